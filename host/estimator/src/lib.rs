@@ -1,0 +1,1 @@
+//! Shear, force, contact and edge estimation.

@@ -1,0 +1,1 @@
+//! NUSense host library.

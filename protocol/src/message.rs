@@ -1,0 +1,196 @@
+//! Messages. The wire format is frozen by golden vectors in the tests: add variants only at the end of an enum,
+//! and bump [`PROTOCOL_VERSION`] for any change a peer could notice.
+
+use heapless::String;
+use serde::{Deserialize, Serialize};
+
+/// Version of this message set. The host and the board refuse to talk across versions.
+pub const PROTOCOL_VERSION: u16 = 1;
+
+/// LED strings on the board: one per side of the light guide.
+pub const CHANNEL_COUNT: usize = 4;
+
+/// Length bound of the textual fields of [`DeviceInfo`].
+pub const VERSION_TEXT_LEN: usize = 16;
+pub const GIT_HASH_LEN: usize = 12;
+pub const BOARD_ID_LEN: usize = 16;
+
+/// Sequence number chosen by the host; the board echoes it in the matching [`Response`].
+pub type Seq = u16;
+
+/// A side of the light guide, as the camera sees the pad.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Side {
+    Top,
+    Right,
+    Bottom,
+    Left,
+}
+
+impl Side {
+    pub const ALL: [Side; CHANNEL_COUNT] = [Side::Top, Side::Right, Side::Bottom, Side::Left];
+
+    /// Index of this side's channel in per-channel arrays.
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// Which LED channels a command addresses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Channel {
+    One(Side),
+    All,
+}
+
+/// Host -> board.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Request {
+    pub seq: Seq,
+    pub body: RequestBody,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum RequestBody {
+    Hello { protocol_version: u16 },
+    GetInfo,
+    GetStatus,
+    SetLed { channel: Channel, current_ma: u16, enabled: bool },
+    /// Soft-start: time for a channel to ramp from 0 to its setpoint.
+    SetRamp { ms: u16 },
+    /// Period of unsolicited [`Telemetry`]; 0 stops the stream.
+    StreamTelemetry { period_ms: u16 },
+    ClearFaults,
+    SaveConfig,
+    Reset,
+    EnterBootloader,
+    Ping { nonce: u32 },
+}
+
+/// Board -> host.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum BoardMessage {
+    Response(Response),
+    Telemetry(Telemetry),
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Response {
+    /// The [`Request::seq`] this answers.
+    pub seq: Seq,
+    pub result: Result<Reply, DeviceError>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Reply {
+    /// The request was carried out and has nothing to report.
+    Ack,
+    Info(DeviceInfo),
+    Status(Status),
+    Pong { nonce: u32 },
+    /// Answer to `Hello`: the board's protocol version, equal to the host's.
+    Hello { protocol_version: u16 },
+}
+
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct DeviceInfo {
+    pub protocol_version: u16,
+    pub firmware_version: String<VERSION_TEXT_LEN>,
+    pub git_hash: String<GIT_HASH_LEN>,
+    pub board_id: String<BOARD_ID_LEN>,
+    /// The MCU's 96-bit factory unique id.
+    pub mcu_uid: [u8; 12],
+    pub channel_count: u8,
+    /// Hard limit per channel; setpoints above it are clamped.
+    pub max_current_ma: u16,
+}
+
+/// Why the board refused or could not carry out a request.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum DeviceError {
+    /// The frame decoded but its request tag is not one this firmware knows.
+    UnknownRequest,
+    /// An argument is out of range; names which one.
+    BadArgument(Argument),
+    /// The board is in a state that cannot take this request now (e.g. flash write in progress).
+    Busy,
+    /// The request would drive a channel that has a latched fault; clear faults first.
+    FaultActive { channel: Side },
+    /// `Hello` with another protocol version.
+    VersionMismatch { device: u16, host: u16 },
+    /// Saving the configuration to flash failed.
+    Storage,
+    /// A request other than `Hello`, `GetInfo` or `Ping` arrived before the version handshake.
+    NotHandshaken,
+}
+
+/// The argument a [`DeviceError::BadArgument`] is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Argument {
+    CurrentMa,
+    RampMs,
+    PeriodMs,
+    Channel,
+}
+
+/// Fault flags of one channel, latched until `ClearFaults`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FaultFlags {
+    /// Full duty and still no current: the string is open (broken wire, dead LED).
+    pub open_string: bool,
+    /// Current above the hard limit: the channel was switched off.
+    pub over_current: bool,
+    /// Board too hot: the channel is derated, then switched off.
+    pub over_temperature: bool,
+    /// Supply too low to regulate.
+    pub under_voltage: bool,
+}
+
+impl FaultFlags {
+    pub const fn any(&self) -> bool {
+        self.open_string || self.over_current || self.over_temperature || self.under_voltage
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ChannelState {
+    pub setpoint_ma: u16,
+    /// Measured over the sense resistor, in mA.
+    pub measured_ma: f32,
+    /// PWM duty, 0.0 ..= 1.0.
+    pub duty: f32,
+    pub enabled: bool,
+    pub faults: FaultFlags,
+}
+
+/// Snapshot of the board, answered to `GetStatus`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Status {
+    pub uptime_us: u64,
+    pub channels: [ChannelState; CHANNEL_COUNT],
+    pub temperature_c: f32,
+    pub supply_mv: u16,
+    pub ramp_ms: u16,
+    pub telemetry_period_ms: u16,
+    pub counters: LinkCounters,
+}
+
+/// Streamed every `period_ms` once `StreamTelemetry` asked for it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Telemetry {
+    pub uptime_us: u64,
+    pub channels: [ChannelState; CHANNEL_COUNT],
+    pub temperature_c: f32,
+    pub supply_mv: u16,
+    pub counters: LinkCounters,
+}
+
+/// What the board's stream decoder threw away, by kind (see the framing module).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LinkCounters {
+    pub bad_cobs: u32,
+    pub bad_crc: u32,
+    pub oversize: u32,
+    pub unknown_tag: u32,
+    pub frames_ok: u32,
+}
