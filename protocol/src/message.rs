@@ -1,7 +1,10 @@
 //! Messages. The wire format is frozen by golden vectors in the tests: add variants only at the end of an enum,
 //! and bump [`PROTOCOL_VERSION`] for any change a peer could notice.
 
+use core::fmt;
+
 use heapless::String;
+use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 /// Version of this message set. The host and the board refuse to talk across versions.
@@ -19,7 +22,7 @@ pub const BOARD_ID_LEN: usize = 16;
 pub type Seq = u16;
 
 /// A side of the light guide, as the camera sees the pad.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, MaxSize)]
 pub enum Side {
     Top,
     Right,
@@ -37,20 +40,20 @@ impl Side {
 }
 
 /// Which LED channels a command addresses.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub enum Channel {
     One(Side),
     All,
 }
 
 /// Host -> board.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct Request {
     pub seq: Seq,
     pub body: RequestBody,
 }
 
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub enum RequestBody {
     Hello { protocol_version: u16 },
     GetInfo,
@@ -68,20 +71,20 @@ pub enum RequestBody {
 }
 
 /// Board -> host.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, MaxSize)]
 pub enum BoardMessage {
     Response(Response),
     Telemetry(Telemetry),
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, MaxSize)]
 pub struct Response {
     /// The [`Request::seq`] this answers.
     pub seq: Seq,
     pub result: Result<Reply, DeviceError>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, MaxSize)]
 pub enum Reply {
     /// The request was carried out and has nothing to report.
     Ack,
@@ -105,8 +108,31 @@ pub struct DeviceInfo {
     pub max_current_ma: u16,
 }
 
+/// Serialised size bound of a `heapless::String<N>` (a varint length, then the bytes). postcard's own `MaxSize`
+/// covers only its heapless 0.7 types, so the impl for [`DeviceInfo`] is written by hand; the framing tests
+/// serialise the longest possible `DeviceInfo` and check it against this bound.
+const fn string_max_size(capacity: usize) -> usize {
+    let mut varint_len = 1;
+    let mut rest = capacity >> 7;
+    while rest > 0 {
+        varint_len += 1;
+        rest >>= 7;
+    }
+    varint_len + capacity
+}
+
+impl MaxSize for DeviceInfo {
+    const POSTCARD_MAX_SIZE: usize = u16::POSTCARD_MAX_SIZE
+        + string_max_size(VERSION_TEXT_LEN)
+        + string_max_size(GIT_HASH_LEN)
+        + string_max_size(BOARD_ID_LEN)
+        + <[u8; 12]>::POSTCARD_MAX_SIZE
+        + u8::POSTCARD_MAX_SIZE
+        + u16::POSTCARD_MAX_SIZE;
+}
+
 /// Why the board refused or could not carry out a request.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub enum DeviceError {
     /// The frame decoded but its request tag is not one this firmware knows.
     UnknownRequest,
@@ -125,7 +151,7 @@ pub enum DeviceError {
 }
 
 /// The argument a [`DeviceError::BadArgument`] is about.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub enum Argument {
     CurrentMa,
     RampMs,
@@ -134,7 +160,7 @@ pub enum Argument {
 }
 
 /// Fault flags of one channel, latched until `ClearFaults`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct FaultFlags {
     /// Full duty and still no current: the string is open (broken wire, dead LED).
     pub open_string: bool,
@@ -152,7 +178,7 @@ impl FaultFlags {
     }
 }
 
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, MaxSize)]
 pub struct ChannelState {
     pub setpoint_ma: u16,
     /// Measured over the sense resistor, in mA.
@@ -164,7 +190,7 @@ pub struct ChannelState {
 }
 
 /// Snapshot of the board, answered to `GetStatus`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, MaxSize)]
 pub struct Status {
     pub uptime_us: u64,
     pub channels: [ChannelState; CHANNEL_COUNT],
@@ -176,7 +202,7 @@ pub struct Status {
 }
 
 /// Streamed every `period_ms` once `StreamTelemetry` asked for it.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, MaxSize)]
 pub struct Telemetry {
     pub uptime_us: u64,
     pub channels: [ChannelState; CHANNEL_COUNT],
@@ -186,7 +212,7 @@ pub struct Telemetry {
 }
 
 /// What the board's stream decoder threw away, by kind (see the framing module).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct LinkCounters {
     pub bad_cobs: u32,
     pub bad_crc: u32,
@@ -194,3 +220,59 @@ pub struct LinkCounters {
     pub unknown_tag: u32,
     pub frames_ok: u32,
 }
+
+impl fmt::Display for Side {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Side::Top => "top",
+            Side::Right => "right",
+            Side::Bottom => "bottom",
+            Side::Left => "left",
+        })
+    }
+}
+
+impl fmt::Display for Argument {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Argument::CurrentMa => "LED current (mA)",
+            Argument::RampMs => "ramp time (ms)",
+            Argument::PeriodMs => "telemetry period (ms)",
+            Argument::Channel => "channel",
+        })
+    }
+}
+
+/// Plain words for a person at the host; no allocation, so the firmware can use it with defmt or a UART too.
+impl fmt::Display for DeviceError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            DeviceError::UnknownRequest => {
+                f.write_str("the board does not know this request (is the firmware older than the host?)")
+            }
+            DeviceError::BadArgument(argument) => write!(f, "the board rejected the {argument}: out of range"),
+            DeviceError::Busy => f.write_str("the board is busy (e.g. writing its configuration); try again"),
+            DeviceError::FaultActive { channel } => write!(
+                f,
+                "the {channel} LED channel has a latched fault; clear faults first (and check the LED string)"
+            ),
+            DeviceError::VersionMismatch { device, host } => {
+                let update = if device < host {
+                    "update the firmware"
+                } else {
+                    "update the host"
+                };
+                write!(
+                    f,
+                    "board speaks protocol v{device} but this host speaks v{host}: {update} so that both speak the same version"
+                )
+            }
+            DeviceError::Storage => f.write_str("the board could not save its configuration to flash"),
+            DeviceError::NotHandshaken => {
+                f.write_str("the board has not been greeted yet: send Hello with the protocol version first")
+            }
+        }
+    }
+}
+
+impl core::error::Error for DeviceError {}
