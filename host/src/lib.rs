@@ -1,1 +1,3 @@
 //! NUSense host library.
+pub mod device;
+pub mod virtual_board;
