@@ -1,0 +1,397 @@
+//! The [`Controller`]: everything the board decides, driven by the board glue with bytes, measurements and time.
+//!
+//! The glue (USB or USART task, ADC/PWM loop, flash, reset) calls:
+//! - [`Controller::on_rx`] with every chunk received from the host; replies go out through `tx` as whole frames;
+//! - [`Controller::control_step`] at >= 1 kHz with fresh measurements; it returns the PWM duty per channel;
+//! - [`Controller::poll_telemetry`] often (e.g. after each control step); it sends a frame when one is due;
+//! - [`Controller::take_action`] after `on_rx`, to carry out what only the glue can do (flash, reset, DFU).
+
+use nusense_protocol::framing::{encode, FrameDecoder, MAX_FRAME_LEN};
+use nusense_protocol::{
+    Argument, BoardMessage, Channel, ChannelState, DeviceError, DeviceInfo, LinkCounters, Reply, Request,
+    RequestBody, Response, Seq, Side, Status, Telemetry, CHANNEL_COUNT, PROTOCOL_VERSION,
+};
+
+use crate::config::BoardConfig;
+use crate::faults::FaultMonitor;
+use crate::identity::Identity;
+use crate::limits::{MAX_CURRENT_MA, MAX_RAMP_MS, MIN_TELEMETRY_PERIOD_MS};
+use crate::regulator::ChannelRegulator;
+
+/// One set of readings from the board's ADC, already in physical units.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Measurements {
+    /// Per channel, in the protocol's `Side` order.
+    pub current_ma: [f32; CHANNEL_COUNT],
+    pub supply_mv: f32,
+    pub temperature_c: f32,
+}
+
+/// Something only the board glue can carry out, requested by the host.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Action {
+    /// Append this blob to the configuration log in flash (see [`crate::config::scan_log`]), then report the
+    /// outcome with [`Controller::complete_save_config`]: the host's reply waits for it.
+    SaveConfig([u8; BoardConfig::BLOB_LEN]),
+    /// The Ack has been written to `tx`: reset once it has left the link.
+    Reset,
+    /// The Ack has been written to `tx`: start the MCU's built-in DFU bootloader once it has left the link.
+    EnterBootloader,
+}
+
+/// The board's brain: command dispatch, regulator, fault monitor, telemetry. No hardware, no allocation.
+pub struct Controller {
+    decoder: FrameDecoder,
+    board: BoardState,
+}
+
+struct BoardState {
+    identity: Identity,
+    config: BoardConfig,
+    regulators: [ChannelRegulator; CHANNEL_COUNT],
+    monitor: FaultMonitor,
+    duty: [f32; CHANNEL_COUNT],
+    last: Measurements,
+    last_step_us: Option<u64>,
+    handshaken: bool,
+    telemetry_period_ms: u16,
+    next_telemetry_us: u64,
+    pending_action: Option<Action>,
+    pending_save_seq: Option<Seq>,
+    /// Frames that passed the CRC but hold a request this firmware does not know (answered `UnknownRequest`).
+    unknown_requests: u32,
+}
+
+impl Controller {
+    pub fn new(identity: Identity, config: BoardConfig) -> Self {
+        let mut config = config;
+        for sp in &mut config.setpoints_ma {
+            *sp = (*sp).min(MAX_CURRENT_MA);
+        }
+        config.ramp_ms = config.ramp_ms.min(MAX_RAMP_MS);
+        Self {
+            decoder: FrameDecoder::new(),
+            board: BoardState {
+                identity,
+                config,
+                regulators: [ChannelRegulator::new(); CHANNEL_COUNT],
+                monitor: FaultMonitor::new(),
+                duty: [0.0; CHANNEL_COUNT],
+                last: Measurements::default(),
+                last_step_us: None,
+                handshaken: false,
+                telemetry_period_ms: 0,
+                next_telemetry_us: 0,
+                pending_action: None,
+                pending_save_seq: None,
+                unknown_requests: 0,
+            },
+        }
+    }
+
+    /// Bytes from the host link (USB CDC or USART), any chunking; writes encoded reply frames through `tx`.
+    pub fn on_rx(&mut self, bytes: &[u8], now_us: u64, tx: &mut impl FnMut(&[u8])) {
+        let Self { decoder, board } = self;
+        // The status a request in this chunk reports counts the frames of earlier chunks.
+        let counters = board.counters(decoder.counters());
+        decoder.feed::<Inbound>(bytes, |frame| match frame {
+            Ok(Inbound::Request(request)) => {
+                if let Some(response) = board.handle(request, now_us, counters) {
+                    send(&BoardMessage::Response(response), tx);
+                }
+            }
+            Ok(Inbound::Unknown { seq }) => {
+                board.unknown_requests = board.unknown_requests.wrapping_add(1);
+                send(&BoardMessage::Response(Response { seq, result: Err(DeviceError::UnknownRequest) }), tx);
+            }
+            // Damaged frames carry no sequence number to answer; they are counted and show in Status/Telemetry.
+            Err(_) => {}
+        });
+    }
+
+    /// The link went away (USB unplugged, port closed): drop any half-received frame, stop streaming, and expect
+    /// a new handshake. The LEDs keep their state.
+    pub fn on_link_reset(&mut self) {
+        self.decoder.clear();
+        self.board.handshaken = false;
+        self.board.telemetry_period_ms = 0;
+    }
+
+    /// One regulator + fault-monitor step (call at >= 1 kHz); returns the PWM duty per channel (0..=1).
+    pub fn control_step(&mut self, now_us: u64, m: &Measurements) -> [f32; CHANNEL_COUNT] {
+        self.board.control_step(now_us, m)
+    }
+
+    /// Sends a Telemetry frame through `tx` when one is due.
+    pub fn poll_telemetry(&mut self, now_us: u64, tx: &mut impl FnMut(&[u8])) {
+        let board = &mut self.board;
+        if board.telemetry_period_ms == 0 || now_us < board.next_telemetry_us {
+            return;
+        }
+        let period_us = u64::from(board.telemetry_period_ms) * 1_000;
+        board.next_telemetry_us += period_us;
+        if board.next_telemetry_us <= now_us {
+            // Fell behind (a stalled link): resume the cadence from now instead of bursting.
+            board.next_telemetry_us = now_us + period_us;
+        }
+        let counters = board.counters(self.decoder.counters());
+        let telemetry = Telemetry {
+            uptime_us: now_us,
+            channels: board.channel_states(),
+            temperature_c: finite_or_zero(board.last.temperature_c),
+            supply_mv: supply_mv_u16(board.last.supply_mv),
+            counters,
+        };
+        send(&BoardMessage::Telemetry(telemetry), tx);
+    }
+
+    /// SaveConfig / Reset / EnterBootloader for the board glue to carry out.
+    pub fn take_action(&mut self) -> Option<Action> {
+        self.board.pending_action.take()
+    }
+
+    /// Outcome of an [`Action::SaveConfig`]; sends the reply the host is waiting for.
+    pub fn complete_save_config(&mut self, saved: bool, tx: &mut impl FnMut(&[u8])) {
+        if let Some(seq) = self.board.pending_save_seq.take() {
+            let result = if saved { Ok(Reply::Ack) } else { Err(DeviceError::Storage) };
+            send(&BoardMessage::Response(Response { seq, result }), tx);
+        }
+    }
+
+    /// What `GetStatus` would answer now.
+    pub fn status(&self, now_us: u64) -> Status {
+        self.board.status(now_us, self.board.counters(self.decoder.counters()))
+    }
+
+    /// The live configuration (what `SaveConfig` would store).
+    pub fn config(&self) -> BoardConfig {
+        self.board.config
+    }
+
+    /// Duty applied by the last control step.
+    pub fn duty(&self) -> [f32; CHANNEL_COUNT] {
+        self.board.duty
+    }
+
+    pub fn identity(&self) -> &Identity {
+        &self.board.identity
+    }
+}
+
+impl BoardState {
+    fn counters(&self, link: LinkCounters) -> LinkCounters {
+        LinkCounters { unknown_tag: link.unknown_tag.wrapping_add(self.unknown_requests), ..link }
+    }
+
+    /// `None` when the answer is deferred (SaveConfig waits for the flash).
+    fn handle(&mut self, request: Request, now_us: u64, counters: LinkCounters) -> Option<Response> {
+        let seq = request.seq;
+        let allowed_before_handshake =
+            matches!(request.body, RequestBody::Hello { .. } | RequestBody::GetInfo | RequestBody::Ping { .. });
+        let result = if !self.handshaken && !allowed_before_handshake {
+            Err(DeviceError::NotHandshaken)
+        } else {
+            match request.body {
+                RequestBody::Hello { protocol_version } => self.hello(protocol_version),
+                RequestBody::GetInfo => Ok(Reply::Info(self.info())),
+                RequestBody::GetStatus => Ok(Reply::Status(self.status(now_us, counters))),
+                RequestBody::SetLed { channel, current_ma, enabled } => self.set_led(channel, current_ma, enabled),
+                RequestBody::SetRamp { ms } => {
+                    if ms > MAX_RAMP_MS {
+                        Err(DeviceError::BadArgument(Argument::RampMs))
+                    } else {
+                        self.config.ramp_ms = ms;
+                        Ok(Reply::Ack)
+                    }
+                }
+                RequestBody::StreamTelemetry { period_ms } => self.stream(period_ms, now_us),
+                RequestBody::ClearFaults => {
+                    self.monitor.clear();
+                    // Restart every channel with its soft start rather than jumping back to the old duty.
+                    self.regulators = [ChannelRegulator::new(); CHANNEL_COUNT];
+                    Ok(Reply::Ack)
+                }
+                RequestBody::SaveConfig => {
+                    if self.pending_action.is_some() || self.pending_save_seq.is_some() {
+                        Err(DeviceError::Busy)
+                    } else {
+                        self.pending_action = Some(Action::SaveConfig(self.config.to_blob()));
+                        self.pending_save_seq = Some(seq);
+                        return None;
+                    }
+                }
+                RequestBody::Reset => self.request_action(Action::Reset),
+                RequestBody::EnterBootloader => self.request_action(Action::EnterBootloader),
+                RequestBody::Ping { nonce } => Ok(Reply::Pong { nonce }),
+            }
+        };
+        Some(Response { seq, result })
+    }
+
+    fn hello(&mut self, host: u16) -> Result<Reply, DeviceError> {
+        if host == PROTOCOL_VERSION {
+            self.handshaken = true;
+            Ok(Reply::Hello { protocol_version: PROTOCOL_VERSION })
+        } else {
+            Err(DeviceError::VersionMismatch { device: PROTOCOL_VERSION, host })
+        }
+    }
+
+    fn info(&self) -> DeviceInfo {
+        DeviceInfo {
+            protocol_version: PROTOCOL_VERSION,
+            firmware_version: self.identity.firmware_version.clone(),
+            git_hash: self.identity.git_hash.clone(),
+            board_id: self.identity.board_id.clone(),
+            mcu_uid: self.identity.mcu_uid,
+            channel_count: CHANNEL_COUNT as u8,
+            max_current_ma: MAX_CURRENT_MA,
+        }
+    }
+
+    fn set_led(&mut self, channel: Channel, current_ma: u16, enabled: bool) -> Result<Reply, DeviceError> {
+        let sides: &[Side] = match &channel {
+            Channel::One(side) => core::slice::from_ref(side),
+            Channel::All => &Side::ALL,
+        };
+        if enabled {
+            if let Some(&side) = sides.iter().find(|s| self.monitor.is_tripped(s.index())) {
+                return Err(DeviceError::FaultActive { channel: side });
+            }
+        }
+        for side in sides {
+            let ch = side.index();
+            self.config.setpoints_ma[ch] = current_ma.min(MAX_CURRENT_MA);
+            self.config.enabled[ch] = enabled;
+            if !enabled {
+                self.regulators[ch].reset();
+            }
+        }
+        Ok(Reply::Ack)
+    }
+
+    fn stream(&mut self, period_ms: u16, now_us: u64) -> Result<Reply, DeviceError> {
+        if period_ms != 0 && period_ms < MIN_TELEMETRY_PERIOD_MS {
+            return Err(DeviceError::BadArgument(Argument::PeriodMs));
+        }
+        self.telemetry_period_ms = period_ms;
+        self.next_telemetry_us = now_us;
+        Ok(Reply::Ack)
+    }
+
+    fn request_action(&mut self, action: Action) -> Result<Reply, DeviceError> {
+        if self.pending_action.is_some() || self.pending_save_seq.is_some() {
+            return Err(DeviceError::Busy);
+        }
+        self.pending_action = Some(action);
+        Ok(Reply::Ack)
+    }
+
+    fn control_step(&mut self, now_us: u64, m: &Measurements) -> [f32; CHANNEL_COUNT] {
+        let dt_us = match self.last_step_us {
+            Some(last) => u32::try_from(now_us.saturating_sub(last)).unwrap_or(u32::MAX),
+            None => 0,
+        };
+        self.last_step_us = Some(now_us);
+        self.last = *m;
+
+        let driving = core::array::from_fn(|ch| self.config.enabled[ch] && self.config.setpoints_ma[ch] > 0);
+        self.monitor.check(now_us, m, driving, self.duty);
+        let derate = FaultMonitor::derate_factor(m.temperature_c);
+        for ch in 0..CHANNEL_COUNT {
+            self.duty[ch] = if driving[ch] && !self.monitor.is_tripped(ch) {
+                let target_ma = f32::from(self.config.setpoints_ma[ch].min(MAX_CURRENT_MA)) * derate;
+                self.regulators[ch].step(target_ma, self.config.ramp_ms, m.current_ma[ch], dt_us)
+            } else {
+                self.regulators[ch].reset();
+                0.0
+            };
+        }
+        self.duty
+    }
+
+    fn channel_states(&self) -> [ChannelState; CHANNEL_COUNT] {
+        let flags = self.monitor.flags();
+        core::array::from_fn(|ch| ChannelState {
+            setpoint_ma: self.config.setpoints_ma[ch],
+            measured_ma: finite_or_zero(self.last.current_ma[ch]),
+            duty: self.duty[ch],
+            enabled: self.config.enabled[ch],
+            faults: flags[ch],
+        })
+    }
+
+    fn status(&self, now_us: u64, counters: LinkCounters) -> Status {
+        Status {
+            uptime_us: now_us,
+            channels: self.channel_states(),
+            temperature_c: finite_or_zero(self.last.temperature_c),
+            supply_mv: supply_mv_u16(self.last.supply_mv),
+            ramp_ms: self.config.ramp_ms,
+            telemetry_period_ms: self.telemetry_period_ms,
+            counters,
+        }
+    }
+}
+
+fn send(message: &BoardMessage, tx: &mut impl FnMut(&[u8])) {
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    // Every BoardMessage fits MAX_FRAME_LEN by construction of the protocol crate, so this cannot fail.
+    if let Ok(frame) = encode(message, &mut buf) {
+        tx(frame);
+    }
+}
+
+fn finite_or_zero(x: f32) -> f32 {
+    if x.is_finite() {
+        x
+    } else {
+        0.0
+    }
+}
+
+fn supply_mv_u16(mv: f32) -> u16 {
+    // `as` saturates and maps NaN to 0.
+    mv as u16
+}
+
+/// A received request, or just its sequence number when the body is not one this firmware knows, so that even
+/// an unknown request gets an answer the host can match.
+enum Inbound {
+    Request(Request),
+    Unknown { seq: Seq },
+}
+
+impl<'de> serde::Deserialize<'de> for Inbound {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        // postcard encodes a struct as its fields in order, read through a sequence: ask for "as many elements
+        // as there are" so that after the sequence number the rest can be inspected byte by byte.
+        deserializer.deserialize_tuple(usize::MAX, InboundVisitor)
+    }
+}
+
+struct InboundVisitor;
+
+impl<'de> serde::de::Visitor<'de> for InboundVisitor {
+    type Value = Inbound;
+
+    fn expecting(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("a request: sequence number then body")
+    }
+
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Inbound, A::Error> {
+        let Some(number) = seq.next_element::<Seq>()? else {
+            return Err(serde::de::Error::invalid_length(0, &self));
+        };
+        let body = seq.next_element::<RequestBody>().ok().flatten();
+        // Consume whatever is left: trailing bytes after a known body also make the request unknown.
+        let mut trailing = false;
+        while let Ok(Some(_)) = seq.next_element::<u8>() {
+            trailing = true;
+        }
+        Ok(match body {
+            Some(body) if !trailing => Inbound::Request(Request { seq: number, body }),
+            _ => Inbound::Unknown { seq: number },
+        })
+    }
+}
