@@ -1,0 +1,772 @@
+//! Force calibration: fit F = a * gamma + b to (gamma, force) pairs, robustly and with confidence intervals, and
+//! write a and b into a sensor config without disturbing the rest of it.
+//!
+//! The fit is Huber's M-estimator by iteratively reweighted least squares, started from the Theil-Sen line so
+//! that a few wild points (a slipped indenter, a frame caught mid-press) cannot pull the start towards them.
+//! The scale of the residuals is re-estimated each round from their median absolute deviation. Intervals use
+//! Huber's asymptotic covariance of the estimate (with his small-sample correction) and Student's t with n - 2
+//! degrees of freedom.
+//!
+//! Pairs come either straight from a CSV of (gamma, force), or from a recorded session: readings with
+//! timestamps aligned with a force/torque log by time ([`align_by_time`]).
+
+use thiserror::Error;
+
+/// One calibration point: the sensor's gamma and the reference force in newtons.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CalibrationSample {
+    pub gamma: f64,
+    pub force_n: f64,
+}
+
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum CalibrationError {
+    #[error("a line needs at least {needed} distinct (gamma, force) points, got {found}")]
+    TooFewPoints { found: usize, needed: usize },
+    #[error("point {index} is not a finite number (gamma {gamma}, force {force_n})")]
+    NotFinite { index: usize, gamma: f64, force_n: f64 },
+    #[error("gamma does not vary (all points at gamma = {gamma}): the force cannot be fitted as a function of it")]
+    GammaConstant { gamma: f64 },
+    #[error("the confidence level {0} must lie strictly between 0 and 1")]
+    BadConfidence(f64),
+    #[error("line {line}: {message}")]
+    Parse { line: usize, message: String },
+    #[error("no column named {wanted} in the header (columns: {found})")]
+    MissingColumn { wanted: String, found: String },
+    #[error("no reading lies within {max_skew_s} s of a force sample ({readings} readings, {forces} force samples)")]
+    NoOverlap { readings: usize, forces: usize, max_skew_s: f64 },
+    #[error("the sensor config: {0}")]
+    Config(String),
+}
+
+/// Options of [`fit_force_line`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FitOptions {
+    /// Huber's tuning constant in units of the residual scale (1.345: 95 % efficiency on Gaussian noise).
+    pub huber_k: f64,
+    /// Two-sided confidence level of the intervals.
+    pub confidence: f64,
+    pub max_iterations: usize,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        Self { huber_k: 1.345, confidence: 0.95, max_iterations: 100 }
+    }
+}
+
+/// The fitted line with its uncertainty.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ForceFit {
+    pub a: f64,
+    pub b: f64,
+    /// Confidence interval of `a` at `confidence`.
+    pub a_interval: [f64; 2],
+    pub b_interval: [f64; 2],
+    pub a_std_error: f64,
+    pub b_std_error: f64,
+    pub confidence: f64,
+    /// Robust standard deviation of the residuals (1.4826 x MAD), N.
+    pub residual_scale_n: f64,
+    pub points: usize,
+    /// Points with less than full weight in the final round (beyond k residual scales).
+    pub downweighted: usize,
+    /// Points more than 3 residual scales off the line.
+    pub outliers: usize,
+    pub iterations: usize,
+}
+
+const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
+
+/// Fits F = a * gamma + b robustly; see the module notes.
+pub fn fit_force_line(samples: &[CalibrationSample], options: &FitOptions) -> Result<ForceFit, CalibrationError> {
+    if !(options.confidence > 0.0 && options.confidence < 1.0) {
+        return Err(CalibrationError::BadConfidence(options.confidence));
+    }
+    if let Some((index, s)) = samples.iter().enumerate().find(|(_, s)| !(s.gamma.is_finite() && s.force_n.is_finite())) {
+        return Err(CalibrationError::NotFinite { index, gamma: s.gamma, force_n: s.force_n });
+    }
+    let distinct = distinct_count(samples);
+    const NEEDED: usize = 3;
+    if distinct < NEEDED {
+        return Err(CalibrationError::TooFewPoints { found: distinct, needed: NEEDED });
+    }
+    let x: Vec<f64> = samples.iter().map(|s| s.gamma).collect();
+    let y: Vec<f64> = samples.iter().map(|s| s.force_n).collect();
+    let (x_min, x_max) = x.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    if x_max - x_min <= 1e-12 * x_max.abs().max(x_min.abs()).max(1e-300) {
+        return Err(CalibrationError::GammaConstant { gamma: x_min });
+    }
+    let n = x.len();
+    let k = if options.huber_k > 0.0 && options.huber_k.is_finite() { options.huber_k } else { 1.345 };
+
+    let (mut a, mut b) = theil_sen(&x, &y).ok_or(CalibrationError::GammaConstant { gamma: x_min })?;
+    let mut scale = 0.0;
+    let mut iterations = 0;
+    let mut weights = vec![1.0; n];
+    for iteration in 1..=options.max_iterations.max(1) {
+        iterations = iteration;
+        let residuals: Vec<f64> = x.iter().zip(&y).map(|(&xi, &yi)| yi - (a * xi + b)).collect();
+        scale = robust_scale(&residuals);
+        if scale <= 0.0 {
+            // More than half the points lie exactly on the line: that line is the fit.
+            weights.iter_mut().zip(&residuals).for_each(|(w, r)| *w = if *r == 0.0 { 1.0 } else { 0.0 });
+            break;
+        }
+        for (w, r) in weights.iter_mut().zip(&residuals) {
+            let u = (r / scale).abs();
+            *w = if u <= k { 1.0 } else { k / u };
+        }
+        let Some((na, nb)) = weighted_line(&x, &y, &weights) else { break };
+        let converged = (na - a).abs() <= 1e-12 * (1.0 + a.abs()) && (nb - b).abs() <= 1e-12 * (1.0 + b.abs());
+        a = na;
+        b = nb;
+        if converged {
+            break;
+        }
+    }
+
+    let residuals: Vec<f64> = x.iter().zip(&y).map(|(&xi, &yi)| yi - (a * xi + b)).collect();
+    if scale > 0.0 {
+        scale = robust_scale(&residuals);
+    }
+    let (a_std_error, b_std_error) = huber_standard_errors(&x, &residuals, scale, k);
+    let t = student_t_quantile(0.5 + options.confidence / 2.0, (n - 2) as f64);
+    let downweighted = if scale > 0.0 { residuals.iter().filter(|r| r.abs() > k * scale).count() } else { 0 };
+    let outliers = if scale > 0.0 {
+        residuals.iter().filter(|r| r.abs() > 3.0 * scale).count()
+    } else {
+        residuals.iter().filter(|r| **r != 0.0).count()
+    };
+    Ok(ForceFit {
+        a,
+        b,
+        a_interval: [a - t * a_std_error, a + t * a_std_error],
+        b_interval: [b - t * b_std_error, b + t * b_std_error],
+        a_std_error,
+        b_std_error,
+        confidence: options.confidence,
+        residual_scale_n: scale,
+        points: n,
+        downweighted,
+        outliers,
+        iterations,
+    })
+}
+
+fn distinct_count(samples: &[CalibrationSample]) -> usize {
+    let mut keys: Vec<(u64, u64)> = samples.iter().map(|s| (s.gamma.to_bits(), s.force_n.to_bits())).collect();
+    keys.sort_unstable();
+    keys.dedup();
+    keys.len()
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    let n = values.len();
+    if n == 0 {
+        return 0.0;
+    }
+    values.sort_unstable_by(f64::total_cmp);
+    if n % 2 == 1 {
+        values[n / 2]
+    } else {
+        0.5 * (values[n / 2 - 1] + values[n / 2])
+    }
+}
+
+/// 1.4826 x the median absolute deviation from the median: the standard deviation for Gaussian residuals.
+fn robust_scale(residuals: &[f64]) -> f64 {
+    let mut r = residuals.to_vec();
+    let centre = median(&mut r);
+    let mut deviations: Vec<f64> = residuals.iter().map(|v| (v - centre).abs()).collect();
+    MAD_TO_SIGMA * median(&mut deviations)
+}
+
+/// Most slope pairs Theil-Sen looks at; beyond that a fixed, evenly spread subset of pairs.
+const MAX_SLOPE_PAIRS: usize = 2_000_000;
+
+/// Median of pairwise slopes, intercept the median of y - a x. `None` if no two points differ in x.
+fn theil_sen(x: &[f64], y: &[f64]) -> Option<(f64, f64)> {
+    let n = x.len();
+    let total = n * (n - 1) / 2;
+    let stride = total.div_ceil(MAX_SLOPE_PAIRS).max(1);
+    let mut slopes = Vec::with_capacity(total.min(MAX_SLOPE_PAIRS) + 1);
+    let mut pair = 0usize;
+    for i in 0..n {
+        for j in i + 1..n {
+            pair += 1;
+            if pair % stride != 0 {
+                continue;
+            }
+            let dx = x[j] - x[i];
+            if dx != 0.0 {
+                slopes.push((y[j] - y[i]) / dx);
+            }
+        }
+    }
+    if slopes.is_empty() {
+        return None;
+    }
+    let a = median(&mut slopes);
+    let mut intercepts: Vec<f64> = x.iter().zip(y).map(|(&xi, &yi)| yi - a * xi).collect();
+    Some((a, median(&mut intercepts)))
+}
+
+fn weighted_line(x: &[f64], y: &[f64], w: &[f64]) -> Option<(f64, f64)> {
+    let sw: f64 = w.iter().sum();
+    if !(sw > 0.0) {
+        return None;
+    }
+    let mx = x.iter().zip(w).map(|(a, b)| a * b).sum::<f64>() / sw;
+    let my = y.iter().zip(w).map(|(a, b)| a * b).sum::<f64>() / sw;
+    let sxx: f64 = x.iter().zip(w).map(|(&xi, &wi)| wi * (xi - mx) * (xi - mx)).sum();
+    let sxy: f64 = x.iter().zip(y).zip(w).map(|((&xi, &yi), &wi)| wi * (xi - mx) * (yi - my)).sum();
+    if !(sxx > 0.0) {
+        return None;
+    }
+    let a = sxy / sxx;
+    let b = my - a * mx;
+    (a.is_finite() && b.is_finite()).then_some((a, b))
+}
+
+/// Standard errors of (a, b) from Huber's asymptotic covariance with his correction factor K
+/// (Huber 1981, "Robust Statistics", 7.6; statsmodels' RLM "H1").
+fn huber_standard_errors(x: &[f64], residuals: &[f64], scale: f64, k: f64) -> (f64, f64) {
+    let n = x.len() as f64;
+    let p = 2.0;
+    if !(scale > 0.0) {
+        return (0.0, 0.0);
+    }
+    let u: Vec<f64> = residuals.iter().map(|r| r / scale).collect();
+    let psi_sq_sum: f64 = u.iter().map(|v| v.clamp(-k, k).powi(2)).sum();
+    let psi_prime: Vec<f64> = u.iter().map(|v| if v.abs() <= k { 1.0 } else { 0.0 }).collect();
+    let m = psi_prime.iter().sum::<f64>() / n;
+    if !(m > 0.0) {
+        return (0.0, 0.0);
+    }
+    let var_psi_prime = psi_prime.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n;
+    let correction = 1.0 + p / n * var_psi_prime / (m * m);
+    let factor = correction * correction * (psi_sq_sum / (n - p)) / (m * m) * scale * scale;
+    // (X^T X)^-1 for X = [gamma, 1].
+    let sx: f64 = x.iter().sum();
+    let sxx: f64 = x.iter().map(|v| v * v).sum();
+    let det = n * sxx - sx * sx;
+    if !(det > 0.0) {
+        return (0.0, 0.0);
+    }
+    let var_a = factor * n / det;
+    let var_b = factor * sxx / det;
+    (var_a.max(0.0).sqrt(), var_b.max(0.0).sqrt())
+}
+
+/// Regularised incomplete beta function I_x(a, b) by its continued fraction (Numerical Recipes, 6.4).
+fn incomplete_beta(x: f64, a: f64, b: f64) -> f64 {
+    if x <= 0.0 {
+        return 0.0;
+    }
+    if x >= 1.0 {
+        return 1.0;
+    }
+    let ln_front = ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * x.ln() + b * (1.0 - x).ln();
+    let front = ln_front.exp();
+    if x < (a + 1.0) / (a + b + 2.0) {
+        front * beta_continued_fraction(x, a, b) / a
+    } else {
+        1.0 - front * beta_continued_fraction(1.0 - x, b, a) / b
+    }
+}
+
+fn beta_continued_fraction(x: f64, a: f64, b: f64) -> f64 {
+    const TINY: f64 = 1e-300;
+    let (qab, qap, qam) = (a + b, a + 1.0, a - 1.0);
+    let mut c = 1.0;
+    let mut d = 1.0 - qab * x / qap;
+    if d.abs() < TINY {
+        d = TINY;
+    }
+    d = 1.0 / d;
+    let mut h = d;
+    for m in 1..300 {
+        let m = f64::from(m);
+        let m2 = 2.0 * m;
+        let aa = m * (b - m) * x / ((qam + m2) * (a + m2));
+        d = 1.0 + aa * d;
+        d = if d.abs() < TINY { TINY } else { d };
+        c = 1.0 + aa / c;
+        c = if c.abs() < TINY { TINY } else { c };
+        d = 1.0 / d;
+        h *= d * c;
+        let aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
+        d = 1.0 + aa * d;
+        d = if d.abs() < TINY { TINY } else { d };
+        c = 1.0 + aa / c;
+        c = if c.abs() < TINY { TINY } else { c };
+        d = 1.0 / d;
+        let delta = d * c;
+        h *= delta;
+        if (delta - 1.0).abs() < 1e-15 {
+            break;
+        }
+    }
+    h
+}
+
+/// ln Gamma(x) for x > 0 (Lanczos, g = 7, n = 9).
+fn ln_gamma(x: f64) -> f64 {
+    const COEFFICIENTS: [f64; 9] = [
+        0.999_999_999_999_809_9,
+        676.520_368_121_885_1,
+        -1_259.139_216_722_402_8,
+        771.323_428_777_653_1,
+        -176.615_029_162_140_6,
+        12.507_343_278_686_905,
+        -0.138_571_095_265_720_12,
+        9.984_369_578_019_572e-6,
+        1.505_632_735_149_311_6e-7,
+    ];
+    if x < 0.5 {
+        // Reflection.
+        let pi = std::f64::consts::PI;
+        return (pi / (pi * x).sin()).ln() - ln_gamma(1.0 - x);
+    }
+    let x = x - 1.0;
+    let t = x + 7.5;
+    let mut sum = COEFFICIENTS[0];
+    for (i, c) in COEFFICIENTS.iter().enumerate().skip(1) {
+        sum += c / (x + i as f64);
+    }
+    0.5 * (2.0 * std::f64::consts::PI).ln() + (x + 0.5) * t.ln() - t + sum.ln()
+}
+
+fn student_t_cdf(t: f64, dof: f64) -> f64 {
+    let x = dof / (dof + t * t);
+    let tail = 0.5 * incomplete_beta(x, dof / 2.0, 0.5);
+    if t >= 0.0 {
+        1.0 - tail
+    } else {
+        tail
+    }
+}
+
+/// The `p` quantile of Student's t with `dof` degrees of freedom (p in (0.5, 1)), by bisection on the CDF.
+/// With no degrees of freedom left the interval is unbounded: infinity.
+pub fn student_t_quantile(p: f64, dof: f64) -> f64 {
+    if !(dof >= 1.0) {
+        return f64::INFINITY;
+    }
+    let (mut lo, mut hi) = (0.0, 1.0);
+    while student_t_cdf(hi, dof) < p && hi < 1e12 {
+        hi *= 2.0;
+    }
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if student_t_cdf(mid, dof) < p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// Splits a CSV line (plain numeric logs: commas, optional spaces, no quoting).
+fn split_csv(line: &str) -> Vec<&str> {
+    line.split(',').map(str::trim).collect()
+}
+
+fn parse_number(field: &str, line: usize, what: &str) -> Result<f64, CalibrationError> {
+    field
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| CalibrationError::Parse { line, message: format!("{what} `{field}` is not a finite number") })
+}
+
+fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.lines().enumerate().map(|(i, l)| (i + 1, l.trim())).filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+}
+
+fn find_column(header: &[&str], names: &[&str]) -> Option<usize> {
+    header.iter().position(|h| names.iter().any(|n| h.eq_ignore_ascii_case(n)))
+}
+
+/// (gamma, force) pairs from CSV: a header naming `gamma` and `force` (or `force_n`), or no header and the
+/// first two columns in that order.
+pub fn parse_pairs_csv(text: &str) -> Result<Vec<CalibrationSample>, CalibrationError> {
+    let mut lines = data_lines(text).peekable();
+    let (gamma_col, force_col) = match lines.peek() {
+        Some(&(_, first)) if first.chars().any(|c| c.is_ascii_alphabetic() && c != 'e' && c != 'E') => {
+            let header = split_csv(first);
+            let found = header.join(", ");
+            let gamma = find_column(&header, &["gamma"])
+                .ok_or_else(|| CalibrationError::MissingColumn { wanted: "gamma".into(), found: found.clone() })?;
+            let force = find_column(&header, &["force", "force_n", "f", "f_n"])
+                .ok_or(CalibrationError::MissingColumn { wanted: "force (or force_n)".into(), found })?;
+            lines.next();
+            (gamma, force)
+        }
+        _ => (0, 1),
+    };
+    lines
+        .map(|(line, text)| {
+            let fields = split_csv(text);
+            let get = |col: usize, what: &str| {
+                fields
+                    .get(col)
+                    .ok_or_else(|| CalibrationError::Parse { line, message: format!("no {what} column") })
+                    .and_then(|f| parse_number(f, line, what))
+            };
+            Ok(CalibrationSample { gamma: get(gamma_col, "gamma")?, force_n: get(force_col, "force")? })
+        })
+        .collect()
+}
+
+/// Which force of a force/torque log is the reference for the normal force.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ForceComponent {
+    /// |fz|: the sensor's z axis along the pad normal (sign conventions differ between F/T sensors).
+    AbsFz,
+    Fx,
+    Fy,
+    Fz,
+    /// sqrt(fx^2 + fy^2 + fz^2).
+    Norm,
+}
+
+/// A force/torque log sample: time in seconds and the chosen force in newtons.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ForceSample {
+    pub time_s: f64,
+    pub force_n: f64,
+}
+
+/// A gamma with its time in seconds (the same clock as the force log, after any offset).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimedGamma {
+    pub time_s: f64,
+    pub gamma: f64,
+}
+
+/// A force/torque log: a header with a time column (`timestamp`, `time`, `t`, with an optional `_s`, `_ms` or
+/// `_us` suffix giving the unit; seconds otherwise) and `fx`, `fy`, `fz`; other columns are ignored.
+pub fn parse_force_log_csv(text: &str, component: ForceComponent) -> Result<Vec<ForceSample>, CalibrationError> {
+    let mut lines = data_lines(text);
+    let (_, header_line) =
+        lines.next().ok_or(CalibrationError::MissingColumn { wanted: "a header".into(), found: String::new() })?;
+    let header = split_csv(header_line);
+    let found = header.join(", ");
+    let time_columns: [(&str, f64); 12] = [
+        ("timestamp", 1.0),
+        ("time", 1.0),
+        ("t", 1.0),
+        ("timestamp_s", 1.0),
+        ("time_s", 1.0),
+        ("t_s", 1.0),
+        ("timestamp_ms", 1e-3),
+        ("time_ms", 1e-3),
+        ("t_ms", 1e-3),
+        ("timestamp_us", 1e-6),
+        ("time_us", 1e-6),
+        ("t_us", 1e-6),
+    ];
+    let (time_col, time_unit) = time_columns
+        .iter()
+        .find_map(|&(name, unit)| find_column(&header, &[name]).map(|c| (c, unit)))
+        .ok_or_else(|| CalibrationError::MissingColumn { wanted: "timestamp".into(), found: found.clone() })?;
+    let column = |name: &str| {
+        find_column(&header, &[name]).ok_or_else(|| CalibrationError::MissingColumn { wanted: name.into(), found: found.clone() })
+    };
+    let needed: Vec<(usize, &str)> = match component {
+        ForceComponent::Fx => vec![(column("fx")?, "fx")],
+        ForceComponent::Fy => vec![(column("fy")?, "fy")],
+        ForceComponent::Fz | ForceComponent::AbsFz => vec![(column("fz")?, "fz")],
+        ForceComponent::Norm => vec![(column("fx")?, "fx"), (column("fy")?, "fy"), (column("fz")?, "fz")],
+    };
+    lines
+        .map(|(line, text)| {
+            let fields = split_csv(text);
+            let get = |col: usize, what: &str| {
+                fields
+                    .get(col)
+                    .ok_or_else(|| CalibrationError::Parse { line, message: format!("no {what} column") })
+                    .and_then(|f| parse_number(f, line, what))
+            };
+            let time_s = get(time_col, "timestamp")? * time_unit;
+            let values: Vec<f64> = needed.iter().map(|&(c, name)| get(c, name)).collect::<Result<_, _>>()?;
+            let force_n = match component {
+                ForceComponent::AbsFz => values[0].abs(),
+                ForceComponent::Fx | ForceComponent::Fy | ForceComponent::Fz => values[0],
+                ForceComponent::Norm => values.iter().map(|v| v * v).sum::<f64>().sqrt(),
+            };
+            Ok(ForceSample { time_s, force_n })
+        })
+        .collect()
+}
+
+/// The outcome of [`align_by_time`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Alignment {
+    pub samples: Vec<CalibrationSample>,
+    /// Readings with no force sample within the allowed skew.
+    pub dropped: usize,
+}
+
+/// Pairs each reading with the force at its time: linear interpolation between the two force samples around it
+/// when the nearer of them is within `max_skew_s`, otherwise the reading is dropped (counted, not guessed).
+pub fn align_by_time(
+    readings: &[TimedGamma],
+    forces: &[ForceSample],
+    max_skew_s: f64,
+) -> Result<Alignment, CalibrationError> {
+    let mut forces: Vec<ForceSample> =
+        forces.iter().copied().filter(|f| f.time_s.is_finite() && f.force_n.is_finite()).collect();
+    forces.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
+    let mut samples = Vec::new();
+    let mut dropped = 0;
+    for r in readings {
+        if !(r.time_s.is_finite() && r.gamma.is_finite()) {
+            dropped += 1;
+            continue;
+        }
+        let after = forces.partition_point(|f| f.time_s < r.time_s);
+        let before = after.checked_sub(1).map(|i| forces[i]);
+        let next = forces.get(after).copied();
+        let force = match (before, next) {
+            (Some(b), Some(n)) => {
+                let nearest = (r.time_s - b.time_s).min(n.time_s - r.time_s);
+                (nearest <= max_skew_s).then(|| {
+                    let span = n.time_s - b.time_s;
+                    if span > 0.0 {
+                        b.force_n + (n.force_n - b.force_n) * (r.time_s - b.time_s) / span
+                    } else {
+                        0.5 * (b.force_n + n.force_n)
+                    }
+                })
+            }
+            (Some(only), None) | (None, Some(only)) => {
+                ((r.time_s - only.time_s).abs() <= max_skew_s).then_some(only.force_n)
+            }
+            (None, None) => None,
+        };
+        match force {
+            Some(force_n) => samples.push(CalibrationSample { gamma: r.gamma, force_n }),
+            None => dropped += 1,
+        }
+    }
+    if samples.is_empty() {
+        return Err(CalibrationError::NoOverlap { readings: readings.len(), forces: forces.len(), max_skew_s });
+    }
+    Ok(Alignment { samples, dropped })
+}
+
+/// Sets `calibration.a` and `calibration.b` in a sensor config's TOML text, keeping every other key, comment
+/// and the layout; the result must still be a valid config.
+pub fn update_config_toml(text: &str, a: f64, b: f64) -> Result<String, CalibrationError> {
+    if !(a.is_finite() && b.is_finite()) {
+        return Err(CalibrationError::Config(format!("refusing to write a non-finite calibration (a = {a}, b = {b})")));
+    }
+    let mut document: toml_edit::DocumentMut =
+        text.parse().map_err(|e: toml_edit::TomlError| CalibrationError::Config(e.to_string()))?;
+    let table = document
+        .entry("calibration")
+        .or_insert_with(|| toml_edit::Item::Table(toml_edit::Table::new()))
+        .as_table_like_mut()
+        .ok_or_else(|| CalibrationError::Config("`calibration` is not a table".into()))?;
+    table.insert("a", toml_edit::value(a));
+    table.insert("b", toml_edit::value(b));
+    let updated = document.to_string();
+    crate::SensorConfig::from_toml_str(&updated).map_err(|e| CalibrationError::Config(e.to_string()))?;
+    Ok(updated)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic small noise in [-amplitude, amplitude] (no RNG dependency, no tuning to a seed).
+    fn noise(i: usize, amplitude: f64) -> f64 {
+        let phase = (i as f64 * 0.618_033_988_749_895).fract();
+        (2.0 * phase - 1.0) * amplitude
+    }
+
+    fn line(a: f64, b: f64, gammas: impl Iterator<Item = f64>, amplitude: f64) -> Vec<CalibrationSample> {
+        gammas.enumerate().map(|(i, g)| CalibrationSample { gamma: g, force_n: a * g + b + noise(i, amplitude) }).collect()
+    }
+
+    #[test]
+    fn recovers_an_exact_line() {
+        let samples = line(3.09, -1.14, (0..20).map(|i| 0.5 + 0.1 * f64::from(i)), 0.0);
+        let fit = fit_force_line(&samples, &FitOptions::default()).unwrap();
+        assert!((fit.a - 3.09).abs() < 1e-9 && (fit.b + 1.14).abs() < 1e-9, "{fit:?}");
+        assert_eq!(fit.residual_scale_n, 0.0);
+        assert!(fit.a_interval[0] <= fit.a && fit.a <= fit.a_interval[1]);
+    }
+
+    #[test]
+    fn shrugs_off_outliers_that_pull_least_squares_away() {
+        let mut samples = line(3.09, -1.14, (0..40).map(|i| 0.4 + 0.07 * f64::from(i)), 0.05);
+        // Five wild points (20 % would be too many for a fair test of least squares; 12 % is plenty).
+        for (i, s) in samples.iter_mut().enumerate().filter(|(i, _)| i % 8 == 3) {
+            s.force_n += if i % 16 == 3 { 4.0 } else { -3.0 };
+        }
+        let fit = fit_force_line(&samples, &FitOptions::default()).unwrap();
+        assert!((fit.a - 3.09).abs() < 0.05, "a = {}", fit.a);
+        assert!((fit.b + 1.14).abs() < 0.08, "b = {}", fit.b);
+        assert_eq!(fit.outliers, 5, "{fit:?}");
+        assert!(fit.a_interval[0] < 3.09 && 3.09 < fit.a_interval[1], "{fit:?}");
+        assert!(fit.b_interval[0] < -1.14 && -1.14 < fit.b_interval[1], "{fit:?}");
+        // Ordinary least squares on the same points misses by far more.
+        let w = vec![1.0; samples.len()];
+        let x: Vec<f64> = samples.iter().map(|s| s.gamma).collect();
+        let y: Vec<f64> = samples.iter().map(|s| s.force_n).collect();
+        let (ols_a, ols_b) = weighted_line(&x, &y, &w).unwrap();
+        assert!((ols_a - 3.09).abs() + (ols_b + 1.14).abs() > 3.0 * ((fit.a - 3.09).abs() + (fit.b + 1.14).abs()));
+    }
+
+    #[test]
+    fn a_high_leverage_outlier_does_not_tilt_the_line() {
+        let mut samples = line(2.0, 0.5, (0..15).map(|i| 1.0 + 0.2 * f64::from(i)), 0.02);
+        samples.push(CalibrationSample { gamma: 20.0, force_n: 0.0 });
+        let fit = fit_force_line(&samples, &FitOptions::default()).unwrap();
+        assert!((fit.a - 2.0).abs() < 0.05 && (fit.b - 0.5).abs() < 0.1, "{fit:?}");
+    }
+
+    #[test]
+    fn intervals_cover_the_truth_at_about_the_stated_rate() {
+        // 200 independent noisy lines; a 95 % interval should miss the true slope in roughly 5 % of them.
+        let mut misses = 0;
+        let trials = 200;
+        for trial in 0..trials {
+            let samples: Vec<CalibrationSample> = (0..25)
+                .map(|i| {
+                    let g = 0.5 + 0.1 * f64::from(i);
+                    // Sum of uniforms: roughly Gaussian noise, different in every trial.
+                    let e: f64 = (0..4).map(|k| noise(trial * 1000 + i as usize * 7 + k * 131 + 1, 0.1)).sum();
+                    CalibrationSample { gamma: g, force_n: 3.0 * g - 1.0 + e }
+                })
+                .collect();
+            let fit = fit_force_line(&samples, &FitOptions::default()).unwrap();
+            if !(fit.a_interval[0] <= 3.0 && 3.0 <= fit.a_interval[1]) {
+                misses += 1;
+            }
+        }
+        assert!(misses <= 25, "{misses} of {trials} intervals missed");
+        assert!(misses >= 1, "intervals so wide they never miss are useless: {misses} of {trials}");
+    }
+
+    #[test]
+    fn degenerate_data_gives_typed_errors() {
+        let p = |g: f64, f: f64| CalibrationSample { gamma: g, force_n: f };
+        let options = FitOptions::default();
+        assert_eq!(fit_force_line(&[], &options), Err(CalibrationError::TooFewPoints { found: 0, needed: 3 }));
+        assert!(matches!(
+            fit_force_line(&[p(1.0, 1.0), p(2.0, 2.0)], &options),
+            Err(CalibrationError::TooFewPoints { found: 2, .. })
+        ));
+        // Duplicates do not count as new information.
+        assert!(matches!(
+            fit_force_line(&[p(1.0, 1.0), p(1.0, 1.0), p(2.0, 2.0), p(2.0, 2.0)], &options),
+            Err(CalibrationError::TooFewPoints { found: 2, .. })
+        ));
+        assert!(matches!(
+            fit_force_line(&[p(1.0, 1.0), p(1.0, 2.0), p(1.0, 3.0)], &options),
+            Err(CalibrationError::GammaConstant { .. })
+        ));
+        assert!(matches!(
+            fit_force_line(&[p(1.0, 1.0), p(f64::NAN, 2.0), p(2.0, 3.0)], &options),
+            Err(CalibrationError::NotFinite { index: 1, .. })
+        ));
+        assert!(matches!(
+            fit_force_line(&[p(1.0, 1.0), p(2.0, 2.0), p(3.0, 3.5)], &FitOptions { confidence: 1.0, ..options }),
+            Err(CalibrationError::BadConfidence(_))
+        ));
+    }
+
+    #[test]
+    fn three_points_fit_with_finite_numbers() {
+        let fit = fit_force_line(
+            &[
+                CalibrationSample { gamma: 1.0, force_n: 2.0 },
+                CalibrationSample { gamma: 2.0, force_n: 4.1 },
+                CalibrationSample { gamma: 3.0, force_n: 5.9 },
+            ],
+            &FitOptions::default(),
+        )
+        .unwrap();
+        for v in [fit.a, fit.b, fit.a_interval[0], fit.a_interval[1], fit.b_interval[0], fit.b_interval[1]] {
+            assert!(v.is_finite(), "{fit:?}");
+        }
+    }
+
+    #[test]
+    fn t_quantiles_match_tables() {
+        for (dof, expected) in [(1.0, 12.706), (2.0, 4.303), (5.0, 2.571), (30.0, 2.042), (1000.0, 1.962)] {
+            let t = student_t_quantile(0.975, dof);
+            assert!((t - expected).abs() < 2e-3, "dof {dof}: {t}");
+        }
+        assert_eq!(student_t_quantile(0.975, 0.0), f64::INFINITY);
+    }
+
+    #[test]
+    fn parses_pair_csv_with_and_without_header() {
+        let with = parse_pairs_csv("# a comment\nforce_n, gamma\n1.5, 0.8\n3.0,1.3e0\n").unwrap();
+        assert_eq!(with, vec![
+            CalibrationSample { gamma: 0.8, force_n: 1.5 },
+            CalibrationSample { gamma: 1.3, force_n: 3.0 }
+        ]);
+        let without = parse_pairs_csv("0.8,1.5\n1.3,3\n").unwrap();
+        assert_eq!(without, with);
+        assert!(matches!(parse_pairs_csv("gamma,force\n0.8,abc\n"), Err(CalibrationError::Parse { line: 2, .. })));
+        assert!(matches!(parse_pairs_csv("g,force\n"), Err(CalibrationError::MissingColumn { .. })));
+        assert!(matches!(parse_pairs_csv("0.8,inf\n"), Err(CalibrationError::Parse { .. })));
+    }
+
+    #[test]
+    fn parses_force_logs_with_units_and_components() {
+        let log = "timestamp_ms,fx,fy,fz,tx\n1000,0.3,0.4,-1.2,0\n1010,0,0,-2,0\n";
+        let abs = parse_force_log_csv(log, ForceComponent::AbsFz).unwrap();
+        assert_eq!(abs, vec![ForceSample { time_s: 1.0, force_n: 1.2 }, ForceSample { time_s: 1.01, force_n: 2.0 }]);
+        let norm = parse_force_log_csv(log, ForceComponent::Norm).unwrap();
+        assert!((norm[0].force_n - (0.09f64 + 0.16 + 1.44).sqrt()).abs() < 1e-12);
+        assert!(matches!(parse_force_log_csv("time,fx\n0,1\n", ForceComponent::AbsFz), Err(CalibrationError::MissingColumn { .. })));
+        assert!(matches!(parse_force_log_csv("fz\n1\n", ForceComponent::AbsFz), Err(CalibrationError::MissingColumn { .. })));
+    }
+
+    #[test]
+    fn aligns_by_interpolation_within_the_skew() {
+        let forces: Vec<ForceSample> =
+            (0..11).map(|i| ForceSample { time_s: 0.01 * f64::from(i), force_n: f64::from(i) }).collect();
+        let readings = [
+            TimedGamma { time_s: 0.025, gamma: 1.0 },  // halfway between 2 and 3
+            TimedGamma { time_s: 0.1004, gamma: 2.0 }, // just after the log, within skew
+            TimedGamma { time_s: 0.5, gamma: 3.0 },    // far outside
+        ];
+        let aligned = align_by_time(&readings, &forces, 0.002).unwrap();
+        assert_eq!(aligned.dropped, 1);
+        assert_eq!(aligned.samples.len(), 2);
+        assert!((aligned.samples[0].force_n - 2.5).abs() < 1e-9);
+        assert_eq!(aligned.samples[1].force_n, 10.0);
+        // A gap in the log wider than twice the skew drops readings in its middle.
+        let gappy = [forces[0], forces[10]];
+        assert!(matches!(
+            align_by_time(&[TimedGamma { time_s: 0.05, gamma: 1.0 }], &gappy, 0.002),
+            Err(CalibrationError::NoOverlap { .. })
+        ));
+    }
+
+    #[test]
+    fn config_update_keeps_other_keys_and_comments() {
+        let text = "# my sensor\n[surface]\ndegree_u = 3 # smoother\n\n[calibration]\nalpha = 0.0001\na = 1.0\n";
+        let updated = update_config_toml(text, 2.5, -0.75).unwrap();
+        assert!(updated.contains("# my sensor") && updated.contains("degree_u = 3 # smoother"), "{updated}");
+        let config = crate::SensorConfig::from_toml_str(&updated).unwrap();
+        assert_eq!((config.calibration.a, config.calibration.b, config.calibration.alpha), (2.5, -0.75, 0.0001));
+        assert_eq!(config.surface.degree_u, 3);
+        // An empty config gains a calibration table.
+        let fresh = crate::SensorConfig::from_toml_str(&update_config_toml("", 1.0, 2.0).unwrap()).unwrap();
+        assert_eq!((fresh.calibration.a, fresh.calibration.b), (1.0, 2.0));
+        assert!(update_config_toml("calibration = 3\n", 1.0, 2.0).is_err());
+        assert!(update_config_toml("", f64::NAN, 2.0).is_err());
+        assert!(update_config_toml("[surface]\ndegree_u = 99\n", 1.0, 2.0).is_err(), "an invalid config stays invalid");
+    }
+}

@@ -1,0 +1,333 @@
+//! The sensor config: everything the estimator needs to know about one sensor, as TOML.
+//!
+//! Every value has a default that fits the real NUSense sensor (the authors' published parameters, see
+//! shared/data/real/README.md), so an empty file is a valid config. Unknown keys are errors: a typo must not
+//! silently fall back to a default.
+
+use std::path::{Path, PathBuf};
+
+use nusense_geometry::camera::FisheyeIntrinsics;
+use nusense_geometry::PadGeometry;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    #[error("cannot read sensor config {}: {source}", path.display())]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("sensor config{}: {message}", file_suffix(path))]
+    Parse { path: Option<PathBuf>, message: String },
+    #[error("sensor config{}: `{key}` = {value} is not allowed; {allowed}", file_suffix(path))]
+    Invalid { path: Option<PathBuf>, key: &'static str, value: String, allowed: &'static str },
+}
+
+fn file_suffix(path: &Option<PathBuf>) -> String {
+    path.as_ref().map(|p| format!(" {}", p.display())).unwrap_or_default()
+}
+
+impl ConfigError {
+    /// The config key the error is about, when it names one.
+    pub fn key(&self) -> Option<&str> {
+        match self {
+            Self::Invalid { key, .. } => Some(key),
+            _ => None,
+        }
+    }
+
+    fn with_path(self, file: &Path) -> Self {
+        match self {
+            Self::Parse { message, .. } => Self::Parse { path: Some(file.to_owned()), message },
+            Self::Invalid { key, value, allowed, .. } => {
+                Self::Invalid { path: Some(file.to_owned()), key, value, allowed }
+            }
+            other => other,
+        }
+    }
+}
+
+/// Region of interest in the undistorted frame, in px of the calibration frame size (`camera.width x height`);
+/// the paper pipeline crops to it. Scaled with the frame like the camera.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Roi {
+    pub x: u32,
+    pub y: u32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Default for Roi {
+    fn default() -> Self {
+        Self { x: 390, y: 203, width: 1335, height: 1000 }
+    }
+}
+
+/// Decision thresholds of the fast pipeline. Image thresholds are not here on purpose: they come from each frame
+/// (Otsu on yellowness), so that lighting changes do not need a new config.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Thresholds {
+    /// Contact when the local (non-affine) displacement of some corner exceeds this, in pad mm.
+    pub contact_shear_mm: f64,
+    /// A tracked point that moved more than this many cells since the reference is implausible (masked).
+    pub max_displacement_cells: f64,
+    /// Tracking is abandoned for a full-frame search when more than this fraction of squares is lost.
+    pub recovery_lost_fraction: f64,
+    /// Samples sheared by at least this fraction of the peak feed the edge-direction PCA.
+    pub edge_sample_fraction: f64,
+    /// Below this eigenvalue contrast (1 - minor/major) the contact counts as round: no edge direction.
+    pub edge_min_confidence: f64,
+}
+
+impl Default for Thresholds {
+    fn default() -> Self {
+        Self {
+            contact_shear_mm: 0.12,
+            max_displacement_cells: 1.5,
+            recovery_lost_fraction: 0.25,
+            edge_sample_fraction: 0.5,
+            edge_min_confidence: 0.35,
+        }
+    }
+}
+
+/// F = a * gamma + b, gamma = alpha * sum ||s - s_ref|| (paper units: px of a 2048-px-wide frame).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ForceCalibration {
+    pub a: f64,
+    pub b: f64,
+    pub alpha: f64,
+}
+
+impl Default for ForceCalibration {
+    fn default() -> Self {
+        Self { a: 3.09, b: -1.14, alpha: 1.0 / 18000.0 }
+    }
+}
+
+/// The B-spline surface over the corner lattice: degree along rows (u) and columns (v), sampled on a uv grid.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SurfaceConfig {
+    pub degree_u: usize,
+    pub degree_v: usize,
+    /// Step of the sample grid in u and v (the paper: 0.015, i.e. 67 x 67 samples).
+    pub uv_step: f64,
+}
+
+impl Default for SurfaceConfig {
+    fn default() -> Self {
+        Self { degree_u: 1, degree_v: 1, uv_step: 0.015 }
+    }
+}
+
+/// The published pipeline's parameters (mode `paper`), on the undistorted frame of the calibration size.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PaperParams {
+    pub bilateral_diameter: u32,
+    pub bilateral_sigma_color: f64,
+    pub bilateral_sigma_space: f64,
+    pub sobel_weight_x: f64,
+    pub sobel_weight_y: f64,
+    pub binary_threshold: f64,
+    pub polygon_epsilon_fraction: f64,
+    pub quad_min_area_px2: f64,
+    pub quad_max_area_px2: f64,
+    pub quad_min_solidity: f64,
+    pub pair_distance_px: f64,
+}
+
+impl Default for PaperParams {
+    fn default() -> Self {
+        Self {
+            bilateral_diameter: 20,
+            bilateral_sigma_color: 65.0,
+            bilateral_sigma_space: 75.0,
+            sobel_weight_x: 0.86,
+            sobel_weight_y: 0.86,
+            binary_threshold: 19.0,
+            polygon_epsilon_fraction: 0.08,
+            quad_min_area_px2: 2000.0,
+            quad_max_area_px2: 100000.0,
+            quad_min_solidity: 0.2,
+            pair_distance_px: 50.0,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SensorConfig {
+    /// The lens, for frames of `camera.width x camera.height`; other frame sizes scale it.
+    pub camera: FisheyeIntrinsics,
+    pub pad: PadGeometry,
+    pub roi: Roi,
+    pub thresholds: Thresholds,
+    pub calibration: ForceCalibration,
+    pub surface: SurfaceConfig,
+    pub paper: PaperParams,
+}
+
+impl Default for SensorConfig {
+    fn default() -> Self {
+        Self {
+            camera: FisheyeIntrinsics::paper(2048, 1536),
+            pad: PadGeometry::default(),
+            roi: Roi::default(),
+            thresholds: Thresholds::default(),
+            calibration: ForceCalibration::default(),
+            surface: SurfaceConfig::default(),
+            paper: PaperParams::default(),
+        }
+    }
+}
+
+fn invalid(key: &'static str, value: impl std::fmt::Display, allowed: &'static str) -> ConfigError {
+    ConfigError::Invalid { path: None, key, value: value.to_string(), allowed }
+}
+
+fn finite_positive(key: &'static str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(key, v, "must be a finite number > 0"))
+    }
+}
+
+fn finite(key: &'static str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(invalid(key, v, "must be a finite number"))
+    }
+}
+
+fn fraction(key: &'static str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() && (0.0..=1.0).contains(&v) {
+        Ok(())
+    } else {
+        Err(invalid(key, v, "must be between 0 and 1"))
+    }
+}
+
+impl SensorConfig {
+    pub fn from_toml_str(text: &str) -> Result<Self, ConfigError> {
+        let config: Self =
+            toml::from_str(text).map_err(|e| ConfigError::Parse { path: None, message: e.to_string() })?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, ConfigError> {
+        let path = path.as_ref();
+        let text =
+            std::fs::read_to_string(path).map_err(|source| ConfigError::Io { path: path.to_owned(), source })?;
+        Self::from_toml_str(&text).map_err(|e| e.with_path(path))
+    }
+
+    pub fn to_toml_string(&self) -> String {
+        // Serialising plain structs of numbers cannot fail; keep the fallback explicit rather than panic.
+        toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot serialise config: {e}\n"))
+    }
+
+    /// Checks every value against what the estimator can use; the error names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let cam = &self.camera;
+        if cam.width < 16 || cam.height < 16 {
+            return Err(invalid("camera.width", format!("{} x {}", cam.width, cam.height), "frame sides >= 16 px"));
+        }
+        finite_positive("camera.fx", cam.fx)?;
+        finite_positive("camera.fy", cam.fy)?;
+        finite("camera.cx", cam.cx)?;
+        finite("camera.cy", cam.cy)?;
+        if cam.distortion.iter().any(|k| !k.is_finite()) {
+            return Err(invalid("camera.distortion", format!("{:?}", cam.distortion), "four finite numbers"));
+        }
+        nusense_geometry::FisheyeCamera::new(*cam)
+            .map_err(|e| invalid("camera.distortion", format!("{:?}", cam.distortion), leak_reason(e)))?;
+        let pad = &self.pad;
+        if pad.rows < 3 || pad.cols < 3 {
+            return Err(invalid("pad.rows", format!("{} x {}", pad.rows, pad.cols), "at least 3 x 3 cells"));
+        }
+        finite_positive("pad.width_mm", pad.width_mm)?;
+        finite_positive("pad.height_mm", pad.height_mm)?;
+        if self.roi.width == 0 || self.roi.height == 0 {
+            return Err(invalid("roi.width", format!("{} x {}", self.roi.width, self.roi.height), "a non-empty ROI"));
+        }
+        if self.roi.x.saturating_add(self.roi.width) > cam.width || self.roi.y.saturating_add(self.roi.height) > cam.height
+        {
+            return Err(invalid(
+                "roi.x",
+                format!("{:?}", self.roi),
+                "the ROI must lie inside the camera.width x camera.height frame",
+            ));
+        }
+        let t = &self.thresholds;
+        finite_positive("thresholds.contact_shear_mm", t.contact_shear_mm)?;
+        finite_positive("thresholds.max_displacement_cells", t.max_displacement_cells)?;
+        fraction("thresholds.recovery_lost_fraction", t.recovery_lost_fraction)?;
+        fraction("thresholds.edge_sample_fraction", t.edge_sample_fraction)?;
+        fraction("thresholds.edge_min_confidence", t.edge_min_confidence)?;
+        finite("calibration.a", self.calibration.a)?;
+        finite("calibration.b", self.calibration.b)?;
+        finite_positive("calibration.alpha", self.calibration.alpha)?;
+        let s = &self.surface;
+        let (net_rows, net_cols) = (usize::from(pad.corner_rows()), usize::from(pad.corner_cols()));
+        if s.degree_u < 1 || s.degree_u >= net_rows {
+            return Err(invalid("surface.degree_u", s.degree_u, "1 ..= corner rows - 1 (10 on the real pad)"));
+        }
+        if s.degree_v < 1 || s.degree_v >= net_cols {
+            return Err(invalid("surface.degree_v", s.degree_v, "1 ..= corner columns - 1 (14 on the real pad)"));
+        }
+        if !(s.uv_step.is_finite() && s.uv_step >= 0.001 && s.uv_step <= 1.0) {
+            return Err(invalid("surface.uv_step", s.uv_step, "0.001 ..= 1"));
+        }
+        let p = &self.paper;
+        if p.bilateral_diameter == 0 {
+            return Err(invalid("paper.bilateral_diameter", p.bilateral_diameter, "> 0"));
+        }
+        finite_positive("paper.bilateral_sigma_color", p.bilateral_sigma_color)?;
+        finite_positive("paper.bilateral_sigma_space", p.bilateral_sigma_space)?;
+        finite("paper.sobel_weight_x", p.sobel_weight_x)?;
+        finite("paper.sobel_weight_y", p.sobel_weight_y)?;
+        finite("paper.binary_threshold", p.binary_threshold)?;
+        fraction("paper.polygon_epsilon_fraction", p.polygon_epsilon_fraction)?;
+        finite_positive("paper.quad_min_area_px2", p.quad_min_area_px2)?;
+        if !(p.quad_max_area_px2.is_finite() && p.quad_max_area_px2 > p.quad_min_area_px2) {
+            return Err(invalid("paper.quad_max_area_px2", p.quad_max_area_px2, "finite and > paper.quad_min_area_px2"));
+        }
+        fraction("paper.quad_min_solidity", p.quad_min_solidity)?;
+        finite_positive("paper.pair_distance_px", p.pair_distance_px)?;
+        Ok(())
+    }
+}
+
+fn leak_reason(e: nusense_geometry::CameraError) -> &'static str {
+    match e {
+        nusense_geometry::CameraError::NonMonotonicDistortion(_) => {
+            "coefficients that keep theta_d increasing over the frame (the lens must not fold the image)"
+        }
+        _ => "a usable fisheye model",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_file_is_the_real_sensor() {
+        assert_eq!(SensorConfig::from_toml_str("").unwrap(), SensorConfig::default());
+    }
+
+    #[test]
+    fn round_trips_through_toml() {
+        let mut config = SensorConfig::default();
+        config.calibration.a = 2.5;
+        config.surface.degree_u = 3;
+        let text = config.to_toml_string();
+        assert_eq!(SensorConfig::from_toml_str(&text).unwrap(), config);
+    }
+}

@@ -1,0 +1,440 @@
+//! Fast lattice detection ("model only what the scene needs").
+//!
+//! Reference frame (once, at tare): a small yellowness map of the whole frame, Otsu, yellow blobs, lattice
+//! indices from topology ([`indexing`]), then every square refined at full resolution inside its own cell
+//! ([`window`]). Every later frame: each square is searched only inside its cell around where it was last seen;
+//! the yellow/not-yellow split comes from those windows' own histogram (Otsu), so lighting may change. A full
+//! search runs again only when tracking fails (many squares lost, or the pattern moved more than half a cell).
+//!
+//! Corners come from the squares: interior corner (r, c) is where the two yellow cells of its 2 x 2 block touch,
+//! taken as the midpoint of their centres. That is exact wherever the pad and lens map the 2 x 2 block affinely
+//! (the lens' curvature over one cell shifts it by far less than a pixel) and needs no extra pixel access.
+
+pub mod blobs;
+pub mod indexing;
+pub mod window;
+pub mod yellowness;
+
+use image::RgbImage;
+use nusense_geometry::{CornerIndex, PadGeometry, Point2, SquareIndex};
+
+use crate::config::Thresholds;
+use crate::error::EstimateError;
+use blobs::find_square_blobs;
+use indexing::index_lattice;
+use window::{add_to_histogram, centroid, CellFrame, Pixels};
+use yellowness::{otsu, Histogram, YellownessMap};
+
+/// Half-size of a square's search window in cell units: the square (about 0.8 cell) plus room for motion,
+/// while the diagonal neighbours (from 0.5 + their gap) stay outside.
+const WINDOW_HALF: f64 = 0.55;
+/// Width of the small map used by the full-frame search.
+const SEARCH_MAP_WIDTH: usize = 512;
+/// A tracked square whose yellow area differs from the reference by more than these factors is not trusted.
+const AREA_RATIO_RANGE: (f64, f64) = (0.45, 2.2);
+
+#[derive(Clone, Debug)]
+struct SquareModel {
+    index: SquareIndex,
+    reference: Option<Point2>,
+    reference_area: f64,
+    cell: CellFrame,
+}
+
+/// What one frame's detection found.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Detection {
+    /// Per yellow square (row-major `PadGeometry::yellow_squares` order), raw px.
+    pub squares: Vec<Option<Point2>>,
+    /// Per interior corner (`PadGeometry::corner_slot` order), raw px.
+    pub corners: Vec<Option<Point2>>,
+    /// Whether this frame needed a full-frame search.
+    pub recovered: bool,
+}
+
+/// The fast detector with its tracking state.
+#[derive(Clone, Debug)]
+pub struct FastTracker {
+    pad: PadGeometry,
+    width: u32,
+    height: u32,
+    stride: usize,
+    squares: Vec<SquareModel>,
+    previous: Vec<Option<Point2>>,
+    thresholds: Thresholds,
+}
+
+fn sub(a: Point2, b: Point2) -> Point2 {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+fn lerp_mid(a: Point2, b: Point2) -> Point2 {
+    [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0]
+}
+
+/// Minimum frame side the search works on (a cell must stay several pixels wide).
+pub const MIN_FRAME_SIDE: u32 = 64;
+
+impl FastTracker {
+    /// Finds the whole lattice in the reference frame.
+    pub fn from_reference(
+        frame: &RgbImage,
+        pad: PadGeometry,
+        thresholds: Thresholds,
+    ) -> Result<(Self, Detection), EstimateError> {
+        let (width, height) = frame.dimensions();
+        if width < MIN_FRAME_SIDE || height < MIN_FRAME_SIDE {
+            return Err(EstimateError::FrameTooSmall { width, height, min: MIN_FRAME_SIDE });
+        }
+        let coarse = full_search(frame, &pad)?;
+        let found = coarse.iter().filter(|p| p.is_some()).count();
+        let needed = pad.yellow_count().div_ceil(2);
+        if found < needed {
+            return Err(EstimateError::TooFewPoints { found, needed });
+        }
+        let cells = local_cells(&pad, &coarse)?;
+        let min_step = cells.iter().flatten().map(CellFrame::min_step).fold(f64::MAX, f64::min);
+        // About 40 samples across a cell are plenty for a sub-pixel centroid; skip pixels beyond that.
+        let stride = ((min_step / 40.0).floor() as usize).max(1);
+        let squares: Vec<SquareModel> = pad
+            .yellow_squares()
+            .zip(&cells)
+            .map(|(index, cell)| SquareModel {
+                index,
+                reference: None,
+                reference_area: 0.0,
+                cell: cell.unwrap_or_else(|| cells.iter().flatten().next().copied().expect("checked above")),
+            })
+            .collect();
+        let mut tracker =
+            Self { pad, width, height, stride, squares, previous: coarse.clone(), thresholds };
+        let measured = tracker.measure(frame, &coarse, None)?;
+        let mut squares_px = Vec::with_capacity(measured.len());
+        for (model, m) in tracker.squares.iter_mut().zip(&measured) {
+            model.reference = m.map(|(p, _)| p);
+            model.reference_area = m.map(|(_, a)| a).unwrap_or(0.0);
+            squares_px.push(model.reference);
+        }
+        // Refresh the cells from the refined reference so later windows follow the lens exactly.
+        let refined_cells = local_cells(&pad, &squares_px)?;
+        for (model, cell) in tracker.squares.iter_mut().zip(refined_cells) {
+            if let Some(cell) = cell {
+                model.cell = cell;
+            }
+        }
+        tracker.previous = squares_px.clone();
+        let corners = corners_from_squares(&pad, &squares_px);
+        Ok((tracker, Detection { squares: squares_px, corners, recovered: false }))
+    }
+
+    pub fn frame_size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// Finds the lattice in a later frame, predicting from the previous one.
+    pub fn track(&mut self, frame: &RgbImage) -> Result<Detection, EstimateError> {
+        let predicted = self.predictions();
+        let mut measured = self.measure(frame, &predicted, Some(&predicted))?;
+        let mut recovered = false;
+        if self.tracking_failed(&measured, &predicted) {
+            if let Ok(coarse) = full_search(frame, &self.pad) {
+                if let Some(aligned) = self.align_to_reference(&coarse) {
+                    measured = self.measure(frame, &aligned, Some(&aligned))?;
+                    recovered = true;
+                }
+            }
+        }
+        let squares: Vec<Option<Point2>> = measured.iter().map(|m| m.map(|(p, _)| p)).collect();
+        self.previous = squares.clone();
+        let corners = corners_from_squares(&self.pad, &squares);
+        Ok(Detection { squares, corners, recovered })
+    }
+
+    /// Where each square is expected: where it was last seen, else its reference position moved by the median
+    /// motion of the squares that were seen.
+    fn predictions(&self) -> Vec<Option<Point2>> {
+        let mut dx = Vec::new();
+        let mut dy = Vec::new();
+        for (model, prev) in self.squares.iter().zip(&self.previous) {
+            if let (Some(r), Some(p)) = (model.reference, prev) {
+                dx.push(p[0] - r[0]);
+                dy.push(p[1] - r[1]);
+            }
+        }
+        let shift = if dx.is_empty() { [0.0, 0.0] } else { [median(&mut dx), median(&mut dy)] };
+        self.squares
+            .iter()
+            .zip(&self.previous)
+            .map(|(model, prev)| prev.or(model.reference.map(|r| [r[0] + shift[0], r[1] + shift[1]])))
+            .collect()
+    }
+
+    fn tracking_failed(&self, measured: &[Option<(Point2, f64)>], predicted: &[Option<Point2>]) -> bool {
+        let expected = self.squares.iter().filter(|m| m.reference.is_some()).count().max(1);
+        let found = measured.iter().filter(|m| m.is_some()).count();
+        let lost_fraction = 1.0 - found as f64 / expected as f64;
+        let mut moves: Vec<f64> = measured
+            .iter()
+            .zip(predicted)
+            .zip(&self.squares)
+            .filter_map(|((m, p), model)| {
+                let (m, p) = (m.as_ref()?.0, (*p)?);
+                Some(sub(m, p)[0].hypot(sub(m, p)[1]) / model.cell.min_step())
+            })
+            .collect();
+        let median_move = if moves.is_empty() { 0.0 } else { median(&mut moves) };
+        lost_fraction > self.thresholds.recovery_lost_fraction || median_move > 0.5
+    }
+
+    /// Gives the full search's squares the reference's indices: the whole-lattice index offset that puts them
+    /// nearest to where the reference saw the same squares.
+    fn align_to_reference(&self, coarse: &[Option<Point2>]) -> Option<Vec<Option<Point2>>> {
+        // `coarse` is indexed as if its first row/column were the pad's; try shifting it by whole cells.
+        let (rows, cols) = (i32::from(self.pad.rows), i32::from(self.pad.cols));
+        let slot_of = |r: i32, c: i32| -> Option<usize> {
+            if r < 0 || c < 0 || r >= rows || c >= cols {
+                return None;
+            }
+            let index = SquareIndex { row: r as u16, col: c as u16 };
+            self.squares.binary_search_by_key(&index, |m| m.index).ok()
+        };
+        let mut best: Option<(f64, usize, i32, i32)> = None;
+        for dr in -3..=3 {
+            for dc in -3..=3 {
+                if (dr + dc) % 2 != 0 {
+                    continue;
+                }
+                let mut distances = Vec::new();
+                for (model, found) in self.squares.iter().zip(coarse) {
+                    let (Some(p), Some(slot)) =
+                        (found, slot_of(i32::from(model.index.row) + dr, i32::from(model.index.col) + dc))
+                    else {
+                        continue;
+                    };
+                    if let Some(r) = self.squares[slot].reference {
+                        distances.push(sub(*p, r)[0].hypot(sub(*p, r)[1]));
+                    }
+                }
+                if distances.len() < 4 {
+                    continue;
+                }
+                let count = distances.len();
+                let cost = median(&mut distances);
+                if best.is_none_or(|(c, n, _, _)| cost < c || (cost == c && count > n)) {
+                    best = Some((cost, count, dr, dc));
+                }
+            }
+        }
+        let (_, _, dr, dc) = best?;
+        let mut aligned = vec![None; self.squares.len()];
+        for (model, found) in self.squares.iter().zip(coarse) {
+            if let Some(slot) = slot_of(i32::from(model.index.row) + dr, i32::from(model.index.col) + dc) {
+                aligned[slot] = *found;
+            }
+        }
+        Some(aligned)
+    }
+
+    /// Sub-pixel centroid and area of every square around its predicted position.
+    fn measure(
+        &self,
+        frame: &RgbImage,
+        predicted: &[Option<Point2>],
+        check_area: Option<&[Option<Point2>]>,
+    ) -> Result<Vec<Option<(Point2, f64)>>, EstimateError> {
+        let (width, height) = frame.dimensions();
+        if (width, height) != (self.width, self.height) {
+            return Err(EstimateError::FrameSizeMismatch {
+                expected_width: self.width,
+                expected_height: self.height,
+                found_width: width,
+                found_height: height,
+            });
+        }
+        let px = Pixels { raw: frame.as_raw(), width: width as usize, height: height as usize };
+        let mut histogram = Histogram::default();
+        for (model, p) in self.squares.iter().zip(predicted) {
+            if let Some(p) = p {
+                add_to_histogram(&px, *p, &model.cell, WINDOW_HALF, self.stride * 3, &mut histogram);
+            }
+        }
+        let Some(split) = otsu(&histogram).filter(|s| s.contrast() >= 8.0) else {
+            return Err(EstimateError::NoPattern {
+                reason: "no yellow/red contrast where the pattern should be".into(),
+            });
+        };
+        let membership = split.ramp().table();
+        let coarse_stride = self.stride * 2;
+        let result = self
+            .squares
+            .iter()
+            .zip(predicted)
+            .map(|(model, p)| {
+                let start = (*p)?;
+                let (first, _) = centroid(&px, start, &model.cell, WINDOW_HALF, coarse_stride, &membership)?;
+                let (mut at, mut area) = centroid(&px, first, &model.cell, WINDOW_HALF, self.stride, &membership)?;
+                // Converged when the window no longer moves; one more pass when it moved far.
+                let moved = sub(at, first);
+                if moved[0].hypot(moved[1]) > 0.05 * model.cell.min_step() {
+                    (at, area) = centroid(&px, at, &model.cell, WINDOW_HALF, self.stride, &membership)?;
+                }
+                let offset = model.cell.to_cell(sub(at, start));
+                if offset[0].abs() > WINDOW_HALF || offset[1].abs() > WINDOW_HALF {
+                    return None;
+                }
+                if check_area.is_some() && model.reference_area > 0.0 {
+                    let ratio = area / model.reference_area;
+                    if ratio < AREA_RATIO_RANGE.0 || ratio > AREA_RATIO_RANGE.1 {
+                        return None;
+                    }
+                }
+                Some((at, area))
+            })
+            .collect();
+        Ok(result)
+    }
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    values.sort_unstable_by(f64::total_cmp);
+    values[values.len() / 2]
+}
+
+/// Full-frame search: coarse square centres by lattice index (row-major `yellow_squares` order). The absolute
+/// index comes from the lattice's extent: the pad's rows and columns must all be seen for an unambiguous index;
+/// with fewer, the found block is centred on the pad.
+fn full_search(frame: &RgbImage, pad: &PadGeometry) -> Result<Vec<Option<Point2>>, EstimateError> {
+    let factor = (frame.width() as usize / SEARCH_MAP_WIDTH).max(1);
+    let map = YellownessMap::new(frame, factor);
+    let Some((blobs, _)) = find_square_blobs(&map, pad.yellow_count()) else {
+        return Err(EstimateError::NoPattern { reason: "no yellow squares in the frame".into() });
+    };
+    let points: Vec<Point2> = blobs.iter().map(|b| b.centre).collect();
+    let Some(indexed) = index_lattice(&points) else {
+        return Err(EstimateError::NoPattern { reason: "the yellow blobs do not form a checkerboard lattice".into() });
+    };
+    let reached: Vec<(usize, indexing::RelativeIndex)> =
+        indexed.indices.iter().enumerate().filter_map(|(i, x)| x.map(|x| (i, x))).collect();
+    let needed = pad.yellow_count().div_ceil(2);
+    if reached.len() < needed {
+        return Err(EstimateError::TooFewPoints { found: reached.len(), needed });
+    }
+    let (min_r, max_r) = reached.iter().fold((i32::MAX, i32::MIN), |(a, b), (_, x)| (a.min(x.row), b.max(x.row)));
+    let (min_c, max_c) = reached.iter().fold((i32::MAX, i32::MIN), |(a, b), (_, x)| (a.min(x.col), b.max(x.col)));
+    let (rows, cols) = (i32::from(pad.rows), i32::from(pad.cols));
+    if max_r - min_r >= rows || max_c - min_c >= cols {
+        return Err(EstimateError::NoPattern {
+            reason: format!(
+                "the lattice found spans {} x {} cells, more than the pad's {} x {}",
+                max_r - min_r + 1,
+                max_c - min_c + 1,
+                rows,
+                cols
+            ),
+        });
+    }
+    let mut row_offset = -min_r + (rows - 1 - (max_r - min_r)) / 2;
+    let mut col_offset = -min_c + (cols - 1 - (max_c - min_c)) / 2;
+    // The seed square is yellow, so its absolute index must have the parity of a yellow cell.
+    let seed_yellow = pad.is_yellow(SquareIndex { row: row_offset.rem_euclid(2) as u16, col: col_offset.rem_euclid(2) as u16 });
+    if !seed_yellow {
+        if max_c - min_c < cols - 1 {
+            col_offset += if col_offset + max_c < cols - 1 { 1 } else { -1 };
+        } else if max_r - min_r < rows - 1 {
+            row_offset += if row_offset + max_r < rows - 1 { 1 } else { -1 };
+        } else {
+            return Err(EstimateError::NoPattern {
+                reason: "the lattice's corner squares are not where the pad's yellow squares are".into(),
+            });
+        }
+    }
+    let mut squares = vec![None; pad.yellow_count()];
+    let slots: Vec<SquareIndex> = pad.yellow_squares().collect();
+    for (i, x) in reached {
+        let (r, c) = (x.row + row_offset, x.col + col_offset);
+        if r < 0 || c < 0 || r >= rows || c >= cols {
+            continue;
+        }
+        if let Ok(slot) = slots.binary_search(&SquareIndex { row: r as u16, col: c as u16 }) {
+            squares[slot] = Some(points[i]);
+        }
+    }
+    Ok(squares)
+}
+
+/// Local column and row steps at every square, from its found neighbours (two cells away along a row or a
+/// column, or one diagonal step), falling back to the lattice-wide median.
+fn local_cells(pad: &PadGeometry, squares: &[Option<Point2>]) -> Result<Vec<Option<CellFrame>>, EstimateError> {
+    let slots: Vec<SquareIndex> = pad.yellow_squares().collect();
+    let at = |r: i32, c: i32| -> Option<Point2> {
+        if r < 0 || c < 0 {
+            return None;
+        }
+        let slot = slots.binary_search(&SquareIndex { row: r as u16, col: c as u16 }).ok()?;
+        squares[slot]
+    };
+    let mean = |vs: &[Point2]| -> Option<Point2> {
+        (!vs.is_empty()).then(|| {
+            let n = vs.len() as f64;
+            [vs.iter().map(|v| v[0]).sum::<f64>() / n, vs.iter().map(|v| v[1]).sum::<f64>() / n]
+        })
+    };
+    // Diagonal neighbours: one column step plus (down-right) or minus (up-right) one row step.
+    let steps = |r: i32, c: i32| -> (Option<Point2>, Option<Point2>) {
+        let Some(here) = at(r, c) else { return (None, None) };
+        let mut down_right = Vec::new();
+        let mut up_right = Vec::new();
+        if let Some(n) = at(r + 1, c + 1) {
+            down_right.push(sub(n, here));
+        }
+        if let Some(n) = at(r - 1, c - 1) {
+            down_right.push(sub(here, n));
+        }
+        if let Some(n) = at(r - 1, c + 1) {
+            up_right.push(sub(n, here));
+        }
+        if let Some(n) = at(r + 1, c - 1) {
+            up_right.push(sub(here, n));
+        }
+        match (mean(&down_right), mean(&up_right)) {
+            (Some(d), Some(u)) => (Some(lerp_mid(d, u)), Some([(d[0] - u[0]) / 2.0, (d[1] - u[1]) / 2.0])),
+            _ => (None, None),
+        }
+    };
+    let local: Vec<Option<CellFrame>> = slots
+        .iter()
+        .map(|s| match steps(i32::from(s.row), i32::from(s.col)) {
+            (Some(c), Some(r)) => CellFrame::new(c, r),
+            _ => None,
+        })
+        .collect();
+    let valid: Vec<&CellFrame> = local.iter().flatten().collect();
+    if valid.is_empty() {
+        return Err(EstimateError::NoPattern { reason: "no square has lattice neighbours".into() });
+    }
+    let mut cx: Vec<f64> = valid.iter().map(|c| c.col_step[0]).collect();
+    let mut cy: Vec<f64> = valid.iter().map(|c| c.col_step[1]).collect();
+    let mut rx: Vec<f64> = valid.iter().map(|c| c.row_step[0]).collect();
+    let mut ry: Vec<f64> = valid.iter().map(|c| c.row_step[1]).collect();
+    let fallback = CellFrame::new([median(&mut cx), median(&mut cy)], [median(&mut rx), median(&mut ry)]);
+    Ok(local.into_iter().map(|c| c.or(fallback)).collect())
+}
+
+/// Interior corners from the yellow squares: the midpoint of the two yellow cells of each corner's 2 x 2 block.
+pub fn corners_from_squares(pad: &PadGeometry, squares: &[Option<Point2>]) -> Vec<Option<Point2>> {
+    let slots: Vec<SquareIndex> = pad.yellow_squares().collect();
+    let at = |r: u16, c: u16| -> Option<Point2> {
+        let slot = slots.binary_search(&SquareIndex { row: r, col: c }).ok()?;
+        squares.get(slot).copied().flatten()
+    };
+    pad.corners()
+        .map(|CornerIndex { row, col }| {
+            let (a, b) = if pad.is_yellow(SquareIndex { row, col }) {
+                (at(row, col), at(row + 1, col + 1))
+            } else {
+                (at(row, col + 1), at(row + 1, col))
+            };
+            Some(lerp_mid(a?, b?))
+        })
+        .collect()
+}

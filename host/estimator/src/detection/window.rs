@@ -1,0 +1,167 @@
+//! The per-frame search: each square is measured only inside its own cell, a parallelogram spanned by the local
+//! column and row steps around where the square is predicted. Neighbouring yellow squares sit in the diagonal
+//! cells, so they never enter the window; the yellowness-weighted centroid is therefore sub-pixel and cheap.
+
+use nusense_geometry::Point2;
+
+use super::yellowness::Histogram;
+
+/// The local cell of a square in raw px: one column step and one row step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CellFrame {
+    pub col_step: Point2,
+    pub row_step: Point2,
+    inverse: [[f64; 2]; 2],
+}
+
+impl CellFrame {
+    /// `None` when the steps are degenerate (parallel or not finite).
+    pub fn new(col_step: Point2, row_step: Point2) -> Option<Self> {
+        let det = col_step[0] * row_step[1] - col_step[1] * row_step[0];
+        if !det.is_finite() || det.abs() < 1e-6 {
+            return None;
+        }
+        let inverse = [[row_step[1] / det, -row_step[0] / det], [-col_step[1] / det, col_step[0] / det]];
+        Some(Self { col_step, row_step, inverse })
+    }
+
+    /// Cell coordinates (column steps, row steps) of an offset in raw px.
+    pub fn to_cell(&self, d: Point2) -> Point2 {
+        [self.inverse[0][0] * d[0] + self.inverse[0][1] * d[1], self.inverse[1][0] * d[0] + self.inverse[1][1] * d[1]]
+    }
+
+    /// Length of the shorter step, px.
+    pub fn min_step(&self) -> f64 {
+        self.col_step[0].hypot(self.col_step[1]).min(self.row_step[0].hypot(self.row_step[1]))
+    }
+
+    /// The x-range (in pixel-centre offsets from the centre) of row offset `dy` inside |s|, |t| <= half.
+    fn row_span(&self, dy: f64, half: f64) -> Option<(f64, f64)> {
+        let mut lo = f64::NEG_INFINITY;
+        let mut hi = f64::INFINITY;
+        for k in 0..2 {
+            let (a, b) = (self.inverse[k][0], self.inverse[k][1] * dy);
+            if a.abs() < 1e-12 {
+                if b.abs() > half {
+                    return None;
+                }
+                continue;
+            }
+            let (p, q) = ((-half - b) / a, (half - b) / a);
+            lo = lo.max(p.min(q));
+            hi = hi.min(p.max(q));
+        }
+        (lo <= hi).then_some((lo, hi))
+    }
+}
+
+/// A frame's pixels, borrowed.
+pub struct Pixels<'a> {
+    pub raw: &'a [u8],
+    pub width: usize,
+    pub height: usize,
+}
+
+/// Visits the pixels of the window (every `stride`-th row and column of the frame's global grid).
+#[inline(always)]
+fn for_each_row(
+    px: &Pixels,
+    centre: Point2,
+    cell: &CellFrame,
+    half: f64,
+    stride: usize,
+    mut row: impl FnMut(usize, &[u8], usize, usize),
+) {
+    let reach = half * (cell.col_step[1].abs() + cell.row_step[1].abs());
+    let y_lo = (centre[1] - reach - 0.5).ceil().max(0.0) as usize;
+    let y_hi = (centre[1] + reach - 0.5).floor().min(px.height as f64 - 1.0);
+    if !(y_hi >= 0.0) || !centre[0].is_finite() {
+        return;
+    }
+    let y_start = y_lo.div_ceil(stride) * stride;
+    let mut y = y_start;
+    while y as f64 <= y_hi {
+        if let Some((lo, hi)) = cell.row_span(y as f64 + 0.5 - centre[1], half) {
+            let x_lo = (centre[0] + lo - 0.5).ceil().max(0.0);
+            let x_hi = (centre[0] + hi - 0.5).floor().min(px.width as f64 - 1.0);
+            if x_hi >= x_lo {
+                let x0 = (x_lo as usize).div_ceil(stride) * stride;
+                let x1 = x_hi as usize;
+                if x0 <= x1 {
+                    let line = &px.raw[y * px.width * 3..(y + 1) * px.width * 3];
+                    row(y, line, x0, x1);
+                }
+            }
+        }
+        y += stride;
+    }
+}
+
+/// Adds the window's yellowness values to a histogram.
+pub fn add_to_histogram(px: &Pixels, centre: Point2, cell: &CellFrame, half: f64, stride: usize, h: &mut Histogram) {
+    for_each_row(px, centre, cell, half, stride, |_, line, x0, x1| {
+        for x in (x0..=x1).step_by(stride) {
+            let p = &line[x * 3..x * 3 + 3];
+            h.add(super::yellowness::yellowness(p[0], p[1], p[2]));
+        }
+    });
+}
+
+/// Weighted centroid (raw px) and weighted area (raw px^2) of the yellow inside the window; `None` when the
+/// window holds no yellow.
+pub fn centroid(
+    px: &Pixels,
+    centre: Point2,
+    cell: &CellFrame,
+    half: f64,
+    stride: usize,
+    membership: &[f32],
+) -> Option<(Point2, f64)> {
+    let (mut sum_w, mut sum_x, mut sum_y) = (0f64, 0f64, 0f64);
+    for_each_row(px, centre, cell, half, stride, |y, line, x0, x1| {
+        let (mut w_row, mut x_row) = (0f32, 0f32);
+        for x in (x0..=x1).step_by(stride) {
+            let p = &line[x * 3..x * 3 + 3];
+            let value = i32::from(p[0].min(p[1])) - i32::from(p[2]);
+            let w = membership[(value + 255) as usize];
+            w_row += w;
+            x_row += w * x as f32;
+        }
+        sum_w += f64::from(w_row);
+        sum_x += f64::from(x_row);
+        sum_y += f64::from(w_row) * y as f64;
+    });
+    if sum_w <= 0.0 {
+        return None;
+    }
+    let area = sum_w * (stride * stride) as f64;
+    Some(([sum_x / sum_w + 0.5, sum_y / sum_w + 0.5], area))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn centroid_of_a_square_is_sub_pixel() {
+        // A 20 x 20 yellow square from (40.5, 30.5) to (60.5, 50.5) with soft edges: centre (50.5, 40.5).
+        let (w, h) = (100usize, 80usize);
+        let mut raw = vec![0u8; w * h * 3];
+        for y in 0..h {
+            for x in 0..w {
+                let cover = |c: f64, a: f64, b: f64| ((c + 0.5).min(b) - (c - 0.5).max(a)).clamp(0.0, 1.0);
+                let k = cover(x as f64 + 0.5, 40.5, 60.5) * cover(y as f64 + 0.5, 30.5, 50.5);
+                let i = (y * w + x) * 3;
+                raw[i] = 200;
+                raw[i + 1] = (40.0 + 160.0 * k) as u8;
+                raw[i + 2] = 60;
+            }
+        }
+        let px = Pixels { raw: &raw, width: w, height: h };
+        let cell = CellFrame::new([30.0, 0.0], [0.0, 30.0]).unwrap();
+        let membership: Vec<f32> = (-255..=255).map(|v| ((f32::from(v as i16) + 20.0) / 140.0).clamp(0.0, 1.0)).collect();
+        let (c, area) = centroid(&px, [48.0, 43.0], &cell, 0.55, 1, &membership).unwrap();
+        assert!((c[0] - 50.5).abs() < 0.05 && (c[1] - 40.5).abs() < 0.05, "{c:?}");
+        assert!(area > 300.0 && area < 500.0, "{area}");
+    }
+}

@@ -1,0 +1,96 @@
+//! Registration by lattice index: each corner of the frame against the same corner of the rest frame. A corner
+//! is used only when both frames saw it and its motion is plausible: not beyond the configured number of cells,
+//! and not far from what its lattice neighbours did (a lone jump is a detection error, not a deformation).
+
+use nusense_geometry::{CornerIndex, PadGeometry, Point2};
+
+use crate::lattice::Lattice;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RegisteredCorner {
+    pub index: CornerIndex,
+    pub reference_raw: Option<Point2>,
+    pub current_raw: Option<Point2>,
+    pub reference_mm: Option<Point2>,
+    /// Motion on the pad since the reference, mm (both frames saw the corner).
+    pub displacement_mm: Option<Point2>,
+    /// Seen in both frames and plausible.
+    pub valid: bool,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Registration {
+    pub corners: Vec<RegisteredCorner>,
+    /// Corners seen in both frames.
+    pub matched: usize,
+    /// Matched corners masked as implausible.
+    pub implausible: usize,
+}
+
+impl Registration {
+    pub fn valid_count(&self) -> usize {
+        self.corners.iter().filter(|c| c.valid).count()
+    }
+}
+
+/// A neighbour-inconsistent corner moved this many cells differently from the median of its neighbours.
+const NEIGHBOUR_DISAGREEMENT_CELLS: f64 = 0.6;
+
+pub fn register(reference: &Lattice, current: &Lattice, max_displacement_cells: f64) -> Registration {
+    let pad: &PadGeometry = &reference.pad;
+    let cell_mm = pad.pitch_x_mm().min(pad.pitch_y_mm());
+    let mut corners: Vec<RegisteredCorner> = reference
+        .corners
+        .iter()
+        .zip(&current.corners)
+        .map(|(r, c)| {
+            let displacement_mm = match (r.mm, c.mm) {
+                (Some(a), Some(b)) => Some([b[0] - a[0], b[1] - a[1]]),
+                _ => None,
+            };
+            let plausible =
+                displacement_mm.is_some_and(|d| d[0].hypot(d[1]) <= max_displacement_cells * cell_mm);
+            RegisteredCorner {
+                index: r.index,
+                reference_raw: r.raw_px,
+                current_raw: c.raw_px,
+                reference_mm: r.mm,
+                displacement_mm,
+                valid: plausible,
+            }
+        })
+        .collect();
+    let matched = corners.iter().filter(|c| c.displacement_mm.is_some()).count();
+    // Neighbour consistency, judged against the motions before this pass so the order does not matter.
+    let snapshot = corners.clone();
+    let (rows, cols) = (i32::from(pad.corner_rows()), i32::from(pad.corner_cols()));
+    for corner in corners.iter_mut().filter(|c| c.valid) {
+        let Some(d) = corner.displacement_mm else { continue };
+        let (r, c) = (i32::from(corner.index.row), i32::from(corner.index.col));
+        let mut dx = Vec::new();
+        let mut dy = Vec::new();
+        for (nr, nc) in [(r - 1, c), (r + 1, c), (r, c - 1), (r, c + 1), (r - 1, c - 1), (r + 1, c + 1), (r - 1, c + 1), (r + 1, c - 1)] {
+            if nr < 0 || nc < 0 || nr >= rows || nc >= cols {
+                continue;
+            }
+            let n = &snapshot[(nr * cols + nc) as usize];
+            if let (true, Some(nd)) = (n.valid, n.displacement_mm) {
+                dx.push(nd[0]);
+                dy.push(nd[1]);
+            }
+        }
+        if dx.len() < 3 {
+            continue;
+        }
+        let mid = |v: &mut Vec<f64>| {
+            v.sort_unstable_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let (mx, my) = (mid(&mut dx), mid(&mut dy));
+        if (d[0] - mx).hypot(d[1] - my) > NEIGHBOUR_DISAGREEMENT_CELLS * cell_mm {
+            corner.valid = false;
+        }
+    }
+    let implausible = corners.iter().filter(|c| c.displacement_mm.is_some() && !c.valid).count();
+    Registration { corners, matched, implausible }
+}
