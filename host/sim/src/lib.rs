@@ -1,1 +1,27 @@
-//! Synthetic NUSense sensor.
+//! Synthetic NUSense sensor: contact mechanics, camera, LEDs, ground truth.
+//!
+//! A [`Scene`] (indenters and loads) is turned into a raw camera frame by a [`Renderer`] built for one
+//! [`SensorModel`] (pad, gel, camera pose, colours, LEDs, image formation), together with the [`GroundTruth`]
+//! the estimator is scored against. Given the same scene, LED currents and seed, a frame is bit-identical.
+//!
+//! ```
+//! use nusense_sim::{Contact, Renderer, Scene, SensorModel};
+//! let renderer = Renderer::new(SensorModel::real(160, 120)).unwrap();
+//! let scene = Scene::with_contact(Contact::sphere(5.0, [0.0, 0.0], 6.0));
+//! let (frame, truth) = renderer.render(&scene, [100.0; 4], 42).unwrap();
+//! assert_eq!(frame.dimensions(), (160, 120));
+//! assert_eq!(truth.corners.len(), 165);
+//! ```
+
+pub mod mechanics;
+pub mod model;
+pub mod render;
+pub mod scene;
+pub mod script;
+pub mod sweep;
+pub mod truth;
+
+pub use model::{ModelError, SensorModel, NOMINAL_LED_CURRENT_MA};
+pub use render::{RenderError, Renderer};
+pub use scene::{Contact, Damage, Indenter, Occlusion, Scene, SceneError, SceneFile, SensorOverrides};
+pub use truth::{ContactTruth, CornerTruth, GroundTruth};

@@ -1,0 +1,348 @@
+//! The simulated sensor: pad, gel, camera pose, colours, LEDs and image formation settings.
+//!
+//! [`SensorModel::real`] reproduces the real sensor of shared/data/real. Where a number was measured on those two
+//! frames (2048 x 1536 raw JPEGs), the comment next to it says how; nothing here is fitted per pixel, only a handful
+//! of physical constants.
+
+use nusense_geometry::camera::FisheyeIntrinsics;
+use nusense_geometry::{CameraError, FisheyeCamera, PadGeometry};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// LED current at which the pad looks like the real frames (each of the four sides).
+pub const NOMINAL_LED_CURRENT_MA: f32 = 100.0;
+
+/// Median RGB of the yellow squares in reference_fisheye.jpg: pixels with R > 150, G > 150, B < 170
+/// (7.8 % of the frame), median per channel. 10th..90th percentile: (205, 173, 132)..(248, 247, 166).
+pub const REAL_YELLOW_RGB: [f32; 3] = [229.0, 221.0, 153.0];
+/// Median RGB of the red base in reference_fisheye.jpg: pixels with R > 100, G < 90 (16.6 % of the frame).
+/// 10th..90th percentile: (144, 58, 97)..(213, 87, 135), i.e. the red is blotchy by about +-15 %.
+pub const REAL_RED_RGB: [f32; 3] = [183.0, 76.0, 119.0];
+/// The dark bluish rim around the pattern (the edge of the pad and its window): samples along row 768 between
+/// x = 280 and 340 and along column 1024 between y = 100 and 136 of reference_fisheye.jpg, about (30..50, 37..53,
+/// 46..83); we take the middle.
+pub const REAL_RIM_RGB: [f32; 3] = [36.0, 44.0, 68.0];
+/// The housing around the window: 40 x 40 px means at the frame's corners and edge midpoints of
+/// reference_fisheye.jpg range (9, 7, 6)..(29, 19, 17).
+pub const REAL_SURROUND_RGB: [f32; 3] = [18.0, 13.0, 13.0];
+/// Yellow square side / cell pitch. Near the frame centre the yellow runs along rows and columns of
+/// reference_fisheye.jpg are 80..83 px long and repeat every 188..190 px (two cells), so 82 / 95 = 0.86.
+pub const REAL_YELLOW_FILL: f64 = 0.86;
+
+#[derive(Debug, Error, PartialEq)]
+pub enum ModelError {
+    #[error("sensor model: {field} must be {expected}, got {value}")]
+    BadValue { field: &'static str, expected: &'static str, value: f64 },
+    #[error("sensor model camera: {0}")]
+    Camera(#[from] CameraError),
+    #[error("sensor model: the pad plane is not in front of the camera (pose {0:?})")]
+    PadBehindCamera(PadPose),
+}
+
+/// Where the pad's colour layer sits relative to the camera: the camera looks along +z; the pad plane's origin
+/// (pad centre) is at (shift_mm.x, shift_mm.y, distance_mm), its axes rotated by `rotation_deg` about the
+/// camera's x, then y, then z axis.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PadPose {
+    pub distance_mm: f64,
+    pub shift_mm: [f64; 2],
+    pub rotation_deg: [f64; 3],
+}
+
+impl PadPose {
+    /// Fitted to the 96 yellow-square centroids of reference_fisheye.jpg with the paper's fisheye model
+    /// (least squares over distance, shift and the three angles; residual 4.6 px RMS, 8 px max on a 2048 x 1536
+    /// frame, the rest being the real lens differing from the paper's K and D). The pattern then spans about
+    /// x 363..1770, y 142..1239 px of the raw frame.
+    pub fn real() -> Self {
+        Self { distance_mm: 71.18, shift_mm: [1.741, -2.840], rotation_deg: [2.667, 0.832, 0.065] }
+    }
+
+    /// Rotation matrix (row-major) taking pad axes to camera axes.
+    pub fn rotation(&self) -> [[f64; 3]; 3] {
+        let [ax, ay, az] = self.rotation_deg.map(f64::to_radians);
+        let (sx, cx) = ax.sin_cos();
+        let (sy, cy) = ay.sin_cos();
+        let (sz, cz) = az.sin_cos();
+        let rx = [[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]];
+        let ry = [[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]];
+        let rz = [[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]];
+        mat_mul(&rz, &mat_mul(&ry, &rx))
+    }
+
+    /// A point of the pad plane (pad mm) in camera coordinates.
+    pub fn pad_to_camera(&self, p: [f64; 2]) -> [f64; 3] {
+        let r = self.rotation();
+        let t = [self.shift_mm[0], self.shift_mm[1], self.distance_mm];
+        std::array::from_fn(|i| r[i][0] * p[0] + r[i][1] * p[1] + t[i])
+    }
+}
+
+fn mat_mul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
+}
+
+/// The gel as an elastic half-space, and where the camera-visible colour layer sits in it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Material {
+    /// Depth of the colour layer below the contact surface.
+    pub layer_depth_mm: f64,
+    pub shear_modulus_kpa: f64,
+    /// 0.5 = incompressible (silicone gels are nearly so).
+    pub poisson_ratio: f64,
+}
+
+impl Material {
+    /// Fitted to the real pair: the displacements of the 96 yellow-square centroids between reference_fisheye.jpg
+    /// and touch_fisheye.jpg (peak about 17 px) against this crate's model of a 5 mm sphere at 6 N (the
+    /// authors' label), with the centre, depth and modulus free and nu = 0.5: 1.1 px RMS residual at depth
+    /// 2.8 mm, G = 48 kPa.
+    pub fn real() -> Self {
+        Self { layer_depth_mm: 2.8, shear_modulus_kpa: 48.0, poisson_ratio: 0.5 }
+    }
+
+    /// In N / mm^2 (MPa), the unit the mechanics works in.
+    pub fn shear_modulus_n_per_mm2(&self) -> f64 {
+        self.shear_modulus_kpa * 1e-3
+    }
+}
+
+/// The pad's look at nominal illumination (the real frames' LED currents), RGB in 0..255.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PadColours {
+    pub yellow: [f32; 3],
+    pub red: [f32; 3],
+    /// The rim around the pattern.
+    pub rim: [f32; 3],
+    /// Everything outside the window.
+    pub surround: [f32; 3],
+}
+
+impl PadColours {
+    pub fn real() -> Self {
+        Self { yellow: REAL_YELLOW_RGB, red: REAL_RED_RGB, rim: REAL_RIM_RGB, surround: REAL_SURROUND_RGB }
+    }
+}
+
+/// Four LED bars, one along each side of the pad just outside the rim; each lights its own side more.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Lighting {
+    /// Current at which a side gives its nominal brightness; brightness is linear in current.
+    pub nominal_current_ma: f32,
+    /// Distance of each LED bar outside the pattern's edge, mm.
+    pub bar_offset_mm: f64,
+    /// A bar's light falls as 1 / (1 + (d / spread)^2) with distance d from it.
+    pub spread_mm: f64,
+    /// Light that does not come from the LEDs, as a fraction of the nominal total (0: dark with LEDs off).
+    pub ambient: f32,
+}
+
+impl Lighting {
+    pub fn real() -> Self {
+        Self { nominal_current_ma: NOMINAL_LED_CURRENT_MA, bar_offset_mm: 5.0, spread_mm: 25.0, ambient: 0.0 }
+    }
+}
+
+/// Everything fixed about one simulated sensor.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorModel {
+    pub pad: PadGeometry,
+    pub width: u32,
+    pub height: u32,
+    pub intrinsics: FisheyeIntrinsics,
+    pub pose: PadPose,
+    pub material: Material,
+    pub colours: PadColours,
+    /// Yellow square side as a fraction of the cell pitch.
+    pub yellow_fill: f64,
+    /// Width of the dark rim around the pattern, mm.
+    pub rim_width_mm: f64,
+    /// Blotchiness of the pad's colours (relative amplitude of a smooth random texture fixed to the material).
+    pub texture_amplitude: f32,
+    /// Seed of that texture: it belongs to the pad, not to the frame.
+    pub texture_seed: u64,
+    pub lighting: Lighting,
+    /// Gain on everything (1 = the real frames' exposure).
+    pub exposure: f32,
+    /// Brightness lost at the frame's corners relative to its centre (quadratic in radius).
+    pub vignetting: f32,
+    /// Standard deviation of per-pixel noise, in 8-bit levels.
+    pub noise_sigma: f32,
+    /// Optical blur (Gaussian sigma) in px of this frame size.
+    pub blur_px: f32,
+    /// Encode and decode every frame as JPEG at this quality, as a webcam's MJPEG stream would.
+    pub jpeg_quality: Option<u8>,
+    /// Spacing of the mesh on which displacements are computed and then interpolated per pixel.
+    pub mesh_step_mm: f64,
+}
+
+impl SensorModel {
+    /// The real sensor at `width x height` (the paper's lens scaled to that frame size).
+    pub fn real(width: u32, height: u32) -> Self {
+        let scale = f64::from(width.max(1)) / 2048.0;
+        Self {
+            pad: PadGeometry::default(),
+            width,
+            height,
+            intrinsics: FisheyeIntrinsics::paper(2048, 1536).scaled_to(width.max(1), height.max(1)),
+            pose: PadPose::real(),
+            material: Material::real(),
+            colours: PadColours::real(),
+            yellow_fill: REAL_YELLOW_FILL,
+            rim_width_mm: 3.0,
+            texture_amplitude: 0.08,
+            texture_seed: 0x006e_7573_656e_7365,
+            lighting: Lighting::real(),
+            exposure: 1.0,
+            vignetting: 0.25,
+            // About what the real frames show in flat yellow areas at 2048 px; JPEG adds its own.
+            noise_sigma: 2.0,
+            // About 2 px of defocus at 2048 px wide, scaled to this frame.
+            blur_px: (2.0 * scale).max(0.3) as f32,
+            jpeg_quality: None,
+            mesh_step_mm: 0.5,
+        }
+    }
+
+    pub fn camera(&self) -> Result<FisheyeCamera, ModelError> {
+        if self.intrinsics.width != self.width || self.intrinsics.height != self.height {
+            return Err(ModelError::BadValue {
+                field: "intrinsics.width/height",
+                expected: "equal to the model's width and height",
+                value: f64::from(self.intrinsics.width),
+            });
+        }
+        Ok(FisheyeCamera::new(self.intrinsics)?)
+    }
+
+    pub fn validate(&self) -> Result<(), ModelError> {
+        let positive = |field: &'static str, value: f64| {
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                Err(ModelError::BadValue { field, expected: "a finite number > 0", value })
+            }
+        };
+        let non_negative = |field: &'static str, value: f64| {
+            if value.is_finite() && value >= 0.0 {
+                Ok(())
+            } else {
+                Err(ModelError::BadValue { field, expected: "a finite number >= 0", value })
+            }
+        };
+        positive("width", f64::from(self.width))?;
+        positive("height", f64::from(self.height))?;
+        if self.pad.rows < 2 || self.pad.cols < 2 {
+            return Err(ModelError::BadValue {
+                field: "pad.rows/cols",
+                expected: "at least 2 cells each way",
+                value: f64::from(self.pad.rows.min(self.pad.cols)),
+            });
+        }
+        positive("pad.width_mm", self.pad.width_mm)?;
+        positive("pad.height_mm", self.pad.height_mm)?;
+        positive("pose.distance_mm", self.pose.distance_mm)?;
+        for v in self.pose.shift_mm.iter().chain(&self.pose.rotation_deg) {
+            if !v.is_finite() {
+                return Err(ModelError::BadValue { field: "pose", expected: "finite numbers", value: *v });
+            }
+        }
+        positive("material.layer_depth_mm", self.material.layer_depth_mm)?;
+        positive("material.shear_modulus_kpa", self.material.shear_modulus_kpa)?;
+        let nu = self.material.poisson_ratio;
+        if !(nu.is_finite() && (0.0..=0.5).contains(&nu)) {
+            return Err(ModelError::BadValue {
+                field: "material.poisson_ratio",
+                expected: "between 0 and 0.5",
+                value: nu,
+            });
+        }
+        if !(self.yellow_fill.is_finite() && self.yellow_fill > 0.0 && self.yellow_fill <= 1.0) {
+            return Err(ModelError::BadValue { field: "yellow_fill", expected: "in (0, 1]", value: self.yellow_fill });
+        }
+        non_negative("rim_width_mm", self.rim_width_mm)?;
+        non_negative("texture_amplitude", f64::from(self.texture_amplitude))?;
+        positive("lighting.nominal_current_ma", f64::from(self.lighting.nominal_current_ma))?;
+        non_negative("lighting.bar_offset_mm", self.lighting.bar_offset_mm)?;
+        positive("lighting.spread_mm", self.lighting.spread_mm)?;
+        non_negative("lighting.ambient", f64::from(self.lighting.ambient))?;
+        non_negative("exposure", f64::from(self.exposure))?;
+        if !(self.vignetting.is_finite() && (0.0..=1.0).contains(&self.vignetting)) {
+            return Err(ModelError::BadValue {
+                field: "vignetting",
+                expected: "between 0 and 1",
+                value: f64::from(self.vignetting),
+            });
+        }
+        non_negative("noise_sigma", f64::from(self.noise_sigma))?;
+        non_negative("blur_px", f64::from(self.blur_px))?;
+        if let Some(q) = self.jpeg_quality {
+            if !(1..=100).contains(&q) {
+                return Err(ModelError::BadValue { field: "jpeg_quality", expected: "1..=100", value: f64::from(q) });
+            }
+        }
+        positive("mesh_step_mm", self.mesh_step_mm)?;
+        if self.mesh_step_mm > 5.0 {
+            return Err(ModelError::BadValue {
+                field: "mesh_step_mm",
+                expected: "at most 5 mm",
+                value: self.mesh_step_mm,
+            });
+        }
+        let normal = self.pose.rotation().map(|row| row[2]);
+        let centre = self.pose.pad_to_camera([0.0, 0.0]);
+        let facing = normal[0] * centre[0] + normal[1] * centre[1] + normal[2] * centre[2];
+        if !(centre[2] > 0.0 && facing.abs() > 1e-6) {
+            return Err(ModelError::PadBehindCamera(self.pose));
+        }
+        self.camera()?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn real_model_is_valid_at_common_sizes() {
+        for (w, h) in [(2048, 1536), (640, 480), (320, 240), (1280, 720)] {
+            SensorModel::real(w, h).validate().unwrap();
+        }
+    }
+
+    #[test]
+    fn invalid_models_are_typed_errors() {
+        let mut m = SensorModel::real(640, 480);
+        m.material.poisson_ratio = 0.7;
+        assert!(matches!(m.validate(), Err(ModelError::BadValue { field: "material.poisson_ratio", .. })));
+        let mut m = SensorModel::real(640, 480);
+        m.pose.distance_mm = -5.0;
+        assert!(m.validate().is_err());
+        let mut m = SensorModel::real(640, 480);
+        m.width = 320;
+        assert!(m.validate().is_err());
+        let mut m = SensorModel::real(640, 480);
+        m.jpeg_quality = Some(0);
+        assert!(m.validate().is_err());
+    }
+
+    #[test]
+    fn real_pose_places_the_pattern_like_the_real_frames() {
+        // The brief's rough extent of the pattern in the real 2048 x 1536 frame: x 370..1760, y 160..1220.
+        let m = SensorModel::real(2048, 1536);
+        let cam = m.camera().unwrap();
+        let px = |p: [f64; 2]| cam.project(m.pose.pad_to_camera(p)).unwrap();
+        let left = px([-26.5, 0.0]);
+        let right = px([26.5, 0.0]);
+        let top = px([0.0, -20.0]);
+        let bottom = px([0.0, 20.0]);
+        assert!((left[0] - 370.0).abs() < 30.0 && (right[0] - 1760.0).abs() < 30.0, "{left:?} {right:?}");
+        assert!((top[1] - 160.0).abs() < 30.0 && (bottom[1] - 1220.0).abs() < 30.0, "{top:?} {bottom:?}");
+    }
+}

@@ -1,0 +1,654 @@
+//! Scene -> raw frame.
+//!
+//! Everything that depends only on the fixed camera is computed once in [`Renderer::new`]: for every pixel, the
+//! point of the pad plane under its centre (ray cast through the fisheye model), the pixel's footprint on the pad
+//! (for analytic anti-aliasing), and its share of each LED bar's light with vignetting. Per frame only the
+//! displacement mesh is solved, inverted, and each pixel looks up which material point it now sees and that
+//! point's colour coverage.
+
+use image::RgbImage;
+use nusense_geometry::{FisheyeCamera, Point2};
+use rand::{RngCore, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use thiserror::Error;
+
+use crate::mechanics::{DisplacementMesh, LoadedPad};
+use crate::model::{ModelError, SensorModel};
+use crate::scene::{Damage, Scene, SceneError};
+use crate::truth::{ContactTruth, CornerTruth, GroundTruth};
+
+#[derive(Debug, Error)]
+pub enum RenderError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error("LED current {side} must be a finite number >= 0 mA, got {value}")]
+    BadCurrent { side: &'static str, value: f32 },
+    #[error("the pad point {0:?} mm does not project into the camera")]
+    NotInView(Point2),
+    #[error("JPEG round trip failed: {0}")]
+    Jpeg(#[from] image::ImageError),
+}
+
+const SIDES: [&str; 4] = ["top", "right", "bottom", "left"];
+/// Pixels whose ray misses the pad plane look at this (far outside everything).
+const NOWHERE_MM: f32 = 1.0e4;
+/// Margin of the displacement mesh around the rim: the field there is tiny but not zero.
+const MESH_MARGIN_MM: f64 = 2.0;
+
+#[derive(Clone, Copy, Debug)]
+struct PixelGeometry {
+    /// Pad-plane point under the pixel centre, mm.
+    q: [f32; 2],
+    /// Half-widths of the pixel's footprint along pad x and y, mm, widened by the optical blur.
+    half: [f32; 2],
+}
+
+#[derive(Clone, Copy, Debug)]
+struct PixelLight {
+    /// Brightness from each LED bar at its nominal current (Top, Right, Bottom, Left), incl. vignetting and exposure.
+    side: [f32; 4],
+    ambient: f32,
+}
+
+/// A smooth random scalar field on a regular grid in pad mm.
+#[derive(Clone, Debug)]
+struct Texture {
+    origin: [f32; 2],
+    inv_step: f32,
+    nx: usize,
+    ny: usize,
+    values: Vec<f32>,
+}
+
+impl Texture {
+    /// Value noise: random levels every `coarse_mm`, bilinear in between, sampled every `step_mm`; two octaves.
+    fn new(min: [f64; 2], max: [f64; 2], seed: u64) -> Self {
+        let step = 0.5;
+        let nx = ((max[0] - min[0]) / step).ceil() as usize + 2;
+        let ny = ((max[1] - min[1]) / step).ceil() as usize + 2;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut octave = |coarse: f64| {
+            let cx = ((max[0] - min[0]) / coarse).ceil() as usize + 2;
+            let cy = ((max[1] - min[1]) / coarse).ceil() as usize + 2;
+            let levels: Vec<f64> = (0..cx * cy).map(|_| f64::from(rng.next_u32()) / f64::from(u32::MAX) * 2.0 - 1.0).collect();
+            move |x: f64, y: f64| {
+                let (fx, fy) = (x / coarse, y / coarse);
+                let (i, j) = ((fx as usize).min(cx - 2), (fy as usize).min(cy - 2));
+                let (tx, ty) = (fx - i as f64, fy - j as f64);
+                let at = |a: usize, b: usize| levels[b * cx + a];
+                let top = at(i, j) + (at(i + 1, j) - at(i, j)) * tx;
+                let bottom = at(i, j + 1) + (at(i + 1, j + 1) - at(i, j + 1)) * tx;
+                top + (bottom - top) * ty
+            }
+        };
+        let large = octave(5.0);
+        let small = octave(2.0);
+        let mut values = Vec::with_capacity(nx * ny);
+        for j in 0..ny {
+            for i in 0..nx {
+                let (x, y) = (i as f64 * step, j as f64 * step);
+                values.push((0.7 * large(x, y) + 0.3 * small(x, y)) as f32);
+            }
+        }
+        Self { origin: [min[0] as f32, min[1] as f32], inv_step: (1.0 / step) as f32, nx, ny, values }
+    }
+
+    #[inline]
+    fn at(&self, p: [f32; 2]) -> f32 {
+        let fx = (p[0] - self.origin[0]) * self.inv_step;
+        let fy = (p[1] - self.origin[1]) * self.inv_step;
+        if !(fx >= 0.0 && fy >= 0.0) {
+            return 0.0;
+        }
+        let (i, j) = (fx as usize, fy as usize);
+        if i + 1 >= self.nx || j + 1 >= self.ny {
+            return 0.0;
+        }
+        let (tx, ty) = (fx - i as f32, fy - j as f32);
+        let row = j * self.nx + i;
+        let top = self.values[row] + (self.values[row + 1] - self.values[row]) * tx;
+        let bottom = self.values[row + self.nx] + (self.values[row + self.nx + 1] - self.values[row + self.nx]) * tx;
+        top + (bottom - top) * ty
+    }
+}
+
+/// Fraction of the box [x - h, x + h] inside [a, b].
+#[inline]
+fn box_coverage(x: f32, h: f32, a: f32, b: f32) -> f32 {
+    ((x + h).clamp(a, b) - (x - h).clamp(a, b)) / (2.0 * h)
+}
+
+/// Fraction of a footprint of half-width `h` at distance `distance` from a disc's centre inside the disc.
+#[inline]
+fn disc_coverage(distance: f32, radius: f32, h: f32) -> f32 {
+    ((radius - distance) / (2.0 * h) + 0.5).clamp(0.0, 1.0)
+}
+
+/// The checkerboard's layout in f32 for the per-pixel loop.
+#[derive(Clone, Copy, Debug)]
+struct PatternLayout {
+    half_width: f32,
+    half_height: f32,
+    rim: f32,
+    pitch: [f32; 2],
+    /// Gap between a yellow square and its cell's edge.
+    inset: [f32; 2],
+    rows: i32,
+    cols: i32,
+    top_left_yellow: bool,
+}
+
+impl PatternLayout {
+    fn new(model: &SensorModel) -> Self {
+        let pad = &model.pad;
+        let pitch = [pad.pitch_x_mm() as f32, pad.pitch_y_mm() as f32];
+        let gap = (1.0 - model.yellow_fill as f32) / 2.0;
+        Self {
+            half_width: (pad.width_mm / 2.0) as f32,
+            half_height: (pad.height_mm / 2.0) as f32,
+            rim: model.rim_width_mm as f32,
+            pitch,
+            inset: [gap * pitch[0], gap * pitch[1]],
+            rows: i32::from(pad.rows),
+            cols: i32::from(pad.cols),
+            top_left_yellow: pad.top_left_yellow,
+        }
+    }
+
+    /// Coverage of (rim incl. everything inside it, pattern area, yellow) in a footprint at material point `p`.
+    #[inline]
+    fn coverage(&self, p: [f32; 2], half: [f32; 2]) -> (f32, f32, f32) {
+        let (hw, hh) = (self.half_width, self.half_height);
+        let rim = box_coverage(p[0], half[0], -hw - self.rim, hw + self.rim)
+            * box_coverage(p[1], half[1], -hh - self.rim, hh + self.rim);
+        if rim <= 0.0 {
+            return (0.0, 0.0, 0.0);
+        }
+        let pattern = box_coverage(p[0], half[0], -hw, hw) * box_coverage(p[1], half[1], -hh, hh);
+        if pattern <= 0.0 {
+            return (rim, 0.0, 0.0);
+        }
+        // Local coordinates from the pattern's top-left corner; a footprint touches at most a few cells.
+        let (x, y) = (p[0] + hw, p[1] + hh);
+        let col_range = cell_range(x, half[0], self.pitch[0], self.cols);
+        let row_range = cell_range(y, half[1], self.pitch[1], self.rows);
+        let mut yellow = 0.0;
+        for row in row_range.0..=row_range.1 {
+            let y0 = row as f32 * self.pitch[1] + self.inset[1];
+            let cover_y = box_coverage(y, half[1], y0, y0 + self.pitch[1] - 2.0 * self.inset[1]);
+            if cover_y <= 0.0 {
+                continue;
+            }
+            for col in col_range.0..=col_range.1 {
+                if ((row + col) % 2 == 0) != self.top_left_yellow {
+                    continue;
+                }
+                let x0 = col as f32 * self.pitch[0] + self.inset[0];
+                yellow += cover_y * box_coverage(x, half[0], x0, x0 + self.pitch[0] - 2.0 * self.inset[0]);
+            }
+        }
+        (rim, pattern, yellow.min(pattern))
+    }
+}
+
+fn cell_range(x: f32, h: f32, pitch: f32, count: i32) -> (i32, i32) {
+    let first = ((x - h) / pitch).floor() as i32;
+    let last = ((x + h) / pitch).floor() as i32;
+    let first = first.clamp(0, count - 1);
+    (first, last.clamp(first, (first + 3).min(count - 1)))
+}
+
+/// The simulated sensor, ready to render frames.
+#[derive(Clone, Debug)]
+pub struct Renderer {
+    model: SensorModel,
+    camera: FisheyeCamera,
+    geometry: Vec<PixelGeometry>,
+    light: Vec<PixelLight>,
+    texture: Texture,
+    layout: PatternLayout,
+    mesh_min: [f64; 2],
+    mesh_max: [f64; 2],
+}
+
+impl Renderer {
+    /// Checks the model and precomputes the per-pixel maps (a few ms at 640 x 480, about a second at 2048 x 1536).
+    pub fn new(model: SensorModel) -> Result<Self, ModelError> {
+        model.validate()?;
+        let camera = model.camera()?;
+        let half_extent = [
+            model.pad.width_mm / 2.0 + model.rim_width_mm + MESH_MARGIN_MM,
+            model.pad.height_mm / 2.0 + model.rim_width_mm + MESH_MARGIN_MM,
+        ];
+        // Every point the mesh and ground truth use must be in front of the camera.
+        for corner in [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]] {
+            let p = [corner[0] * half_extent[0], corner[1] * half_extent[1]];
+            if model.pose.pad_to_camera(p)[2] <= 0.0 {
+                return Err(ModelError::PadBehindCamera(model.pose));
+            }
+        }
+        let geometry = pixel_geometry(&model, &camera);
+        let light = pixel_light(&model, &geometry);
+        let mesh_min = [-half_extent[0], -half_extent[1]];
+        let mesh_max = half_extent;
+        let texture = Texture::new(mesh_min, mesh_max, model.texture_seed);
+        let layout = PatternLayout::new(&model);
+        Ok(Self { model, camera, geometry, light, texture, layout, mesh_min, mesh_max })
+    }
+
+    pub fn model(&self) -> &SensorModel {
+        &self.model
+    }
+
+    pub fn camera(&self) -> &FisheyeCamera {
+        &self.camera
+    }
+
+    /// Where a point of the colour layer's plane (pad mm) appears in the raw frame.
+    pub fn pad_mm_to_raw_px(&self, p: Point2) -> Option<Point2> {
+        self.camera.project(self.model.pose.pad_to_camera(p))
+    }
+
+    fn px(&self, p: Point2) -> Result<Point2, RenderError> {
+        self.pad_mm_to_raw_px(p).ok_or(RenderError::NotInView(p))
+    }
+
+    /// Renders one frame. `led_currents_ma`: Top, Right, Bottom, Left (the protocol's side order), 100 mA nominal.
+    /// The same scene, currents and seed always give the same frame.
+    pub fn render(&self, scene: &Scene, led_currents_ma: [f32; 4], seed: u64) -> Result<(RgbImage, GroundTruth), RenderError> {
+        let (image, pad) = self.render_image(scene, led_currents_ma, seed)?;
+        let truth = self.truth_of(scene, &pad, led_currents_ma, seed)?;
+        Ok((image, truth))
+    }
+
+    /// Only the ground truth (no image): cheap.
+    pub fn ground_truth(&self, scene: &Scene, led_currents_ma: [f32; 4], seed: u64) -> Result<GroundTruth, RenderError> {
+        check_inputs(&self.model, scene, led_currents_ma)?;
+        let pad = LoadedPad::new(&scene.contacts, &self.model.material);
+        self.truth_of(scene, &pad, led_currents_ma, seed)
+    }
+
+    fn render_image(&self, scene: &Scene, led_currents_ma: [f32; 4], seed: u64) -> Result<(RgbImage, LoadedPad), RenderError> {
+        check_inputs(&self.model, scene, led_currents_ma)?;
+        let pad = LoadedPad::new(&scene.contacts, &self.model.material);
+        let inverse = pad.is_loaded().then(|| {
+            DisplacementMesh::sample(self.mesh_min, self.mesh_max, self.model.mesh_step_mm, |p| {
+                let u = pad.displacement_mm(p);
+                [u[0], u[1]]
+            })
+            .inverse()
+        });
+        let gains = led_currents_ma.map(|c| c / self.model.lighting.nominal_current_ma);
+        let colours = &self.model.colours;
+        let texture_amplitude = self.model.texture_amplitude;
+        let damage: Vec<(bool, [f32; 2], f32, f32)> = scene
+            .damage
+            .iter()
+            .map(|d| match *d {
+                Damage::Missing { centre_mm, radius_mm } => (true, centre_mm.map(|v| v as f32), radius_mm as f32, 0.0),
+                Damage::Smeared { centre_mm, radius_mm, smear_mm } => {
+                    (false, centre_mm.map(|v| v as f32), radius_mm as f32, smear_mm as f32)
+                }
+            })
+            .collect();
+        let occlusions: Vec<([f32; 2], f32, [f32; 3])> = scene
+            .occlusions
+            .iter()
+            .map(|o| (o.centre_mm.map(|v| v as f32), o.radius_mm as f32, o.colour.map(f32::from)))
+            .collect();
+        let noise_scale = self.model.noise_sigma * 6f32.sqrt() / 255.0;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+
+        let mut image = RgbImage::new(self.model.width, self.model.height);
+        for ((out, g), light) in image.as_mut().chunks_exact_mut(3).zip(&self.geometry).zip(&self.light) {
+            let q = g.q;
+            let p = match &inverse {
+                Some(mesh) => {
+                    let v = mesh.at(q);
+                    [q[0] + v[0], q[1] + v[1]]
+                }
+                None => q,
+            };
+            let mut half = g.half;
+            let mut yellow_kept = 1.0;
+            for &(missing, centre, radius, smear) in &damage {
+                let distance = (p[0] - centre[0]).hypot(p[1] - centre[1]);
+                let inside = disc_coverage(distance, radius, half[0].max(half[1]));
+                if inside > 0.0 {
+                    if missing {
+                        yellow_kept *= 1.0 - inside;
+                    } else {
+                        half = [half[0] + smear * inside, half[1] + smear * inside];
+                    }
+                }
+            }
+            let (rim, pattern, yellow) = self.layout.coverage(p, half);
+            let yellow = yellow * yellow_kept;
+            let shade = if rim > 0.0 { 1.0 + texture_amplitude * self.texture.at(p) } else { 1.0 };
+            let brightness = gains[0] * light.side[0]
+                + gains[1] * light.side[1]
+                + gains[2] * light.side[2]
+                + gains[3] * light.side[3]
+                + light.ambient;
+            let mut rgb: [f32; 3] = std::array::from_fn(|k| {
+                let albedo = colours.surround[k] * (1.0 - rim)
+                    + colours.rim[k] * (rim - pattern)
+                    + (colours.red[k] * (pattern - yellow) + colours.yellow[k] * yellow) * shade;
+                albedo * brightness
+            });
+            for &(centre, radius, colour) in &occlusions {
+                let distance = (q[0] - centre[0]).hypot(q[1] - centre[1]);
+                let cover = disc_coverage(distance, radius, g.half[0].max(g.half[1]));
+                if cover > 0.0 {
+                    for k in 0..3 {
+                        rgb[k] += (colour[k] * brightness.min(1.0) - rgb[k]) * cover;
+                    }
+                }
+            }
+            if noise_scale > 0.0 {
+                let bits = rng.next_u64();
+                for (k, value) in rgb.iter_mut().enumerate() {
+                    // Two uniform bytes sum to a triangular variate on [-255, 255], variance 255^2 / 6.
+                    let a = ((bits >> (16 * k)) & 0xff) as f32;
+                    let b = ((bits >> (16 * k + 8)) & 0xff) as f32;
+                    *value += (a + b - 255.0) * noise_scale;
+                }
+            }
+            for (channel, value) in out.iter_mut().zip(rgb) {
+                *channel = (value + 0.5).clamp(0.0, 255.0) as u8;
+            }
+        }
+        if let Some(quality) = self.model.jpeg_quality {
+            image = jpeg_round_trip(&image, quality)?;
+        }
+        Ok((image, pad))
+    }
+
+    fn truth_of(&self, scene: &Scene, pad: &LoadedPad, led_currents_ma: [f32; 4], seed: u64) -> Result<GroundTruth, RenderError> {
+        let geometry = &self.model.pad;
+        let mut corners = Vec::with_capacity(geometry.corner_count());
+        for index in geometry.corners() {
+            let rest_mm = geometry.corner_mm(index);
+            let u = pad.displacement_mm(rest_mm);
+            let displaced_mm = [rest_mm[0] + u[0], rest_mm[1] + u[1]];
+            corners.push(CornerTruth {
+                index,
+                rest_mm,
+                displaced_mm,
+                normal_displacement_mm: u[2],
+                rest_px: self.px(rest_mm)?,
+                displaced_px: self.px(displaced_mm)?,
+            });
+        }
+        let mut contacts = Vec::with_capacity(scene.contacts.len());
+        for (contact, load) in scene.contacts.iter().zip(&pad.loads) {
+            let centre_px = self.px(contact.position_mm)?;
+            let edge_angle_deg = contact.indenter.edge_angle_deg();
+            let edge_angle_px_deg = match edge_angle_deg {
+                Some(angle) => {
+                    let (s, c) = angle.to_radians().sin_cos();
+                    let ahead = self.px([contact.position_mm[0] + 0.5 * c, contact.position_mm[1] + 0.5 * s])?;
+                    let behind = self.px([contact.position_mm[0] - 0.5 * c, contact.position_mm[1] - 0.5 * s])?;
+                    Some((ahead[1] - behind[1]).atan2(ahead[0] - behind[0]).to_degrees().rem_euclid(180.0))
+                }
+                None => None,
+            };
+            contacts.push(ContactTruth {
+                indenter: contact.indenter.clone(),
+                centre_mm: contact.position_mm,
+                centre_px,
+                normal_force_n: contact.normal_force_n,
+                tangential_force_n: contact.tangential_force_n,
+                torsion_nmm: contact.torsion_nmm,
+                contact_radius_mm: load.contact_radius_mm,
+                edge_angle_deg,
+                edge_angle_px_deg,
+            });
+        }
+        Ok(GroundTruth {
+            width: self.model.width,
+            height: self.model.height,
+            seed,
+            led_currents_ma,
+            contacts,
+            total_force_n: scene.total_normal_force_n(),
+            corners,
+        })
+    }
+}
+
+fn check_inputs(model: &SensorModel, scene: &Scene, led_currents_ma: [f32; 4]) -> Result<(), RenderError> {
+    for (side, value) in SIDES.iter().zip(led_currents_ma) {
+        if !(value.is_finite() && value >= 0.0) {
+            return Err(RenderError::BadCurrent { side, value });
+        }
+    }
+    scene.validate(&model.pad)?;
+    Ok(())
+}
+
+fn jpeg_round_trip(image: &RgbImage, quality: u8) -> Result<RgbImage, image::ImageError> {
+    let mut bytes = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, quality).encode_image(image)?;
+    Ok(image::load_from_memory_with_format(&bytes, image::ImageFormat::Jpeg)?.to_rgb8())
+}
+
+/// Ray-casts the pixel-corner lattice onto the pad plane, then takes each pixel's centre and footprint from its
+/// four corners.
+fn pixel_geometry(model: &SensorModel, camera: &FisheyeCamera) -> Vec<PixelGeometry> {
+    let (w, h) = (model.width as usize, model.height as usize);
+    let rotation = model.pose.rotation();
+    let t = [model.pose.shift_mm[0], model.pose.shift_mm[1], model.pose.distance_mm];
+    let normal = [rotation[0][2], rotation[1][2], rotation[2][2]];
+    let normal_dot_t = normal[0] * t[0] + normal[1] * t[1] + normal[2] * t[2];
+    let cast = |x: f64, y: f64| -> Option<[f64; 2]> {
+        let n = camera.raw_to_normalized([x, y])?;
+        let d = [n[0], n[1], 1.0];
+        let s = normal_dot_t / (normal[0] * d[0] + normal[1] * d[1] + normal[2] * d[2]);
+        if !(s.is_finite() && s > 0.0) {
+            return None;
+        }
+        let hit = [s * d[0] - t[0], s * d[1] - t[1], s * d[2] - t[2]];
+        // Rotation is orthonormal: pad coordinates are R^T (hit).
+        Some(std::array::from_fn(|k| rotation[0][k] * hit[0] + rotation[1][k] * hit[1] + rotation[2][k] * hit[2]))
+    };
+    let mut lattice: Vec<Option<[f64; 2]>> = Vec::with_capacity((w + 1) * (h + 1));
+    for j in 0..=h {
+        for i in 0..=w {
+            lattice.push(cast(i as f64, j as f64));
+        }
+    }
+    // Gaussian blur of sigma s adds 3 s^2 to the squared half-width of an equivalent box (variances h^2 / 3 + s^2).
+    let blur = f64::from(model.blur_px);
+    let mut geometry = Vec::with_capacity(w * h);
+    for j in 0..h {
+        for i in 0..w {
+            let corners = [lattice[j * (w + 1) + i], lattice[j * (w + 1) + i + 1], lattice[(j + 1) * (w + 1) + i], lattice[(j + 1) * (w + 1) + i + 1]];
+            let pixel = match corners {
+                [Some(a), Some(b), Some(c), Some(d)] => {
+                    let centre = [(a[0] + b[0] + c[0] + d[0]) / 4.0, (a[1] + b[1] + c[1] + d[1]) / 4.0];
+                    let along_x = [(b[0] + d[0] - a[0] - c[0]) / 2.0, (b[1] + d[1] - a[1] - c[1]) / 2.0];
+                    let along_y = [(c[0] + d[0] - a[0] - b[0]) / 2.0, (c[1] + d[1] - a[1] - b[1]) / 2.0];
+                    let half_x = 0.5 * (along_x[0].abs() + along_y[0].abs());
+                    let half_y = 0.5 * (along_x[1].abs() + along_y[1].abs());
+                    let widen = |half: f64| (half * half * (1.0 + 12.0 * blur * blur)).sqrt().max(1e-6);
+                    PixelGeometry { q: [centre[0] as f32, centre[1] as f32], half: [widen(half_x) as f32, widen(half_y) as f32] }
+                }
+                _ => PixelGeometry { q: [NOWHERE_MM, NOWHERE_MM], half: [1.0, 1.0] },
+            };
+            geometry.push(pixel);
+        }
+    }
+    geometry
+}
+
+/// Each LED bar lies `bar_offset_mm` outside one edge of the pattern, as long as that edge; its light falls
+/// off as 1 / (1 + (d / spread)^2) with the distance d from the bar. Normalised so that all four bars at nominal
+/// current give 1 at the pad centre.
+fn pixel_light(model: &SensorModel, geometry: &[PixelGeometry]) -> Vec<PixelLight> {
+    let lighting = &model.lighting;
+    let (hw, hh) = (model.pad.width_mm / 2.0, model.pad.height_mm / 2.0);
+    let offset = lighting.bar_offset_mm;
+    let falloff = |d: f64| 1.0 / (1.0 + (d / lighting.spread_mm).powi(2));
+    let segment_distance = |p: [f64; 2], a: [f64; 2], b: [f64; 2]| {
+        let ab = [b[0] - a[0], b[1] - a[1]];
+        let t = (((p[0] - a[0]) * ab[0] + (p[1] - a[1]) * ab[1]) / (ab[0] * ab[0] + ab[1] * ab[1])).clamp(0.0, 1.0);
+        (p[0] - a[0] - t * ab[0]).hypot(p[1] - a[1] - t * ab[1])
+    };
+    let bars = [
+        ([-hw, -hh - offset], [hw, -hh - offset]),
+        ([hw + offset, -hh], [hw + offset, hh]),
+        ([-hw, hh + offset], [hw, hh + offset]),
+        ([-hw - offset, -hh], [-hw - offset, hh]),
+    ];
+    let sides_at = |p: [f64; 2]| bars.map(|(a, b)| falloff(segment_distance(p, a, b)));
+    let norm: f64 = sides_at([0.0, 0.0]).iter().sum();
+    let (w, h) = (model.width as usize, model.height as usize);
+    let centre = [model.intrinsics.cx, model.intrinsics.cy];
+    let corner_radius2 = centre[0].max(f64::from(model.width) - centre[0]).powi(2)
+        + centre[1].max(f64::from(model.height) - centre[1]).powi(2);
+    let mut light = Vec::with_capacity(w * h);
+    for (idx, g) in geometry.iter().enumerate() {
+        let (i, j) = (idx % w, idx / w);
+        let r2 = (i as f64 + 0.5 - centre[0]).powi(2) + (j as f64 + 0.5 - centre[1]).powi(2);
+        let gain = f64::from(model.exposure) * (1.0 - f64::from(model.vignetting) * r2 / corner_radius2);
+        // Rays that miss the plane see the housing; light it like the far surround.
+        let p = [f64::from(g.q[0]).clamp(-3.0 * hw, 3.0 * hw), f64::from(g.q[1]).clamp(-3.0 * hh, 3.0 * hh)];
+        let sides = sides_at(p).map(|s| (s / norm * gain) as f32);
+        light.push(PixelLight { side: sides, ambient: (f64::from(lighting.ambient) * gain) as f32 });
+    }
+    light
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Contact;
+
+    fn small() -> Renderer {
+        Renderer::new(SensorModel::real(320, 240)).unwrap()
+    }
+
+    #[test]
+    fn same_seed_same_frame_other_seed_other_noise() {
+        let r = small();
+        let scene = Scene::with_contact(Contact::sphere(5.0, [2.0, 1.0], 4.0));
+        let (a, ta) = r.render(&scene, [100.0; 4], 7).unwrap();
+        let (b, tb) = r.render(&scene, [100.0; 4], 7).unwrap();
+        let (c, _) = r.render(&scene, [100.0; 4], 8).unwrap();
+        assert_eq!(a, b);
+        assert_eq!(ta, tb);
+        assert_ne!(a, c);
+    }
+
+    #[test]
+    fn led_current_changes_brightness_per_side() {
+        let mut model = SensorModel::real(320, 240);
+        model.noise_sigma = 0.0;
+        let r = Renderer::new(model).unwrap();
+        let scene = Scene::rest();
+        let mean = |img: &RgbImage, rows: std::ops::Range<u32>| {
+            let mut sum = 0.0;
+            let mut n = 0.0;
+            for y in rows {
+                for x in 0..img.width() {
+                    let p = img.get_pixel(x, y);
+                    sum += f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2]);
+                    n += 3.0;
+                }
+            }
+            sum / n
+        };
+        let (nominal, _) = r.render(&scene, [100.0; 4], 1).unwrap();
+        let (dim, _) = r.render(&scene, [50.0; 4], 1).unwrap();
+        let (dark, _) = r.render(&scene, [0.0; 4], 1).unwrap();
+        let (top_only, _) = r.render(&scene, [100.0, 0.0, 0.0, 0.0], 1).unwrap();
+        let all = 0..240;
+        assert!(mean(&dark, all.clone()) < 0.5, "no light, no picture");
+        let (m_nominal, m_dim) = (mean(&nominal, all.clone()), mean(&dim, all.clone()));
+        assert!(m_dim < 0.6 * m_nominal && m_dim > 0.4 * m_nominal, "{m_dim} vs {m_nominal}");
+        // The top bar lights the top of the pad more than the bottom.
+        let (top, bottom) = (mean(&top_only, 40..80), mean(&top_only, 160..200));
+        assert!(top > 1.3 * bottom, "{top} vs {bottom}");
+    }
+
+    #[test]
+    fn rest_frame_looks_like_the_real_sensor() {
+        let mut model = SensorModel::real(640, 480);
+        model.noise_sigma = 0.0;
+        let r = Renderer::new(model).unwrap();
+        let (img, truth) = r.render(&Scene::rest(), [100.0; 4], 0).unwrap();
+        // Centre of a yellow cell (0, 0) and of a red cell (0, 1) at rest.
+        let pad = &r.model().pad;
+        let yellow = pad.square_centre_mm(nusense_geometry::SquareIndex { row: 5, col: 5 });
+        let red = pad.square_centre_mm(nusense_geometry::SquareIndex { row: 5, col: 6 });
+        let sample = |p: Point2| {
+            let px = r.pad_mm_to_raw_px(p).unwrap();
+            *img.get_pixel(px[0] as u32, px[1] as u32)
+        };
+        let (y, rd) = (sample(yellow), sample(red));
+        assert!(y[0] > 180 && y[1] > 170 && y[2] < 200 && y[2] + 40 < y[1], "{y:?}");
+        assert!(rd[0] > 130 && rd[1] < 110 && rd[2] > rd[1], "{rd:?}");
+        assert!(img.get_pixel(5, 5)[0] < 40, "the surround is dark");
+        assert_eq!(truth.corners.len(), 165);
+        assert_eq!(truth.max_corner_displacement_mm(), 0.0);
+    }
+
+    #[test]
+    fn a_press_moves_the_corners_outward_and_the_picture_with_them() {
+        let r = small();
+        let scene = Scene::with_contact(Contact::sphere(5.0, [0.0, 0.0], 6.0));
+        let truth = r.ground_truth(&scene, [100.0; 4], 0).unwrap();
+        let moved = truth.max_corner_displacement_mm();
+        assert!(moved > 0.2 && moved < 1.5, "{moved}");
+        for c in &truth.corners {
+            let out = (c.displaced_mm[0] - c.rest_mm[0]) * c.rest_mm[0] + (c.displaced_mm[1] - c.rest_mm[1]) * c.rest_mm[1];
+            assert!(out >= -1e-9, "{c:?}");
+        }
+        let (rest, _) = r.render(&Scene::rest(), [100.0; 4], 0).unwrap();
+        let (pressed, _) = r.render(&scene, [100.0; 4], 0).unwrap();
+        let centre = truth.contacts[0].centre_px;
+        let changed_near = count_changed(&rest, &pressed, centre, 30.0);
+        let changed_far = count_changed(&rest, &pressed, [20.0, 20.0], 15.0);
+        assert!(changed_near > 100, "{changed_near}");
+        assert_eq!(changed_far, 0);
+    }
+
+    fn count_changed(a: &RgbImage, b: &RgbImage, centre: [f64; 2], radius: f64) -> usize {
+        a.enumerate_pixels()
+            .filter(|(x, y, p)| {
+                let d = (f64::from(*x) + 0.5 - centre[0]).hypot(f64::from(*y) + 0.5 - centre[1]);
+                let q = b.get_pixel(*x, *y);
+                d < radius && (0..3).any(|k| (i32::from(p[k]) - i32::from(q[k])).abs() > 12)
+            })
+            .count()
+    }
+
+    #[test]
+    fn jpeg_damage_and_occlusion_options_render() {
+        let mut model = SensorModel::real(320, 240);
+        model.jpeg_quality = Some(70);
+        let r = Renderer::new(model).unwrap();
+        let mut scene = Scene::rest();
+        scene.damage.push(Damage::Missing { centre_mm: [0.0, 0.0], radius_mm: 6.0 });
+        scene.occlusions.push(crate::scene::Occlusion { centre_mm: [15.0, 10.0], radius_mm: 4.0, colour: [0, 0, 0] });
+        let (img, _) = r.render(&scene, [100.0; 4], 3).unwrap();
+        let centre = r.pad_mm_to_raw_px([1.6, 1.6]).unwrap();
+        let p = img.get_pixel(centre[0] as u32, centre[1] as u32);
+        assert!(p[1] < 120, "the yellow square at the centre is gone: {p:?}");
+        let occluded = r.pad_mm_to_raw_px([15.0, 10.0]).unwrap();
+        let p = img.get_pixel(occluded[0] as u32, occluded[1] as u32);
+        assert!(p[0] < 40 && p[1] < 40, "{p:?}");
+    }
+
+    #[test]
+    fn bad_inputs_are_typed_errors() {
+        let r = small();
+        assert!(matches!(r.render(&Scene::rest(), [100.0, f32::NAN, 0.0, 0.0], 0), Err(RenderError::BadCurrent { side: "right", .. })));
+        let bad = Scene::with_contact(Contact::sphere(-1.0, [0.0, 0.0], 1.0));
+        assert!(matches!(r.render(&bad, [100.0; 4], 0), Err(RenderError::Scene(_))));
+        let mut model = SensorModel::real(320, 240);
+        model.noise_sigma = f32::INFINITY;
+        assert!(Renderer::new(model).is_err());
+    }
+}
