@@ -1,11 +1,12 @@
 //! Force calibration: fit F = a * gamma + b to (gamma, force) pairs, robustly and with confidence intervals, and
 //! write a and b into a sensor config without disturbing the rest of it.
 //!
-//! The fit is Huber's M-estimator by iteratively reweighted least squares, started from the Theil-Sen line so
-//! that a few wild points (a slipped indenter, a frame caught mid-press) cannot pull the start towards them.
-//! The scale of the residuals is re-estimated each round from their median absolute deviation. Intervals use
-//! Huber's asymptotic covariance of the estimate (with his small-sample correction) and Student's t with n - 2
-//! degrees of freedom.
+//! The fit is an MM-type regression: the Theil-Sen line (median of pairwise slopes, breakdown point 29 %) gives
+//! the start and the residual scale (1.4826 x MAD), then iteratively reweighted least squares with Tukey's
+//! bisquare at that fixed scale gives an efficient final line. A convex loss such as Huber's is not enough: its
+//! minimum follows a single far-out gamma (a bad leverage point, e.g. a frame caught mid-press), the bisquare
+//! gives such points weight zero. Intervals use the M-estimator's asymptotic (sandwich) covariance with Huber's
+//! small-sample correction and Student's t with n - 2 degrees of freedom.
 //!
 //! Pairs come either straight from a CSV of (gamma, force), or from a recorded session: readings with
 //! timestamps aligned with a force/torque log by time ([`align_by_time`]).
@@ -42,8 +43,9 @@ pub enum CalibrationError {
 /// Options of [`fit_force_line`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FitOptions {
-    /// Huber's tuning constant in units of the residual scale (1.345: 95 % efficiency on Gaussian noise).
-    pub huber_k: f64,
+    /// Tukey bisquare's tuning constant in units of the residual scale (4.685: 95 % efficiency on Gaussian
+    /// noise); residuals beyond it get weight zero.
+    pub bisquare_c: f64,
     /// Two-sided confidence level of the intervals.
     pub confidence: f64,
     pub max_iterations: usize,
@@ -51,7 +53,7 @@ pub struct FitOptions {
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { huber_k: 1.345, confidence: 0.95, max_iterations: 100 }
+        Self { bisquare_c: 4.685, confidence: 0.95, max_iterations: 200 }
     }
 }
 
@@ -69,9 +71,7 @@ pub struct ForceFit {
     /// Robust standard deviation of the residuals (1.4826 x MAD), N.
     pub residual_scale_n: f64,
     pub points: usize,
-    /// Points with less than full weight in the final round (beyond k residual scales).
-    pub downweighted: usize,
-    /// Points more than 3 residual scales off the line.
+    /// Points with weight zero in the final line (beyond `bisquare_c` residual scales).
     pub outliers: usize,
     pub iterations: usize,
 }
@@ -98,24 +98,24 @@ pub fn fit_force_line(samples: &[CalibrationSample], options: &FitOptions) -> Re
         return Err(CalibrationError::GammaConstant { gamma: x_min });
     }
     let n = x.len();
-    let k = if options.huber_k > 0.0 && options.huber_k.is_finite() { options.huber_k } else { 1.345 };
+    let c = if options.bisquare_c > 0.0 && options.bisquare_c.is_finite() { options.bisquare_c } else { 4.685 };
 
     let (mut a, mut b) = theil_sen(&x, &y).ok_or(CalibrationError::GammaConstant { gamma: x_min })?;
-    let mut scale = 0.0;
+    // The residual scale stays at that of the Theil-Sen start (the MM-estimation recipe): re-estimating it each
+    // round lets a far-out gamma inflate the scale, gain weight and tilt the line towards itself.
+    let start_residuals: Vec<f64> = x.iter().zip(&y).map(|(&xi, &yi)| yi - (a * xi + b)).collect();
+    let scale = robust_scale(&start_residuals);
     let mut iterations = 0;
     let mut weights = vec![1.0; n];
     for iteration in 1..=options.max_iterations.max(1) {
         iterations = iteration;
         let residuals: Vec<f64> = x.iter().zip(&y).map(|(&xi, &yi)| yi - (a * xi + b)).collect();
-        scale = robust_scale(&residuals);
         if scale <= 0.0 {
-            // More than half the points lie exactly on the line: that line is the fit.
-            weights.iter_mut().zip(&residuals).for_each(|(w, r)| *w = if *r == 0.0 { 1.0 } else { 0.0 });
+            // More than half the points lie exactly on the start line: that line is the fit.
             break;
         }
         for (w, r) in weights.iter_mut().zip(&residuals) {
-            let u = (r / scale).abs();
-            *w = if u <= k { 1.0 } else { k / u };
+            *w = bisquare_weight(r / scale, c);
         }
         let Some((na, nb)) = weighted_line(&x, &y, &weights) else { break };
         let converged = (na - a).abs() <= 1e-12 * (1.0 + a.abs()) && (nb - b).abs() <= 1e-12 * (1.0 + b.abs());
@@ -127,14 +127,10 @@ pub fn fit_force_line(samples: &[CalibrationSample], options: &FitOptions) -> Re
     }
 
     let residuals: Vec<f64> = x.iter().zip(&y).map(|(&xi, &yi)| yi - (a * xi + b)).collect();
-    if scale > 0.0 {
-        scale = robust_scale(&residuals);
-    }
-    let (a_std_error, b_std_error) = huber_standard_errors(&x, &residuals, scale, k);
+    let (a_std_error, b_std_error) = m_estimator_standard_errors(&x, &residuals, scale, c);
     let t = student_t_quantile(0.5 + options.confidence / 2.0, (n - 2) as f64);
-    let downweighted = if scale > 0.0 { residuals.iter().filter(|r| r.abs() > k * scale).count() } else { 0 };
     let outliers = if scale > 0.0 {
-        residuals.iter().filter(|r| r.abs() > 3.0 * scale).count()
+        residuals.iter().filter(|r| r.abs() >= c * scale).count()
     } else {
         residuals.iter().filter(|r| **r != 0.0).count()
     };
@@ -148,7 +144,6 @@ pub fn fit_force_line(samples: &[CalibrationSample], options: &FitOptions) -> Re
         confidence: options.confidence,
         residual_scale_n: scale,
         points: n,
-        downweighted,
         outliers,
         iterations,
     })
@@ -229,34 +224,52 @@ fn weighted_line(x: &[f64], y: &[f64], w: &[f64]) -> Option<(f64, f64)> {
     (a.is_finite() && b.is_finite()).then_some((a, b))
 }
 
-/// Standard errors of (a, b) from Huber's asymptotic covariance with his correction factor K
-/// (Huber 1981, "Robust Statistics", 7.6; statsmodels' RLM "H1").
-fn huber_standard_errors(x: &[f64], residuals: &[f64], scale: f64, k: f64) -> (f64, f64) {
+fn bisquare_weight(u: f64, c: f64) -> f64 {
+    let t = u / c;
+    if t.abs() < 1.0 {
+        (1.0 - t * t).powi(2)
+    } else {
+        0.0
+    }
+}
+
+fn bisquare_psi_prime(u: f64, c: f64) -> f64 {
+    let t2 = (u / c).powi(2);
+    if t2 < 1.0 {
+        (1.0 - t2) * (1.0 - 5.0 * t2)
+    } else {
+        0.0
+    }
+}
+
+/// Standard errors of (a, b) from the M-estimator's asymptotic covariance
+/// K^2 [sum psi^2 / (n - p)] / mean(psi')^2 s^2 (X^T X)^-1 with Huber's correction K = 1 + p/n var(psi')/mean(psi')^2
+/// (Huber 1981, "Robust Statistics", 7.6). Zero when the residual scale is zero (an exact line).
+fn m_estimator_standard_errors(x: &[f64], residuals: &[f64], scale: f64, c: f64) -> (f64, f64) {
     let n = x.len() as f64;
     let p = 2.0;
-    if !(scale > 0.0) {
+    if !(scale > 0.0) || n <= p {
         return (0.0, 0.0);
     }
     let u: Vec<f64> = residuals.iter().map(|r| r / scale).collect();
-    let psi_sq_sum: f64 = u.iter().map(|v| v.clamp(-k, k).powi(2)).sum();
-    let psi_prime: Vec<f64> = u.iter().map(|v| if v.abs() <= k { 1.0 } else { 0.0 }).collect();
+    let psi_sq_sum: f64 = u.iter().map(|&v| (v * bisquare_weight(v, c)).powi(2)).sum();
+    let psi_prime: Vec<f64> = u.iter().map(|&v| bisquare_psi_prime(v, c)).collect();
     let m = psi_prime.iter().sum::<f64>() / n;
-    if !(m > 0.0) {
-        return (0.0, 0.0);
-    }
-    let var_psi_prime = psi_prime.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n;
-    let correction = 1.0 + p / n * var_psi_prime / (m * m);
-    let factor = correction * correction * (psi_sq_sum / (n - p)) / (m * m) * scale * scale;
-    // (X^T X)^-1 for X = [gamma, 1].
     let sx: f64 = x.iter().sum();
     let sxx: f64 = x.iter().map(|v| v * v).sum();
     let det = n * sxx - sx * sx;
     if !(det > 0.0) {
         return (0.0, 0.0);
     }
-    let var_a = factor * n / det;
-    let var_b = factor * sxx / det;
-    (var_a.max(0.0).sqrt(), var_b.max(0.0).sqrt())
+    let factor = if m > 0.0 {
+        let var_psi_prime = psi_prime.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n;
+        let correction = 1.0 + p / n * var_psi_prime / (m * m);
+        correction * correction * (psi_sq_sum / (n - p)) / (m * m) * scale * scale
+    } else {
+        // Most residuals sit where the bisquare turns over: fall back to the plain least-squares variance.
+        residuals.iter().map(|r| r * r).sum::<f64>() / (n - p)
+    };
+    ((factor * n / det).max(0.0).sqrt(), (factor * sxx / det).max(0.0).sqrt())
 }
 
 /// Regularised incomplete beta function I_x(a, b) by its continued fraction (Numerical Recipes, 6.4).
@@ -395,7 +408,8 @@ fn find_column(header: &[&str], names: &[&str]) -> Option<usize> {
 pub fn parse_pairs_csv(text: &str) -> Result<Vec<CalibrationSample>, CalibrationError> {
     let mut lines = data_lines(text).peekable();
     let (gamma_col, force_col) = match lines.peek() {
-        Some(&(_, first)) if first.chars().any(|c| c.is_ascii_alphabetic() && c != 'e' && c != 'E') => {
+        // A header is a first line whose first field is not a number.
+        Some(&(_, first)) if split_csv(first)[0].parse::<f64>().is_err() => {
             let header = split_csv(first);
             let found = header.join(", ");
             let gamma = find_column(&header, &["gamma"])
@@ -741,7 +755,7 @@ mod tests {
             TimedGamma { time_s: 0.1004, gamma: 2.0 }, // just after the log, within skew
             TimedGamma { time_s: 0.5, gamma: 3.0 },    // far outside
         ];
-        let aligned = align_by_time(&readings, &forces, 0.002).unwrap();
+        let aligned = align_by_time(&readings, &forces, 0.006).unwrap();
         assert_eq!(aligned.dropped, 1);
         assert_eq!(aligned.samples.len(), 2);
         assert!((aligned.samples[0].force_n - 2.5).abs() < 1e-9);
