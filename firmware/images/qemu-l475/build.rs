@@ -7,6 +7,8 @@ fn main() {
     fs::copy(manifest.join("memory.x"), out.join("memory.x")).expect("qemu-l475/memory.x");
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed=memory.x");
+    // defmt's symbols (see the defmt-rtt dependency in Cargo.toml).
+    println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
 
     let hash = Command::new("git")
         .args(["rev-parse", "--short=12", "HEAD"])

@@ -14,6 +14,7 @@ use embassy_futures::select::{select, Either};
 use embassy_time::{Duration, Instant, Ticker};
 use nusense_firmware_core::plant::{LedPlant, PlantParams};
 use nusense_firmware_core::{Action, Controller, Identity};
+use defmt_rtt as _;
 use panic_halt as _;
 
 /// MSI at reset: QEMU's RCC model starts the L475 there, and nothing here needs more.
