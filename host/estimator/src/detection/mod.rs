@@ -32,6 +32,12 @@ const WINDOW_HALF: f64 = 0.55;
 const SEARCH_MAP_WIDTH: usize = 512;
 /// A tracked square whose yellow area differs from the reference by more than these factors is not trusted.
 const AREA_RATIO_RANGE: (f64, f64) = (0.45, 2.2);
+/// Most centroid passes per square (one, unless the square moved far since the last frame).
+const MAX_PASSES: usize = 4;
+/// A centroid this close (in cells) to its window's centre leaves the whole square inside the window.
+const SETTLED_CELLS: f64 = 0.08;
+/// Samples across a cell the centroid needs; more pixels than this add time, not precision.
+const SAMPLES_PER_CELL: f64 = 36.0;
 
 #[derive(Clone, Debug)]
 struct SquareModel {
@@ -93,9 +99,8 @@ impl FastTracker {
             return Err(EstimateError::TooFewPoints { found, needed });
         }
         let cells = local_cells(&pad, &coarse)?;
-        let min_step = cells.iter().flatten().map(CellFrame::min_step).fold(f64::MAX, f64::min);
-        // About 40 samples across a cell are plenty for a sub-pixel centroid; skip pixels beyond that.
-        let stride = ((min_step / 40.0).floor() as usize).max(1);
+        let mut steps: Vec<f64> = cells.iter().flatten().map(CellFrame::min_step).collect();
+        let stride = ((median(&mut steps) / SAMPLES_PER_CELL).round() as usize).max(1);
         let squares: Vec<SquareModel> = pad
             .yellow_squares()
             .zip(&cells)
@@ -264,20 +269,27 @@ impl FastTracker {
             });
         };
         let membership = split.ramp().table();
-        let coarse_stride = self.stride * 2;
         let result = self
             .squares
             .iter()
             .zip(predicted)
             .map(|(model, p)| {
                 let start = (*p)?;
-                let (first, _) = centroid(&px, start, &model.cell, WINDOW_HALF, coarse_stride, &membership)?;
-                let (mut at, mut area) = centroid(&px, first, &model.cell, WINDOW_HALF, self.stride, &membership)?;
-                // Converged when the window no longer moves; one more pass when it moved far.
-                let moved = sub(at, first);
-                if moved[0].hypot(moved[1]) > 0.05 * model.cell.min_step() {
-                    (at, area) = centroid(&px, at, &model.cell, WINDOW_HALF, self.stride, &membership)?;
+                // The window holds the whole square with room to spare, so one pass centred on the prediction
+                // is exact unless the square moved far since; then re-centre and measure again.
+                let settle = SETTLED_CELLS * model.cell.min_step();
+                let mut centre = [start[0].round(), start[1].round()];
+                let mut result = None;
+                for _ in 0..MAX_PASSES {
+                    let (at, area) = centroid(&px, centre, &model.cell, WINDOW_HALF, self.stride, &membership)?;
+                    result = Some((at, area));
+                    let moved = sub(at, centre);
+                    if moved[0].hypot(moved[1]) <= settle {
+                        break;
+                    }
+                    centre = [at[0].round(), at[1].round()];
                 }
+                let (at, area) = result?;
                 let offset = model.cell.to_cell(sub(at, start));
                 if offset[0].abs() > WINDOW_HALF || offset[1].abs() > WINDOW_HALF {
                     return None;

@@ -1,0 +1,66 @@
+//! The real sensor's pair of frames (shared/data/real): counts, contact, and the rest frame against itself.
+
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+use image::RgbImage;
+use nusense_estimator::{Estimator, Mode, SensorConfig};
+
+fn real_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/real")
+}
+
+fn load(name: &str) -> RgbImage {
+    image::open(real_dir().join(name)).expect("the real frames are part of the shared data").to_rgb8()
+}
+
+fn reference() -> &'static RgbImage {
+    static FRAME: OnceLock<RgbImage> = OnceLock::new();
+    FRAME.get_or_init(|| load("reference_fisheye.jpg"))
+}
+
+fn touch() -> &'static RgbImage {
+    static FRAME: OnceLock<RgbImage> = OnceLock::new();
+    FRAME.get_or_init(|| load("touch_fisheye.jpg"))
+}
+
+#[test]
+fn fast_mode_finds_every_square_and_corner_on_both_frames() {
+    let mut estimator = Estimator::new(SensorConfig::default(), Mode::Fast, reference()).unwrap();
+    let rest = estimator.reference_lattice().clone();
+    assert_eq!(rest.squares_found(), 96);
+    assert_eq!(rest.corners_found(), 165);
+    let reading = estimator.estimate(touch()).unwrap();
+    assert_eq!(reading.squares_detected, 96);
+    assert_eq!(reading.points_detected, 165);
+    assert_eq!(reading.points_expected, 165);
+    assert_eq!(reading.points_valid, 165, "no corner of the real touch frame is implausible");
+}
+
+#[test]
+fn fast_mode_finds_the_contact_near_the_published_centre() {
+    let mut estimator = Estimator::new(SensorConfig::default(), Mode::Fast, reference()).unwrap();
+    let reading = estimator.estimate(touch()).unwrap();
+    assert!(reading.contact, "{reading:?}");
+    let [x, y] = reading.contact_undistorted_px.unwrap();
+    assert!((x - 1000.0).abs() <= 40.0 && (y - 750.0).abs() <= 40.0, "contact at ({x}, {y}) undistorted px");
+    assert!(reading.gamma > 0.0 && reading.force_n > 0.0, "{} {}", reading.gamma, reading.force_n);
+    // The contact in mm lies on the pad, near its centre (the press was "near the centre of the pad").
+    let [mx, my] = reading.contact_mm.unwrap();
+    assert!(mx.abs() < 10.0 && my.abs() < 10.0, "({mx}, {my}) mm");
+    assert_eq!(reading.samples_total, 67 * 67);
+    assert_eq!(reading.samples_used, 67 * 67);
+}
+
+#[test]
+fn the_rest_frame_against_itself_is_no_contact() {
+    let mut estimator = Estimator::new(SensorConfig::default(), Mode::Fast, reference()).unwrap();
+    let reading = estimator.estimate(reference()).unwrap();
+    assert!(!reading.contact);
+    // The same pixels give the same centroids up to where the search window starts (1e-3 of gamma is about
+    // 0.003 N, far below anything a touch produces).
+    assert!(reading.gamma.abs() < 1e-3, "gamma {}", reading.gamma);
+    assert_eq!(reading.force_n, 0.0);
+    assert_eq!(reading.contact_px, None);
+    assert_eq!(reading.edge_angle_deg, None);
+}
