@@ -132,6 +132,10 @@ pub fn encode<'b, T: Serialize>(msg: &T, buf: &'b mut [u8]) -> Result<&'b [u8], 
 /// Decodes one frame body: the COBS bytes between two delimiters (without the 0x00). Decodes in place, so
 /// `encoded` is overwritten.
 pub fn decode_frame<T: DeserializeOwned>(encoded: &mut [u8]) -> Result<T, WireError> {
+    // The COBS decoder would silently stop at a 0x00 and ignore the rest; a body never contains one.
+    if encoded.contains(&DELIMITER) {
+        return Err(WireError::BadCobs);
+    }
     let decoded_len = cobs::decode_in_place(encoded).map_err(|_| WireError::BadCobs)?;
     let decoded = encoded.get(..decoded_len).ok_or(WireError::BadCobs)?;
     if decoded.len() < CRC_LEN {
@@ -376,6 +380,26 @@ mod tests {
         decoder.feed::<Request>(frame, |m| got = Some(m));
         assert_eq!(got, Some(Ok(request)));
         assert_eq!(decoder.counters().frames_ok, 1);
+    }
+
+    #[test]
+    fn a_body_with_a_delimiter_inside_is_bad_cobs() {
+        let request = Request {
+            seq: 3,
+            body: RequestBody::Reset,
+        };
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let frame = encode(&request, &mut buf).unwrap();
+        let mut body = [0u8; MAX_FRAME_LEN + 2];
+        let n = frame.len();
+        body[..n].copy_from_slice(frame);
+        body[n] = 0x42; // bytes after the delimiter must not be ignored
+        let mut whole = body;
+        assert_eq!(
+            decode_frame::<Request>(&mut whole[..n + 1]),
+            Err(WireError::BadCobs)
+        );
+        assert_eq!(decode_frame::<Request>(&mut body[..n - 1]), Ok(request));
     }
 
     #[test]
