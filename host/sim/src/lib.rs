@@ -13,6 +13,7 @@
 //! assert_eq!(truth.corners.len(), 165);
 //! ```
 
+pub mod dataset;
 pub mod mechanics;
 pub mod model;
 pub mod render;

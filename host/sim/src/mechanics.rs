@@ -27,7 +27,10 @@ pub struct HalfSpace {
 
 impl HalfSpace {
     pub fn new(material: &Material) -> Self {
-        Self { shear_modulus: material.shear_modulus_n_per_mm2(), poisson_ratio: material.poisson_ratio }
+        Self {
+            shear_modulus: material.shear_modulus_n_per_mm2(),
+            poisson_ratio: material.poisson_ratio,
+        }
     }
 
     /// The plane-strain contact modulus E* = E / (1 - nu^2) = 2 G / (1 - nu).
@@ -52,7 +55,11 @@ impl HalfSpace {
 
         // Boussinesq: normal force p.
         let radial = z * inv_rho3 - c * inv_rho * inv_rz;
-        let mut u = [p * x * radial, p * y * radial, p * (z * z * inv_rho3 + 2.0 * (1.0 - self.poisson_ratio) * inv_rho)];
+        let mut u = [
+            p * x * radial,
+            p * y * radial,
+            p * (z * z * inv_rho3 + 2.0 * (1.0 - self.poisson_ratio) * inv_rho),
+        ];
 
         // Cerruti: tangential force (qx, qy); the y-force solution is the x-force one with x and y swapped.
         let cross = inv_rho3 - c * inv_rho * inv_rz * inv_rz;
@@ -117,7 +124,11 @@ pub fn discretise(contact: &Contact, material: &Material) -> ContactLoad {
     match contact.indenter {
         Indenter::Sphere { radius_mm } | Indenter::FlatPunch { radius_mm } => {
             let hertz = matches!(contact.indenter, Indenter::Sphere { .. });
-            let a = if hertz { hertz_radius_mm(&half_space, radius_mm, shape_force) } else { radius_mm };
+            let a = if hertz {
+                hertz_radius_mm(&half_space, radius_mm, shape_force)
+            } else {
+                radius_mm
+            };
             contact_radius_mm = a;
             // r = a sin(phi) removes the flat punch's rim singularity and the Hertz profile's sqrt from the
             // integrand: Hertz p r dr ~ sin(phi) cos^2(phi) dphi, punch p r dr ~ sin(phi) dphi.
@@ -126,7 +137,11 @@ pub fn discretise(contact: &Contact, material: &Material) -> ContactLoad {
             for ring in 0..n_rings {
                 let phi = (ring as f64 + 0.5) / n_rings as f64 * std::f64::consts::FRAC_PI_2;
                 let r = a * phi.sin();
-                let radial_weight = if hertz { phi.sin() * phi.cos().powi(2) } else { phi.sin() };
+                let radial_weight = if hertz {
+                    phi.sin() * phi.cos().powi(2)
+                } else {
+                    phi.sin()
+                };
                 let stagger = if ring % 2 == 0 { 0.0 } else { 0.5 };
                 for k in 0..n_angles {
                     let theta = (k as f64 + stagger) / n_angles as f64 * std::f64::consts::TAU;
@@ -134,7 +149,11 @@ pub fn discretise(contact: &Contact, material: &Material) -> ContactLoad {
                 }
             }
         }
-        Indenter::Edge { length_mm, width_mm, angle_deg } => {
+        Indenter::Edge {
+            length_mm,
+            width_mm,
+            angle_deg,
+        } => {
             let (sin, cos) = angle_deg.to_radians().sin_cos();
             let along = [cos, sin];
             let across = [-sin, cos];
@@ -148,7 +167,10 @@ pub fn discretise(contact: &Contact, material: &Material) -> ContactLoad {
                     // x = b sin(phi): the half-elliptic profile sqrt(1 - x^2/b^2) dx becomes cos^2(phi) dphi.
                     let phi = ((j as f64 + 0.5) / n_across as f64 - 0.5) * std::f64::consts::PI;
                     let t = b * phi.sin();
-                    weighted.push(([s * along[0] + t * across[0], s * along[1] + t * across[1]], phi.cos().powi(2)));
+                    weighted.push((
+                        [s * along[0] + t * across[0], s * along[1] + t * across[1]],
+                        phi.cos().powi(2),
+                    ));
                 }
             }
         }
@@ -165,9 +187,16 @@ pub fn discretise(contact: &Contact, material: &Material) -> ContactLoad {
             near_distance_mm: 0.0,
         };
     }
-    let polar_moment: f64 = weighted.iter().map(|(p, w)| w / total * (p[0] * p[0] + p[1] * p[1])).sum();
+    let polar_moment: f64 = weighted
+        .iter()
+        .map(|(p, w)| w / total * (p[0] * p[0] + p[1] * p[1]))
+        .sum();
     // Torsion as a traction proportional to pressure times lever arm, scaled to the requested moment.
-    let twist = if polar_moment > 0.0 { contact.torsion_nmm / polar_moment } else { 0.0 };
+    let twist = if polar_moment > 0.0 {
+        contact.torsion_nmm / polar_moment
+    } else {
+        0.0
+    };
     let fine: Vec<PointForce> = weighted
         .iter()
         .map(|&(p, w)| {
@@ -215,7 +244,10 @@ fn group(forces: &[PointForce], origin: [f64; 2], cell_mm: f64) -> Vec<PointForc
     cells
         .into_values()
         .filter(|(_, weight, _)| *weight > 0.0)
-        .map(|(moment, weight, force_n)| PointForce { at_mm: [moment[0] / weight, moment[1] / weight], force_n })
+        .map(|(moment, weight, force_n)| PointForce {
+            at_mm: [moment[0] / weight, moment[1] / weight],
+            force_n,
+        })
         .collect()
 }
 
@@ -245,7 +277,11 @@ impl LoadedPad {
         let mut u = [0.0; 3];
         for load in &self.loads {
             let distance = (at_mm[0] - load.centre_mm[0]).hypot(at_mm[1] - load.centre_mm[1]);
-            let forces = if distance > load.near_distance_mm { &load.coarse } else { &load.fine };
+            let forces = if distance > load.near_distance_mm {
+                &load.coarse
+            } else {
+                &load.fine
+            };
             for f in forces {
                 let d = self.half_space.point_force_displacement(
                     f.force_n,
@@ -301,7 +337,13 @@ impl DisplacementMesh {
                 values.push([u[0] as f32, u[1] as f32]);
             }
         }
-        Self { origin_mm: min, step_mm, nx, ny, values }
+        Self {
+            origin_mm: min,
+            step_mm,
+            nx,
+            ny,
+            values,
+        }
     }
 
     /// Bilinear interpolation; zero outside the mesh (the field has decayed there).
@@ -318,7 +360,12 @@ impl DisplacementMesh {
         }
         let (tx, ty) = (fx - i as f32, fy - j as f32);
         let row = j * self.nx + i;
-        let (a, b, c, d) = (self.values[row], self.values[row + 1], self.values[row + self.nx], self.values[row + self.nx + 1]);
+        let (a, b, c, d) = (
+            self.values[row],
+            self.values[row + 1],
+            self.values[row + self.nx],
+            self.values[row + self.nx + 1],
+        );
         let lerp = |k: usize| {
             let top = a[k] + (b[k] - a[k]) * tx;
             let bottom = c[k] + (d[k] - c[k]) * tx;
@@ -361,16 +408,23 @@ mod tests {
     fn point_force_radial_displacement_matches_closed_form() {
         // Boussinesq in cylindrical form: u_r = P / (4 pi G) [r z / rho^3 - (1 - 2 nu) r / (rho (rho + z))].
         for nu in [0.5, 0.3, 0.0] {
-            let half = HalfSpace { shear_modulus: 0.048, poisson_ratio: nu };
+            let half = HalfSpace {
+                shear_modulus: 0.048,
+                poisson_ratio: nu,
+            };
             let (p, z) = (2.5, 2.8);
             for (r, angle) in [(0.5, 0.3), (2.0, 1.9), (4.0, -2.5), (12.0, 0.0)] {
                 let rho = f64::hypot(r, z);
-                let expected = p / (4.0 * std::f64::consts::PI * 0.048) * (r * z / rho.powi(3) - (1.0 - 2.0 * nu) * r / (rho * (rho + z)));
+                let expected = p / (4.0 * std::f64::consts::PI * 0.048)
+                    * (r * z / rho.powi(3) - (1.0 - 2.0 * nu) * r / (rho * (rho + z)));
                 let offset = [r * f64::cos(angle), r * f64::sin(angle)];
                 let u = half.point_force_displacement([0.0, 0.0, p], offset, z);
                 let radial = (u[0] * offset[0] + u[1] * offset[1]) / r;
                 let tangential = (u[1] * offset[0] - u[0] * offset[1]) / r;
-                assert!((radial - expected).abs() < 1e-12 * expected.abs().max(1.0), "nu {nu} r {r}: {radial} vs {expected}");
+                assert!(
+                    (radial - expected).abs() < 1e-12 * expected.abs().max(1.0),
+                    "nu {nu} r {r}: {radial} vs {expected}"
+                );
                 assert!(tangential.abs() < 1e-12);
             }
         }
@@ -391,7 +445,10 @@ mod tests {
             let point = half.point_force_displacement([0.0, 0.0, 4.0], at, material.layer_depth_mm);
             let u = pad.displacement_fine_mm(at);
             for k in 0..3 {
-                assert!((u[k] - point[k]).abs() < 0.03 * point[k].abs().max(1e-4), "{contact:?} {u:?} vs {point:?}");
+                assert!(
+                    (u[k] - point[k]).abs() < 0.03 * point[k].abs().max(1e-4),
+                    "{contact:?} {u:?} vs {point:?}"
+                );
             }
         }
     }
@@ -404,8 +461,13 @@ mod tests {
         contact.torsion_nmm = 3.0;
         let load = discretise(&contact, &material);
         for forces in [&load.fine, &load.coarse] {
-            let sum = forces.iter().fold([0.0; 3], |acc, f| [acc[0] + f.force_n[0], acc[1] + f.force_n[1], acc[2] + f.force_n[2]]);
-            assert!((sum[0] - 0.7).abs() < 1e-9 && (sum[1] + 0.2).abs() < 1e-9 && (sum[2] - 5.0).abs() < 1e-9, "{sum:?}");
+            let sum = forces.iter().fold([0.0; 3], |acc, f| {
+                [acc[0] + f.force_n[0], acc[1] + f.force_n[1], acc[2] + f.force_n[2]]
+            });
+            assert!(
+                (sum[0] - 0.7).abs() < 1e-9 && (sum[1] + 0.2).abs() < 1e-9 && (sum[2] - 5.0).abs() < 1e-9,
+                "{sum:?}"
+            );
         }
         let moment: f64 = load
             .fine
@@ -453,7 +515,11 @@ mod tests {
                 let u = pad.displacement_mm([r * c, r * s]);
                 let radial = u[0] * c + u[1] * s;
                 let tangential = u[1] * c - u[0] * s;
-                assert!((radial - reference[0]).abs() < 0.01 * reference[0], "r {r} angle {angle}: {radial} vs {}", reference[0]);
+                assert!(
+                    (radial - reference[0]).abs() < 0.01 * reference[0],
+                    "r {r} angle {angle}: {radial} vs {}",
+                    reference[0]
+                );
                 assert!(tangential.abs() < 0.01 * reference[0]);
             }
         }
@@ -469,7 +535,11 @@ mod tests {
         let only_a = LoadedPad::new(&[a], &material);
         let only_b = LoadedPad::new(&[b], &material);
         for p in [[0.0, 0.0], [-8.0, 4.0], [6.5, -4.0], [20.0, 15.0]] {
-            let (u, ua, ub) = (both.displacement_mm(p), only_a.displacement_mm(p), only_b.displacement_mm(p));
+            let (u, ua, ub) = (
+                both.displacement_mm(p),
+                only_a.displacement_mm(p),
+                only_b.displacement_mm(p),
+            );
             for k in 0..3 {
                 assert!((u[k] - ua[k] - ub[k]).abs() < 1e-12);
             }

@@ -12,12 +12,18 @@ use thiserror::Error;
 /// LED current at which the pad looks like the real frames (each of the four sides).
 pub const NOMINAL_LED_CURRENT_MA: f32 = 100.0;
 
-/// Median RGB of the yellow squares in reference_fisheye.jpg: pixels with R > 150, G > 150, B < 170
-/// (7.8 % of the frame), median per channel. 10th..90th percentile: (205, 173, 132)..(248, 247, 166).
-pub const REAL_YELLOW_RGB: [f32; 3] = [229.0, 221.0, 153.0];
-/// Median RGB of the red base in reference_fisheye.jpg: pixels with R > 100, G < 90 (16.6 % of the frame).
-/// 10th..90th percentile: (144, 58, 97)..(213, 87, 135), i.e. the red is blotchy by about +-15 %.
-pub const REAL_RED_RGB: [f32; 3] = [183.0, 76.0, 119.0];
+// The pad's colours were measured on reference_fisheye.jpg at the cells' centres and edges, located with the pose of
+// [`PadPose::real`]: the mean of a 16 x 16 px patch at the centre of each of the 140 inner cells, and of a
+// 3 x 20 px strip on each vertical cell edge (the bright lines between cells); the median over cells is the
+// constant, the 10th..90th percentiles are given for the spread the texture imitates.
+
+/// Yellow cells: median (251, 255, 186), 10..90 %: (216, 231, 136)..(255, 255, 227). Green clips at 255 in the
+/// middle of the pad, so the albedo sits just below clipping at nominal light and clips where the light is higher.
+pub const REAL_YELLOW_RGB: [f32; 3] = [248.0, 250.0, 180.0];
+/// Red cells (darker than the lines between cells): median (191, 85, 129), 10..90 %: (158, 56, 100)..(227, 97, 145).
+pub const REAL_RED_RGB: [f32; 3] = [191.0, 85.0, 129.0];
+/// The bright red lines between cells: median (224, 100, 131), 10..90 %: (201, 85, 112)..(246, 128, 148).
+pub const REAL_LINE_RGB: [f32; 3] = [224.0, 100.0, 131.0];
 /// The dark bluish rim around the pattern (the edge of the pad and its window): samples along row 768 between
 /// x = 280 and 340 and along column 1024 between y = 100 and 136 of reference_fisheye.jpg, about (30..50, 37..53,
 /// 46..83); we take the middle.
@@ -25,14 +31,19 @@ pub const REAL_RIM_RGB: [f32; 3] = [36.0, 44.0, 68.0];
 /// The housing around the window: 40 x 40 px means at the frame's corners and edge midpoints of
 /// reference_fisheye.jpg range (9, 7, 6)..(29, 19, 17).
 pub const REAL_SURROUND_RGB: [f32; 3] = [18.0, 13.0, 13.0];
-/// Yellow square side / cell pitch. Near the frame centre the yellow runs along rows and columns of
-/// reference_fisheye.jpg are 80..83 px long and repeat every 188..190 px (two cells), so 82 / 95 = 0.86.
+/// Side of a cell's coloured square / cell pitch (the rest is the line between cells). Near the frame centre the
+/// yellow runs along rows and columns of reference_fisheye.jpg are 80..83 px long and repeat every 188..190 px
+/// (two cells), so 82 / 95 = 0.86.
 pub const REAL_YELLOW_FILL: f64 = 0.86;
 
 #[derive(Debug, Error, PartialEq)]
 pub enum ModelError {
     #[error("sensor model: {field} must be {expected}, got {value}")]
-    BadValue { field: &'static str, expected: &'static str, value: f64 },
+    BadValue {
+        field: &'static str,
+        expected: &'static str,
+        value: f64,
+    },
     #[error("sensor model camera: {0}")]
     Camera(#[from] CameraError),
     #[error("sensor model: the pad plane is not in front of the camera (pose {0:?})")]
@@ -56,7 +67,11 @@ impl PadPose {
     /// frame, the rest being the real lens differing from the paper's K and D). The pattern then spans about
     /// x 363..1770, y 142..1239 px of the raw frame.
     pub fn real() -> Self {
-        Self { distance_mm: 71.18, shift_mm: [1.741, -2.840], rotation_deg: [2.667, 0.832, 0.065] }
+        Self {
+            distance_mm: 71.18,
+            shift_mm: [1.741, -2.840],
+            rotation_deg: [2.667, 0.832, 0.065],
+        }
     }
 
     /// Rotation matrix (row-major) taking pad axes to camera axes.
@@ -100,7 +115,11 @@ impl Material {
     /// authors' label), with the centre, depth and modulus free and nu = 0.5: 1.1 px RMS residual at depth
     /// 2.8 mm, G = 48 kPa.
     pub fn real() -> Self {
-        Self { layer_depth_mm: 2.8, shear_modulus_kpa: 48.0, poisson_ratio: 0.5 }
+        Self {
+            layer_depth_mm: 2.8,
+            shear_modulus_kpa: 48.0,
+            poisson_ratio: 0.5,
+        }
     }
 
     /// In N / mm^2 (MPa), the unit the mechanics works in.
@@ -115,6 +134,8 @@ impl Material {
 pub struct PadColours {
     pub yellow: [f32; 3],
     pub red: [f32; 3],
+    /// The lines between cells.
+    pub lines: [f32; 3],
     /// The rim around the pattern.
     pub rim: [f32; 3],
     /// Everything outside the window.
@@ -123,7 +144,13 @@ pub struct PadColours {
 
 impl PadColours {
     pub fn real() -> Self {
-        Self { yellow: REAL_YELLOW_RGB, red: REAL_RED_RGB, rim: REAL_RIM_RGB, surround: REAL_SURROUND_RGB }
+        Self {
+            yellow: REAL_YELLOW_RGB,
+            red: REAL_RED_RGB,
+            lines: REAL_LINE_RGB,
+            rim: REAL_RIM_RGB,
+            surround: REAL_SURROUND_RGB,
+        }
     }
 }
 
@@ -143,7 +170,12 @@ pub struct Lighting {
 
 impl Lighting {
     pub fn real() -> Self {
-        Self { nominal_current_ma: NOMINAL_LED_CURRENT_MA, bar_offset_mm: 5.0, spread_mm: 25.0, ambient: 0.0 }
+        Self {
+            nominal_current_ma: NOMINAL_LED_CURRENT_MA,
+            bar_offset_mm: 5.0,
+            spread_mm: 25.0,
+            ambient: 0.0,
+        }
     }
 }
 
@@ -158,7 +190,7 @@ pub struct SensorModel {
     pub pose: PadPose,
     pub material: Material,
     pub colours: PadColours,
-    /// Yellow square side as a fraction of the cell pitch.
+    /// Side of each cell's coloured square as a fraction of the cell pitch (the rest is the line between cells).
     pub yellow_fill: f64,
     /// Width of the dark rim around the pattern, mm.
     pub rim_width_mm: f64,
@@ -195,7 +227,7 @@ impl SensorModel {
             colours: PadColours::real(),
             yellow_fill: REAL_YELLOW_FILL,
             rim_width_mm: 3.0,
-            texture_amplitude: 0.08,
+            texture_amplitude: 0.1,
             texture_seed: 0x006e_7573_656e_7365,
             lighting: Lighting::real(),
             exposure: 1.0,
@@ -225,14 +257,22 @@ impl SensorModel {
             if value.is_finite() && value > 0.0 {
                 Ok(())
             } else {
-                Err(ModelError::BadValue { field, expected: "a finite number > 0", value })
+                Err(ModelError::BadValue {
+                    field,
+                    expected: "a finite number > 0",
+                    value,
+                })
             }
         };
         let non_negative = |field: &'static str, value: f64| {
             if value.is_finite() && value >= 0.0 {
                 Ok(())
             } else {
-                Err(ModelError::BadValue { field, expected: "a finite number >= 0", value })
+                Err(ModelError::BadValue {
+                    field,
+                    expected: "a finite number >= 0",
+                    value,
+                })
             }
         };
         positive("width", f64::from(self.width))?;
@@ -249,7 +289,11 @@ impl SensorModel {
         positive("pose.distance_mm", self.pose.distance_mm)?;
         for v in self.pose.shift_mm.iter().chain(&self.pose.rotation_deg) {
             if !v.is_finite() {
-                return Err(ModelError::BadValue { field: "pose", expected: "finite numbers", value: *v });
+                return Err(ModelError::BadValue {
+                    field: "pose",
+                    expected: "finite numbers",
+                    value: *v,
+                });
             }
         }
         positive("material.layer_depth_mm", self.material.layer_depth_mm)?;
@@ -263,11 +307,18 @@ impl SensorModel {
             });
         }
         if !(self.yellow_fill.is_finite() && self.yellow_fill > 0.0 && self.yellow_fill <= 1.0) {
-            return Err(ModelError::BadValue { field: "yellow_fill", expected: "in (0, 1]", value: self.yellow_fill });
+            return Err(ModelError::BadValue {
+                field: "yellow_fill",
+                expected: "in (0, 1]",
+                value: self.yellow_fill,
+            });
         }
         non_negative("rim_width_mm", self.rim_width_mm)?;
         non_negative("texture_amplitude", f64::from(self.texture_amplitude))?;
-        positive("lighting.nominal_current_ma", f64::from(self.lighting.nominal_current_ma))?;
+        positive(
+            "lighting.nominal_current_ma",
+            f64::from(self.lighting.nominal_current_ma),
+        )?;
         non_negative("lighting.bar_offset_mm", self.lighting.bar_offset_mm)?;
         positive("lighting.spread_mm", self.lighting.spread_mm)?;
         non_negative("lighting.ambient", f64::from(self.lighting.ambient))?;
@@ -283,7 +334,11 @@ impl SensorModel {
         non_negative("blur_px", f64::from(self.blur_px))?;
         if let Some(q) = self.jpeg_quality {
             if !(1..=100).contains(&q) {
-                return Err(ModelError::BadValue { field: "jpeg_quality", expected: "1..=100", value: f64::from(q) });
+                return Err(ModelError::BadValue {
+                    field: "jpeg_quality",
+                    expected: "1..=100",
+                    value: f64::from(q),
+                });
             }
         }
         positive("mesh_step_mm", self.mesh_step_mm)?;
@@ -320,7 +375,13 @@ mod tests {
     fn invalid_models_are_typed_errors() {
         let mut m = SensorModel::real(640, 480);
         m.material.poisson_ratio = 0.7;
-        assert!(matches!(m.validate(), Err(ModelError::BadValue { field: "material.poisson_ratio", .. })));
+        assert!(matches!(
+            m.validate(),
+            Err(ModelError::BadValue {
+                field: "material.poisson_ratio",
+                ..
+            })
+        ));
         let mut m = SensorModel::real(640, 480);
         m.pose.distance_mm = -5.0;
         assert!(m.validate().is_err());
@@ -342,7 +403,13 @@ mod tests {
         let right = px([26.5, 0.0]);
         let top = px([0.0, -20.0]);
         let bottom = px([0.0, 20.0]);
-        assert!((left[0] - 370.0).abs() < 30.0 && (right[0] - 1760.0).abs() < 30.0, "{left:?} {right:?}");
-        assert!((top[1] - 160.0).abs() < 30.0 && (bottom[1] - 1220.0).abs() < 30.0, "{top:?} {bottom:?}");
+        assert!(
+            (left[0] - 370.0).abs() < 30.0 && (right[0] - 1760.0).abs() < 30.0,
+            "{left:?} {right:?}"
+        );
+        assert!(
+            (top[1] - 160.0).abs() < 30.0 && (bottom[1] - 1220.0).abs() < 30.0,
+            "{top:?} {bottom:?}"
+        );
     }
 }

@@ -70,7 +70,9 @@ impl Texture {
         let mut octave = |coarse: f64| {
             let cx = ((max[0] - min[0]) / coarse).ceil() as usize + 2;
             let cy = ((max[1] - min[1]) / coarse).ceil() as usize + 2;
-            let levels: Vec<f64> = (0..cx * cy).map(|_| f64::from(rng.next_u32()) / f64::from(u32::MAX) * 2.0 - 1.0).collect();
+            let levels: Vec<f64> = (0..cx * cy)
+                .map(|_| f64::from(rng.next_u32()) / f64::from(u32::MAX) * 2.0 - 1.0)
+                .collect();
             move |x: f64, y: f64| {
                 let (fx, fy) = (x / coarse, y / coarse);
                 let (i, j) = ((fx as usize).min(cx - 2), (fy as usize).min(cy - 2));
@@ -90,7 +92,13 @@ impl Texture {
                 values.push((0.7 * large(x, y) + 0.3 * small(x, y)) as f32);
             }
         }
-        Self { origin: [min[0] as f32, min[1] as f32], inv_step: (1.0 / step) as f32, nx, ny, values }
+        Self {
+            origin: [min[0] as f32, min[1] as f32],
+            inv_step: (1.0 / step) as f32,
+            nx,
+            ny,
+            values,
+        }
     }
 
     #[inline]
@@ -131,7 +139,7 @@ struct PatternLayout {
     half_height: f32,
     rim: f32,
     pitch: [f32; 2],
-    /// Gap between a yellow square and its cell's edge.
+    /// Gap between a cell's coloured square and the cell's edge (half the line between cells).
     inset: [f32; 2],
     rows: i32,
     cols: i32,
@@ -155,24 +163,25 @@ impl PatternLayout {
         }
     }
 
-    /// Coverage of (rim incl. everything inside it, pattern area, yellow) in a footprint at material point `p`.
+    /// Coverage of (rim incl. everything inside it, pattern area, yellow squares, red squares) in a footprint at
+    /// material point `p`.
     #[inline]
-    fn coverage(&self, p: [f32; 2], half: [f32; 2]) -> (f32, f32, f32) {
+    fn coverage(&self, p: [f32; 2], half: [f32; 2]) -> (f32, f32, f32, f32) {
         let (hw, hh) = (self.half_width, self.half_height);
         let rim = box_coverage(p[0], half[0], -hw - self.rim, hw + self.rim)
             * box_coverage(p[1], half[1], -hh - self.rim, hh + self.rim);
         if rim <= 0.0 {
-            return (0.0, 0.0, 0.0);
+            return (0.0, 0.0, 0.0, 0.0);
         }
         let pattern = box_coverage(p[0], half[0], -hw, hw) * box_coverage(p[1], half[1], -hh, hh);
         if pattern <= 0.0 {
-            return (rim, 0.0, 0.0);
+            return (rim, 0.0, 0.0, 0.0);
         }
         // Local coordinates from the pattern's top-left corner; a footprint touches at most a few cells.
         let (x, y) = (p[0] + hw, p[1] + hh);
         let col_range = cell_range(x, half[0], self.pitch[0], self.cols);
         let row_range = cell_range(y, half[1], self.pitch[1], self.rows);
-        let mut yellow = 0.0;
+        let (mut yellow, mut red) = (0.0, 0.0);
         for row in row_range.0..=row_range.1 {
             let y0 = row as f32 * self.pitch[1] + self.inset[1];
             let cover_y = box_coverage(y, half[1], y0, y0 + self.pitch[1] - 2.0 * self.inset[1]);
@@ -180,20 +189,30 @@ impl PatternLayout {
                 continue;
             }
             for col in col_range.0..=col_range.1 {
-                if ((row + col) % 2 == 0) != self.top_left_yellow {
-                    continue;
-                }
                 let x0 = col as f32 * self.pitch[0] + self.inset[0];
-                yellow += cover_y * box_coverage(x, half[0], x0, x0 + self.pitch[0] - 2.0 * self.inset[0]);
+                let cover = cover_y * box_coverage(x, half[0], x0, x0 + self.pitch[0] - 2.0 * self.inset[0]);
+                if ((row + col) % 2 == 0) == self.top_left_yellow {
+                    yellow += cover;
+                } else {
+                    red += cover;
+                }
             }
         }
-        (rim, pattern, yellow.min(pattern))
+        let yellow = yellow.min(pattern);
+        (rim, pattern, yellow, red.min(pattern - yellow))
     }
 }
 
+/// `floor` without a libm call (baseline x86-64 has no rounding instruction); exact for |v| < 2^31.
+#[inline]
+fn floor_to_i32(v: f32) -> i32 {
+    let truncated = v as i32;
+    truncated - i32::from(v < truncated as f32)
+}
+
 fn cell_range(x: f32, h: f32, pitch: f32, count: i32) -> (i32, i32) {
-    let first = ((x - h) / pitch).floor() as i32;
-    let last = ((x + h) / pitch).floor() as i32;
+    let first = floor_to_i32((x - h) / pitch);
+    let last = floor_to_i32((x + h) / pitch);
     let first = first.clamp(0, count - 1);
     (first, last.clamp(first, (first + 3).min(count - 1)))
 }
@@ -233,7 +252,16 @@ impl Renderer {
         let mesh_max = half_extent;
         let texture = Texture::new(mesh_min, mesh_max, model.texture_seed);
         let layout = PatternLayout::new(&model);
-        Ok(Self { model, camera, geometry, light, texture, layout, mesh_min, mesh_max })
+        Ok(Self {
+            model,
+            camera,
+            geometry,
+            light,
+            texture,
+            layout,
+            mesh_min,
+            mesh_max,
+        })
     }
 
     pub fn model(&self) -> &SensorModel {
@@ -255,20 +283,35 @@ impl Renderer {
 
     /// Renders one frame. `led_currents_ma`: Top, Right, Bottom, Left (the protocol's side order), 100 mA nominal.
     /// The same scene, currents and seed always give the same frame.
-    pub fn render(&self, scene: &Scene, led_currents_ma: [f32; 4], seed: u64) -> Result<(RgbImage, GroundTruth), RenderError> {
+    pub fn render(
+        &self,
+        scene: &Scene,
+        led_currents_ma: [f32; 4],
+        seed: u64,
+    ) -> Result<(RgbImage, GroundTruth), RenderError> {
         let (image, pad) = self.render_image(scene, led_currents_ma, seed)?;
         let truth = self.truth_of(scene, &pad, led_currents_ma, seed)?;
         Ok((image, truth))
     }
 
     /// Only the ground truth (no image): cheap.
-    pub fn ground_truth(&self, scene: &Scene, led_currents_ma: [f32; 4], seed: u64) -> Result<GroundTruth, RenderError> {
+    pub fn ground_truth(
+        &self,
+        scene: &Scene,
+        led_currents_ma: [f32; 4],
+        seed: u64,
+    ) -> Result<GroundTruth, RenderError> {
         check_inputs(&self.model, scene, led_currents_ma)?;
         let pad = LoadedPad::new(&scene.contacts, &self.model.material);
         self.truth_of(scene, &pad, led_currents_ma, seed)
     }
 
-    fn render_image(&self, scene: &Scene, led_currents_ma: [f32; 4], seed: u64) -> Result<(RgbImage, LoadedPad), RenderError> {
+    fn render_image(
+        &self,
+        scene: &Scene,
+        led_currents_ma: [f32; 4],
+        seed: u64,
+    ) -> Result<(RgbImage, LoadedPad), RenderError> {
         check_inputs(&self.model, scene, led_currents_ma)?;
         let pad = LoadedPad::new(&scene.contacts, &self.model.material);
         let inverse = pad.is_loaded().then(|| {
@@ -286,15 +329,23 @@ impl Renderer {
             .iter()
             .map(|d| match *d {
                 Damage::Missing { centre_mm, radius_mm } => (true, centre_mm.map(|v| v as f32), radius_mm as f32, 0.0),
-                Damage::Smeared { centre_mm, radius_mm, smear_mm } => {
-                    (false, centre_mm.map(|v| v as f32), radius_mm as f32, smear_mm as f32)
-                }
+                Damage::Smeared {
+                    centre_mm,
+                    radius_mm,
+                    smear_mm,
+                } => (false, centre_mm.map(|v| v as f32), radius_mm as f32, smear_mm as f32),
             })
             .collect();
         let occlusions: Vec<([f32; 2], f32, [f32; 3])> = scene
             .occlusions
             .iter()
-            .map(|o| (o.centre_mm.map(|v| v as f32), o.radius_mm as f32, o.colour.map(f32::from)))
+            .map(|o| {
+                (
+                    o.centre_mm.map(|v| v as f32),
+                    o.radius_mm as f32,
+                    o.colour.map(f32::from),
+                )
+            })
             .collect();
         let noise_scale = self.model.noise_sigma * 6f32.sqrt() / 255.0;
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -322,9 +373,14 @@ impl Renderer {
                     }
                 }
             }
-            let (rim, pattern, yellow) = self.layout.coverage(p, half);
+            let (rim, pattern, yellow, red) = self.layout.coverage(p, half);
+            // Where the yellow ink is gone, the red base (the lines' colour) shows.
             let yellow = yellow * yellow_kept;
-            let shade = if rim > 0.0 { 1.0 + texture_amplitude * self.texture.at(p) } else { 1.0 };
+            let shade = if rim > 0.0 {
+                1.0 + texture_amplitude * self.texture.at(p)
+            } else {
+                1.0
+            };
             let brightness = gains[0] * light.side[0]
                 + gains[1] * light.side[1]
                 + gains[2] * light.side[2]
@@ -333,7 +389,8 @@ impl Renderer {
             let mut rgb: [f32; 3] = std::array::from_fn(|k| {
                 let albedo = colours.surround[k] * (1.0 - rim)
                     + colours.rim[k] * (rim - pattern)
-                    + (colours.red[k] * (pattern - yellow) + colours.yellow[k] * yellow) * shade;
+                    + (colours.lines[k] * (pattern - yellow - red) + colours.red[k] * red + colours.yellow[k] * yellow)
+                        * shade;
                 albedo * brightness
             });
             for &(centre, radius, colour) in &occlusions {
@@ -364,7 +421,13 @@ impl Renderer {
         Ok((image, pad))
     }
 
-    fn truth_of(&self, scene: &Scene, pad: &LoadedPad, led_currents_ma: [f32; 4], seed: u64) -> Result<GroundTruth, RenderError> {
+    fn truth_of(
+        &self,
+        scene: &Scene,
+        pad: &LoadedPad,
+        led_currents_ma: [f32; 4],
+        seed: u64,
+    ) -> Result<GroundTruth, RenderError> {
         let geometry = &self.model.pad;
         let mut corners = Vec::with_capacity(geometry.corner_count());
         for index in geometry.corners() {
@@ -389,7 +452,12 @@ impl Renderer {
                     let (s, c) = angle.to_radians().sin_cos();
                     let ahead = self.px([contact.position_mm[0] + 0.5 * c, contact.position_mm[1] + 0.5 * s])?;
                     let behind = self.px([contact.position_mm[0] - 0.5 * c, contact.position_mm[1] - 0.5 * s])?;
-                    Some((ahead[1] - behind[1]).atan2(ahead[0] - behind[0]).to_degrees().rem_euclid(180.0))
+                    Some(
+                        (ahead[1] - behind[1])
+                            .atan2(ahead[0] - behind[0])
+                            .to_degrees()
+                            .rem_euclid(180.0),
+                    )
                 }
                 None => None,
             };
@@ -450,7 +518,9 @@ fn pixel_geometry(model: &SensorModel, camera: &FisheyeCamera) -> Vec<PixelGeome
         }
         let hit = [s * d[0] - t[0], s * d[1] - t[1], s * d[2] - t[2]];
         // Rotation is orthonormal: pad coordinates are R^T (hit).
-        Some(std::array::from_fn(|k| rotation[0][k] * hit[0] + rotation[1][k] * hit[1] + rotation[2][k] * hit[2]))
+        Some(std::array::from_fn(|k| {
+            rotation[0][k] * hit[0] + rotation[1][k] * hit[1] + rotation[2][k] * hit[2]
+        }))
     };
     let mut lattice: Vec<Option<[f64; 2]>> = Vec::with_capacity((w + 1) * (h + 1));
     for j in 0..=h {
@@ -463,7 +533,12 @@ fn pixel_geometry(model: &SensorModel, camera: &FisheyeCamera) -> Vec<PixelGeome
     let mut geometry = Vec::with_capacity(w * h);
     for j in 0..h {
         for i in 0..w {
-            let corners = [lattice[j * (w + 1) + i], lattice[j * (w + 1) + i + 1], lattice[(j + 1) * (w + 1) + i], lattice[(j + 1) * (w + 1) + i + 1]];
+            let corners = [
+                lattice[j * (w + 1) + i],
+                lattice[j * (w + 1) + i + 1],
+                lattice[(j + 1) * (w + 1) + i],
+                lattice[(j + 1) * (w + 1) + i + 1],
+            ];
             let pixel = match corners {
                 [Some(a), Some(b), Some(c), Some(d)] => {
                     let centre = [(a[0] + b[0] + c[0] + d[0]) / 4.0, (a[1] + b[1] + c[1] + d[1]) / 4.0];
@@ -472,9 +547,15 @@ fn pixel_geometry(model: &SensorModel, camera: &FisheyeCamera) -> Vec<PixelGeome
                     let half_x = 0.5 * (along_x[0].abs() + along_y[0].abs());
                     let half_y = 0.5 * (along_x[1].abs() + along_y[1].abs());
                     let widen = |half: f64| (half * half * (1.0 + 12.0 * blur * blur)).sqrt().max(1e-6);
-                    PixelGeometry { q: [centre[0] as f32, centre[1] as f32], half: [widen(half_x) as f32, widen(half_y) as f32] }
+                    PixelGeometry {
+                        q: [centre[0] as f32, centre[1] as f32],
+                        half: [widen(half_x) as f32, widen(half_y) as f32],
+                    }
                 }
-                _ => PixelGeometry { q: [NOWHERE_MM, NOWHERE_MM], half: [1.0, 1.0] },
+                _ => PixelGeometry {
+                    q: [NOWHERE_MM, NOWHERE_MM],
+                    half: [1.0, 1.0],
+                },
             };
             geometry.push(pixel);
         }
@@ -513,9 +594,15 @@ fn pixel_light(model: &SensorModel, geometry: &[PixelGeometry]) -> Vec<PixelLigh
         let r2 = (i as f64 + 0.5 - centre[0]).powi(2) + (j as f64 + 0.5 - centre[1]).powi(2);
         let gain = f64::from(model.exposure) * (1.0 - f64::from(model.vignetting) * r2 / corner_radius2);
         // Rays that miss the plane see the housing; light it like the far surround.
-        let p = [f64::from(g.q[0]).clamp(-3.0 * hw, 3.0 * hw), f64::from(g.q[1]).clamp(-3.0 * hh, 3.0 * hh)];
+        let p = [
+            f64::from(g.q[0]).clamp(-3.0 * hw, 3.0 * hw),
+            f64::from(g.q[1]).clamp(-3.0 * hh, 3.0 * hh),
+        ];
         let sides = sides_at(p).map(|s| (s / norm * gain) as f32);
-        light.push(PixelLight { side: sides, ambient: (f64::from(lighting.ambient) * gain) as f32 });
+        light.push(PixelLight {
+            side: sides,
+            ambient: (f64::from(lighting.ambient) * gain) as f32,
+        });
     }
     light
 }
@@ -566,7 +653,10 @@ mod tests {
         let all = 0..240;
         assert!(mean(&dark, all.clone()) < 0.5, "no light, no picture");
         let (m_nominal, m_dim) = (mean(&nominal, all.clone()), mean(&dim, all.clone()));
-        assert!(m_dim < 0.6 * m_nominal && m_dim > 0.4 * m_nominal, "{m_dim} vs {m_nominal}");
+        assert!(
+            m_dim < 0.6 * m_nominal && m_dim > 0.4 * m_nominal,
+            "{m_dim} vs {m_nominal}"
+        );
         // The top bar lights the top of the pad more than the bottom.
         let (top, bottom) = (mean(&top_only, 40..80), mean(&top_only, 160..200));
         assert!(top > 1.3 * bottom, "{top} vs {bottom}");
@@ -602,7 +692,8 @@ mod tests {
         let moved = truth.max_corner_displacement_mm();
         assert!(moved > 0.2 && moved < 1.5, "{moved}");
         for c in &truth.corners {
-            let out = (c.displaced_mm[0] - c.rest_mm[0]) * c.rest_mm[0] + (c.displaced_mm[1] - c.rest_mm[1]) * c.rest_mm[1];
+            let out =
+                (c.displaced_mm[0] - c.rest_mm[0]) * c.rest_mm[0] + (c.displaced_mm[1] - c.rest_mm[1]) * c.rest_mm[1];
             assert!(out >= -1e-9, "{c:?}");
         }
         let (rest, _) = r.render(&Scene::rest(), [100.0; 4], 0).unwrap();
@@ -630,8 +721,15 @@ mod tests {
         model.jpeg_quality = Some(70);
         let r = Renderer::new(model).unwrap();
         let mut scene = Scene::rest();
-        scene.damage.push(Damage::Missing { centre_mm: [0.0, 0.0], radius_mm: 6.0 });
-        scene.occlusions.push(crate::scene::Occlusion { centre_mm: [15.0, 10.0], radius_mm: 4.0, colour: [0, 0, 0] });
+        scene.damage.push(Damage::Missing {
+            centre_mm: [0.0, 0.0],
+            radius_mm: 6.0,
+        });
+        scene.occlusions.push(crate::scene::Occlusion {
+            centre_mm: [15.0, 10.0],
+            radius_mm: 4.0,
+            colour: [0, 0, 0],
+        });
         let (img, _) = r.render(&scene, [100.0; 4], 3).unwrap();
         let centre = r.pad_mm_to_raw_px([1.6, 1.6]).unwrap();
         let p = img.get_pixel(centre[0] as u32, centre[1] as u32);
@@ -644,7 +742,10 @@ mod tests {
     #[test]
     fn bad_inputs_are_typed_errors() {
         let r = small();
-        assert!(matches!(r.render(&Scene::rest(), [100.0, f32::NAN, 0.0, 0.0], 0), Err(RenderError::BadCurrent { side: "right", .. })));
+        assert!(matches!(
+            r.render(&Scene::rest(), [100.0, f32::NAN, 0.0, 0.0], 0),
+            Err(RenderError::BadCurrent { side: "right", .. })
+        ));
         let bad = Scene::with_contact(Contact::sphere(-1.0, [0.0, 0.0], 1.0));
         assert!(matches!(r.render(&bad, [100.0; 4], 0), Err(RenderError::Scene(_))));
         let mut model = SensorModel::real(320, 240);

@@ -15,11 +15,23 @@ pub enum SceneError {
     #[error("could not read scene file {path}: {source}")]
     Read { path: PathBuf, source: std::io::Error },
     #[error("scene file {path}: {source}")]
-    Parse { path: PathBuf, source: Box<toml::de::Error> },
+    Parse {
+        path: PathBuf,
+        source: Box<toml::de::Error>,
+    },
     #[error("{key} must be {expected}, got {value}")]
-    BadValue { key: String, expected: &'static str, value: f64 },
+    BadValue {
+        key: String,
+        expected: &'static str,
+        value: f64,
+    },
     #[error("{key} = [{:.2}, {:.2}] mm lies outside the pad (|x| <= {half_width_mm} mm, |y| <= {half_height_mm} mm)", position_mm[0], position_mm[1])]
-    OutsidePad { key: String, position_mm: [f64; 2], half_width_mm: f64, half_height_mm: f64 },
+    OutsidePad {
+        key: String,
+        position_mm: [f64; 2],
+        half_width_mm: f64,
+        half_height_mm: f64,
+    },
     #[error("a scene file gives either top-level [[contacts]]/[[damage]]/[[occlusions]] or [[frames]], not both")]
     FramesAndTopLevelScene,
 }
@@ -34,7 +46,11 @@ pub enum Indenter {
     FlatPunch { radius_mm: f64 },
     /// A long rigid edge (a blade's rounded edge) lying along `angle_deg` (from +x towards +y, pad mm):
     /// a strip load `length_mm` long with a half-elliptic profile `width_mm` wide.
-    Edge { length_mm: f64, width_mm: f64, angle_deg: f64 },
+    Edge {
+        length_mm: f64,
+        width_mm: f64,
+        angle_deg: f64,
+    },
 }
 
 impl Indenter {
@@ -74,11 +90,25 @@ impl Contact {
     }
 
     pub fn edge(length_mm: f64, width_mm: f64, angle_deg: f64, position_mm: [f64; 2], normal_force_n: f64) -> Self {
-        Self::pressing(Indenter::Edge { length_mm, width_mm, angle_deg }, position_mm, normal_force_n)
+        Self::pressing(
+            Indenter::Edge {
+                length_mm,
+                width_mm,
+                angle_deg,
+            },
+            position_mm,
+            normal_force_n,
+        )
     }
 
     fn pressing(indenter: Indenter, position_mm: [f64; 2], normal_force_n: f64) -> Self {
-        Self { indenter, position_mm, normal_force_n, tangential_force_n: [0.0, 0.0], torsion_nmm: 0.0 }
+        Self {
+            indenter,
+            position_mm,
+            normal_force_n,
+            tangential_force_n: [0.0, 0.0],
+            torsion_nmm: 0.0,
+        }
     }
 }
 
@@ -89,7 +119,11 @@ pub enum Damage {
     /// The yellow ink is gone inside the disc (only the red base shows).
     Missing { centre_mm: [f64; 2], radius_mm: f64 },
     /// The ink is smeared inside the disc: edges spread over `smear_mm`.
-    Smeared { centre_mm: [f64; 2], radius_mm: f64, smear_mm: f64 },
+    Smeared {
+        centre_mm: [f64; 2],
+        radius_mm: f64,
+        smear_mm: f64,
+    },
 }
 
 /// Something between the camera and the pad (dirt on the glass, a finger's shadow); fixed to the camera, so it
@@ -128,7 +162,10 @@ impl Scene {
     }
 
     pub fn with_contact(contact: Contact) -> Self {
-        Self { contacts: vec![contact], ..Self::default() }
+        Self {
+            contacts: vec![contact],
+            ..Self::default()
+        }
     }
 
     pub fn total_normal_force_n(&self) -> f64 {
@@ -140,7 +177,12 @@ impl Scene {
         for (i, contact) in self.contacts.iter().enumerate() {
             let key = |field: &str| format!("contacts[{i}].{field}");
             finite_in_pad(&key("position_mm"), contact.position_mm, pad)?;
-            at_least(&key("normal_force_n"), contact.normal_force_n, 0.0, "a finite force >= 0 N")?;
+            at_least(
+                &key("normal_force_n"),
+                contact.normal_force_n,
+                0.0,
+                "a finite force >= 0 N",
+            )?;
             for (axis, value) in ["x", "y"].iter().zip(contact.tangential_force_n) {
                 finite(&key(&format!("tangential_force_n.{axis}")), value)?;
             }
@@ -149,7 +191,11 @@ impl Scene {
                 Indenter::Sphere { radius_mm } | Indenter::FlatPunch { radius_mm } => {
                     positive(&key("indenter.radius_mm"), radius_mm)?;
                 }
-                Indenter::Edge { length_mm, width_mm, angle_deg } => {
+                Indenter::Edge {
+                    length_mm,
+                    width_mm,
+                    angle_deg,
+                } => {
                     positive(&key("indenter.length_mm"), length_mm)?;
                     positive(&key("indenter.width_mm"), width_mm)?;
                     finite(&key("indenter.angle_deg"), angle_deg)?;
@@ -160,7 +206,11 @@ impl Scene {
             let key = |field: &str| format!("damage[{i}].{field}");
             let (centre_mm, radius_mm) = match *damage {
                 Damage::Missing { centre_mm, radius_mm } => (centre_mm, radius_mm),
-                Damage::Smeared { centre_mm, radius_mm, smear_mm } => {
+                Damage::Smeared {
+                    centre_mm,
+                    radius_mm,
+                    smear_mm,
+                } => {
                     positive(&key("smear_mm"), smear_mm)?;
                     (centre_mm, radius_mm)
                 }
@@ -184,7 +234,11 @@ fn finite(key: &str, value: f64) -> Result<(), SceneError> {
     if value.is_finite() {
         Ok(())
     } else {
-        Err(SceneError::BadValue { key: key.to_owned(), expected: "a finite number", value })
+        Err(SceneError::BadValue {
+            key: key.to_owned(),
+            expected: "a finite number",
+            value,
+        })
     }
 }
 
@@ -192,7 +246,11 @@ fn positive(key: &str, value: f64) -> Result<(), SceneError> {
     if value.is_finite() && value > 0.0 {
         Ok(())
     } else {
-        Err(SceneError::BadValue { key: key.to_owned(), expected: "a finite number > 0", value })
+        Err(SceneError::BadValue {
+            key: key.to_owned(),
+            expected: "a finite number > 0",
+            value,
+        })
     }
 }
 
@@ -200,7 +258,11 @@ fn at_least(key: &str, value: f64, min: f64, expected: &'static str) -> Result<(
     if value.is_finite() && value >= min {
         Ok(())
     } else {
-        Err(SceneError::BadValue { key: key.to_owned(), expected, value })
+        Err(SceneError::BadValue {
+            key: key.to_owned(),
+            expected,
+            value,
+        })
     }
 }
 
@@ -309,8 +371,10 @@ pub struct SceneFile {
 
 impl SceneFile {
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, SceneError> {
-        let file: SceneFile =
-            toml::from_str(text).map_err(|source| SceneError::Parse { path: path.to_owned(), source: Box::new(source) })?;
+        let file: SceneFile = toml::from_str(text).map_err(|source| SceneError::Parse {
+            path: path.to_owned(),
+            source: Box::new(source),
+        })?;
         let top_level = !(file.contacts.is_empty() && file.damage.is_empty() && file.occlusions.is_empty());
         if top_level && !file.frames.is_empty() {
             return Err(SceneError::FramesAndTopLevelScene);
@@ -332,15 +396,21 @@ impl SceneFile {
     }
 
     pub fn load(path: &Path) -> Result<Self, SceneError> {
-        let text =
-            std::fs::read_to_string(path).map_err(|source| SceneError::Read { path: path.to_owned(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
         Self::from_toml_str(&text, path)
     }
 
     /// The frames this file describes, in order.
     pub fn scenes(&self) -> Vec<Scene> {
         if self.frames.is_empty() {
-            vec![Scene { contacts: self.contacts.clone(), damage: self.damage.clone(), occlusions: self.occlusions.clone() }]
+            vec![Scene {
+                contacts: self.contacts.clone(),
+                damage: self.damage.clone(),
+                occlusions: self.occlusions.clone(),
+            }]
         } else {
             self.frames.clone()
         }
@@ -415,7 +485,9 @@ mod tests {
         let zero_radius = parse(
             "[[contacts]]\nindenter = { kind = \"flat_punch\", radius_mm = 0.0 }\nposition_mm = [0.0, 0.0]\nnormal_force_n = 1.0\n",
         );
-        assert!(matches!(zero_radius, Err(SceneError::BadValue { ref key, .. }) if key == "contacts[0].indenter.radius_mm"));
+        assert!(
+            matches!(zero_radius, Err(SceneError::BadValue { ref key, .. }) if key == "contacts[0].indenter.radius_mm")
+        );
         let outside = parse(
             "[[contacts]]\nindenter = { kind = \"sphere\", radius_mm = 5.0 }\nposition_mm = [40.0, 0.0]\nnormal_force_n = 1.0\n",
         );
@@ -434,6 +506,9 @@ mod tests {
             "[[contacts]]\nindenter = { kind = \"sphere\", radius_mm = 5.0 }\nposition_mm = [0.0, 0.0]\nnormal_force_n = 1.0\n[[frames]]\n",
         );
         assert!(matches!(both, Err(SceneError::FramesAndTopLevelScene)));
-        assert!(matches!(parse("led_currents_ma = [100, -1, 0, 0]\n"), Err(SceneError::BadValue { .. })));
+        assert!(matches!(
+            parse("led_currents_ma = [100, -1, 0, 0]\n"),
+            Err(SceneError::BadValue { .. })
+        ));
     }
 }

@@ -73,7 +73,11 @@ pub fn scene_at(t_s: f64) -> Scene {
             let direction = [SLIDE_TO_MM[0] - SLIDE_FROM_MM[0], SLIDE_TO_MM[1] - SLIDE_FROM_MM[1]];
             let norm = direction[0].hypot(direction[1]);
             let drag = SLIDE_FRICTION * PRESS_FORCE_N;
-            sphere(position, PRESS_FORCE_N, [drag * direction[0] / norm, drag * direction[1] / norm])
+            sphere(
+                position,
+                PRESS_FORCE_N,
+                [drag * direction[0] / norm, drag * direction[1] / norm],
+            )
         }
         Phase::Release => sphere(SLIDE_TO_MM, PRESS_FORCE_N * (1.0 - smoothstep(t - 9.0)), [0.0, 0.0]),
         Phase::Edge => {

@@ -55,15 +55,28 @@ pub fn forces_with(indenter: &Indenter, label: &str) -> Vec<SweepFrame> {
                 tangential_force_n: [0.0, 0.0],
                 torsion_nmm: 0.0,
             };
-            SweepFrame { name: format!("{label}_{force:.1}N"), scene: Scene::with_contact(contact) }
+            SweepFrame {
+                name: format!("{label}_{force:.1}N"),
+                scene: Scene::with_contact(contact),
+            }
         })
         .collect()
 }
 
 /// The force ramps for the sphere and the flat tip.
 pub fn forces() -> Vec<SweepFrame> {
-    let mut frames = forces_with(&Indenter::Sphere { radius_mm: SPHERE_RADIUS_MM }, "sphere");
-    frames.extend(forces_with(&Indenter::FlatPunch { radius_mm: FLAT_PUNCH_RADIUS_MM }, "flat"));
+    let mut frames = forces_with(
+        &Indenter::Sphere {
+            radius_mm: SPHERE_RADIUS_MM,
+        },
+        "sphere",
+    );
+    frames.extend(forces_with(
+        &Indenter::FlatPunch {
+            radius_mm: FLAT_PUNCH_RADIUS_MM,
+        },
+        "flat",
+    ));
     frames
 }
 
@@ -75,7 +88,13 @@ pub fn edges() -> Vec<SweepFrame> {
             let angle = k as f64 * EDGE_STEP_DEG;
             SweepFrame {
                 name: format!("edge_{angle:03.0}deg"),
-                scene: Scene::with_contact(Contact::edge(EDGE_LENGTH_MM, EDGE_WIDTH_MM, angle, [0.0, 0.0], EDGE_FORCE_N)),
+                scene: Scene::with_contact(Contact::edge(
+                    EDGE_LENGTH_MM,
+                    EDGE_WIDTH_MM,
+                    angle,
+                    [0.0, 0.0],
+                    EDGE_FORCE_N,
+                )),
             }
         })
         .collect()
