@@ -33,7 +33,9 @@ impl Default for BoardConfig {
 /// Why a stored blob was not taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ConfigBlobError {
-    WrongLength { found: usize },
+    WrongLength {
+        found: usize,
+    },
     /// Never written (erased flash).
     Erased,
     BadMagic,
@@ -45,10 +47,16 @@ pub enum ConfigBlobError {
 impl core::fmt::Display for ConfigBlobError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Self::WrongLength { found } => write!(f, "config blob has {found} bytes, expected {}", BoardConfig::BLOB_LEN),
+            Self::WrongLength { found } => write!(
+                f,
+                "config blob has {found} bytes, expected {}",
+                BoardConfig::BLOB_LEN
+            ),
             Self::Erased => f.write_str("config slot is erased"),
             Self::BadMagic => f.write_str("config blob does not start with the NUSense magic"),
-            Self::UnsupportedLayout(v) => write!(f, "config blob layout {v} is unknown to this firmware"),
+            Self::UnsupportedLayout(v) => {
+                write!(f, "config blob layout {v} is unknown to this firmware")
+            }
             Self::BadCrc => f.write_str("config blob CRC does not match"),
         }
     }
@@ -109,7 +117,8 @@ impl BoardConfig {
         };
         for i in 0..CHANNEL_COUNT {
             config.enabled[i] = blob[5] & (1 << i) != 0;
-            config.setpoints_ma[i] = u16::from_le_bytes([blob[8 + 2 * i], blob[9 + 2 * i]]).min(MAX_CURRENT_MA);
+            config.setpoints_ma[i] =
+                u16::from_le_bytes([blob[8 + 2 * i], blob[9 + 2 * i]]).min(MAX_CURRENT_MA);
         }
         Ok(config)
     }
@@ -133,12 +142,18 @@ pub fn scan_log(sector: &[u8]) -> LogScan {
         match BoardConfig::from_blob(slot) {
             Ok(config) => latest = Some(config),
             Err(ConfigBlobError::Erased) => {
-                return LogScan { latest, next_free: Some(index * BoardConfig::BLOB_LEN) };
+                return LogScan {
+                    latest,
+                    next_free: Some(index * BoardConfig::BLOB_LEN),
+                };
             }
             Err(_) => {}
         }
     }
-    LogScan { latest, next_free: None }
+    LogScan {
+        latest,
+        next_free: None,
+    }
 }
 
 #[cfg(test)]
@@ -146,7 +161,11 @@ mod tests {
     use super::*;
 
     fn sample() -> BoardConfig {
-        BoardConfig { setpoints_ma: [100, 90, 120, 0], enabled: [true, false, true, true], ramp_ms: 250 }
+        BoardConfig {
+            setpoints_ma: [100, 90, 120, 0],
+            enabled: [true, false, true, true],
+            ramp_ms: 250,
+        }
     }
 
     #[test]
@@ -159,9 +178,18 @@ mod tests {
         let mut blob = sample().to_blob();
         blob[9] ^= 0x10;
         assert_eq!(BoardConfig::from_blob(&blob), Err(ConfigBlobError::BadCrc));
-        assert_eq!(BoardConfig::from_blob(&[0xFF; 24]), Err(ConfigBlobError::Erased));
-        assert_eq!(BoardConfig::from_blob(&[0; 24]), Err(ConfigBlobError::BadMagic));
-        assert_eq!(BoardConfig::from_blob(&[0; 3]), Err(ConfigBlobError::WrongLength { found: 3 }));
+        assert_eq!(
+            BoardConfig::from_blob(&[0xFF; 24]),
+            Err(ConfigBlobError::Erased)
+        );
+        assert_eq!(
+            BoardConfig::from_blob(&[0; 24]),
+            Err(ConfigBlobError::BadMagic)
+        );
+        assert_eq!(
+            BoardConfig::from_blob(&[0; 3]),
+            Err(ConfigBlobError::WrongLength { found: 3 })
+        );
     }
 
     #[test]
@@ -170,21 +198,48 @@ mod tests {
         blob[8..10].copy_from_slice(&5000u16.to_le_bytes());
         let crc = CRC32.checksum(&blob[..20]);
         blob[20..24].copy_from_slice(&crc.to_le_bytes());
-        assert_eq!(BoardConfig::from_blob(&blob).unwrap().setpoints_ma[0], MAX_CURRENT_MA);
+        assert_eq!(
+            BoardConfig::from_blob(&blob).unwrap().setpoints_ma[0],
+            MAX_CURRENT_MA
+        );
     }
 
     #[test]
     fn log_keeps_the_newest_good_slot_and_finds_the_next_free_one() {
         let mut sector = [0xFFu8; 24 * 4];
-        assert_eq!(scan_log(&sector), LogScan { latest: None, next_free: Some(0) });
+        assert_eq!(
+            scan_log(&sector),
+            LogScan {
+                latest: None,
+                next_free: Some(0)
+            }
+        );
         let older = BoardConfig::default();
         sector[0..24].copy_from_slice(&older.to_blob());
         sector[24..48].copy_from_slice(&sample().to_blob());
-        assert_eq!(scan_log(&sector), LogScan { latest: Some(sample()), next_free: Some(48) });
+        assert_eq!(
+            scan_log(&sector),
+            LogScan {
+                latest: Some(sample()),
+                next_free: Some(48)
+            }
+        );
         // A write torn by a power cut: the slot is neither erased nor valid, the previous one stays in force.
         sector[48..52].copy_from_slice(b"NUSC");
-        assert_eq!(scan_log(&sector), LogScan { latest: Some(sample()), next_free: Some(72) });
+        assert_eq!(
+            scan_log(&sector),
+            LogScan {
+                latest: Some(sample()),
+                next_free: Some(72)
+            }
+        );
         sector[72..96].copy_from_slice(&older.to_blob());
-        assert_eq!(scan_log(&sector), LogScan { latest: Some(older), next_free: None });
+        assert_eq!(
+            scan_log(&sector),
+            LogScan {
+                latest: Some(older),
+                next_free: None
+            }
+        );
     }
 }

@@ -8,8 +8,8 @@
 
 use nusense_protocol::framing::{encode, FrameDecoder, MAX_FRAME_LEN};
 use nusense_protocol::{
-    Argument, BoardMessage, Channel, ChannelState, DeviceError, DeviceInfo, LinkCounters, Reply, Request,
-    RequestBody, Response, Seq, Side, Status, Telemetry, CHANNEL_COUNT, PROTOCOL_VERSION,
+    Argument, BoardMessage, Channel, ChannelState, DeviceError, DeviceInfo, LinkCounters, Reply,
+    Request, RequestBody, Response, Seq, Side, Status, Telemetry, CHANNEL_COUNT, PROTOCOL_VERSION,
 };
 
 use crate::config::BoardConfig;
@@ -102,7 +102,13 @@ impl Controller {
             }
             Ok(Inbound::Unknown { seq }) => {
                 board.unknown_requests = board.unknown_requests.wrapping_add(1);
-                send(&BoardMessage::Response(Response { seq, result: Err(DeviceError::UnknownRequest) }), tx);
+                send(
+                    &BoardMessage::Response(Response {
+                        seq,
+                        result: Err(DeviceError::UnknownRequest),
+                    }),
+                    tx,
+                );
             }
             // Damaged frames carry no sequence number to answer; they are counted and show in Status/Telemetry.
             Err(_) => {}
@@ -153,14 +159,19 @@ impl Controller {
     /// Outcome of an [`Action::SaveConfig`]; sends the reply the host is waiting for.
     pub fn complete_save_config(&mut self, saved: bool, tx: &mut impl FnMut(&[u8])) {
         if let Some(seq) = self.board.pending_save_seq.take() {
-            let result = if saved { Ok(Reply::Ack) } else { Err(DeviceError::Storage) };
+            let result = if saved {
+                Ok(Reply::Ack)
+            } else {
+                Err(DeviceError::Storage)
+            };
             send(&BoardMessage::Response(Response { seq, result }), tx);
         }
     }
 
     /// What `GetStatus` would answer now.
     pub fn status(&self, now_us: u64) -> Status {
-        self.board.status(now_us, self.board.counters(self.decoder.counters()))
+        self.board
+            .status(now_us, self.board.counters(self.decoder.counters()))
     }
 
     /// The live configuration (what `SaveConfig` would store).
@@ -180,14 +191,24 @@ impl Controller {
 
 impl BoardState {
     fn counters(&self, link: LinkCounters) -> LinkCounters {
-        LinkCounters { unknown_tag: link.unknown_tag.wrapping_add(self.unknown_requests), ..link }
+        LinkCounters {
+            unknown_tag: link.unknown_tag.wrapping_add(self.unknown_requests),
+            ..link
+        }
     }
 
     /// `None` when the answer is deferred (SaveConfig waits for the flash).
-    fn handle(&mut self, request: Request, now_us: u64, counters: LinkCounters) -> Option<Response> {
+    fn handle(
+        &mut self,
+        request: Request,
+        now_us: u64,
+        counters: LinkCounters,
+    ) -> Option<Response> {
         let seq = request.seq;
-        let allowed_before_handshake =
-            matches!(request.body, RequestBody::Hello { .. } | RequestBody::GetInfo | RequestBody::Ping { .. });
+        let allowed_before_handshake = matches!(
+            request.body,
+            RequestBody::Hello { .. } | RequestBody::GetInfo | RequestBody::Ping { .. }
+        );
         let result = if !self.handshaken && !allowed_before_handshake {
             Err(DeviceError::NotHandshaken)
         } else {
@@ -195,7 +216,11 @@ impl BoardState {
                 RequestBody::Hello { protocol_version } => self.hello(protocol_version),
                 RequestBody::GetInfo => Ok(Reply::Info(self.info())),
                 RequestBody::GetStatus => Ok(Reply::Status(self.status(now_us, counters))),
-                RequestBody::SetLed { channel, current_ma, enabled } => self.set_led(channel, current_ma, enabled),
+                RequestBody::SetLed {
+                    channel,
+                    current_ma,
+                    enabled,
+                } => self.set_led(channel, current_ma, enabled),
                 RequestBody::SetRamp { ms } => {
                     if ms > MAX_RAMP_MS {
                         Err(DeviceError::BadArgument(Argument::RampMs))
@@ -231,9 +256,14 @@ impl BoardState {
     fn hello(&mut self, host: u16) -> Result<Reply, DeviceError> {
         if host == PROTOCOL_VERSION {
             self.handshaken = true;
-            Ok(Reply::Hello { protocol_version: PROTOCOL_VERSION })
+            Ok(Reply::Hello {
+                protocol_version: PROTOCOL_VERSION,
+            })
         } else {
-            Err(DeviceError::VersionMismatch { device: PROTOCOL_VERSION, host })
+            Err(DeviceError::VersionMismatch {
+                device: PROTOCOL_VERSION,
+                host,
+            })
         }
     }
 
@@ -249,7 +279,12 @@ impl BoardState {
         }
     }
 
-    fn set_led(&mut self, channel: Channel, current_ma: u16, enabled: bool) -> Result<Reply, DeviceError> {
+    fn set_led(
+        &mut self,
+        channel: Channel,
+        current_ma: u16,
+        enabled: bool,
+    ) -> Result<Reply, DeviceError> {
         let sides: &[Side] = match &channel {
             Channel::One(side) => core::slice::from_ref(side),
             Channel::All => &Side::ALL,
@@ -295,18 +330,20 @@ impl BoardState {
         self.last_step_us = Some(now_us);
         self.last = *m;
 
-        let driving = core::array::from_fn(|ch| self.config.enabled[ch] && self.config.setpoints_ma[ch] > 0);
+        let driving =
+            core::array::from_fn(|ch| self.config.enabled[ch] && self.config.setpoints_ma[ch] > 0);
         self.monitor.check(now_us, m, driving, self.duty);
         let derate = FaultMonitor::derate_factor(m.temperature_c);
-        for ch in 0..CHANNEL_COUNT {
-            self.duty[ch] = if driving[ch] && !self.monitor.is_tripped(ch) {
-                let target_ma = f32::from(self.config.setpoints_ma[ch].min(MAX_CURRENT_MA)) * derate;
+        self.duty = core::array::from_fn(|ch| {
+            if driving[ch] && !self.monitor.is_tripped(ch) {
+                let target_ma =
+                    f32::from(self.config.setpoints_ma[ch].min(MAX_CURRENT_MA)) * derate;
                 self.regulators[ch].step(target_ma, self.config.ramp_ms, m.current_ma[ch], dt_us)
             } else {
                 self.regulators[ch].reset();
                 0.0
-            };
-        }
+            }
+        });
         self.duty
     }
 

@@ -33,8 +33,12 @@ pub struct FaultMonitor {
 impl FaultMonitor {
     pub const fn new() -> Self {
         Self {
-            flags: [FaultFlags { open_string: false, over_current: false, over_temperature: false, under_voltage: false };
-                CHANNEL_COUNT],
+            flags: [FaultFlags {
+                open_string: false,
+                over_current: false,
+                over_temperature: false,
+                under_voltage: false,
+            }; CHANNEL_COUNT],
             tripped: [false; CHANNEL_COUNT],
             open_since_us: [None; CHANNEL_COUNT],
             under_voltage_since_us: None,
@@ -44,24 +48,46 @@ impl FaultMonitor {
 
     /// Checks one set of measurements. `driving[ch]` says whether the channel is meant to carry current,
     /// `duty[ch]` what the regulator applied during the interval that `m` measured.
-    pub fn check(&mut self, now_us: u64, m: &Measurements, driving: [bool; CHANNEL_COUNT], duty: [f32; CHANNEL_COUNT]) {
-        let supply_low = !(m.supply_mv >= UNDER_VOLTAGE_MV);
-        let under_voltage = confirmed(&mut self.under_voltage_since_us, supply_low && driving.iter().any(|&d| d), now_us, UNDER_VOLTAGE_CONFIRM_US);
-        let too_hot = !(m.temperature_c < SHUTDOWN_C);
-        let shutdown = confirmed(&mut self.too_hot_since_us, too_hot, now_us, SHUTDOWN_CONFIRM_US);
-        let derating = !(m.temperature_c < DERATE_START_C);
+    pub fn check(
+        &mut self,
+        now_us: u64,
+        m: &Measurements,
+        driving: [bool; CHANNEL_COUNT],
+        duty: [f32; CHANNEL_COUNT],
+    ) {
+        let supply_low = m.supply_mv < UNDER_VOLTAGE_MV || m.supply_mv.is_nan();
+        let under_voltage = confirmed(
+            &mut self.under_voltage_since_us,
+            supply_low && driving.iter().any(|&d| d),
+            now_us,
+            UNDER_VOLTAGE_CONFIRM_US,
+        );
+        let too_hot = m.temperature_c >= SHUTDOWN_C || m.temperature_c.is_nan();
+        let shutdown = confirmed(
+            &mut self.too_hot_since_us,
+            too_hot,
+            now_us,
+            SHUTDOWN_CONFIRM_US,
+        );
+        let derating = m.temperature_c >= DERATE_START_C || m.temperature_c.is_nan();
 
         for ch in 0..CHANNEL_COUNT {
             let current = m.current_ma[ch];
-            if !(current <= OVER_CURRENT_TRIP_MA) {
+            if current > OVER_CURRENT_TRIP_MA || current.is_nan() {
                 self.trip(ch, |f| f.over_current = true);
             }
             if !driving[ch] || self.tripped[ch] {
                 self.open_since_us[ch] = None;
                 continue;
             }
-            let looks_open = !supply_low && duty[ch] >= OPEN_STRING_DUTY && current < OPEN_STRING_CURRENT_MA;
-            if confirmed(&mut self.open_since_us[ch], looks_open, now_us, OPEN_STRING_CONFIRM_US) {
+            let looks_open =
+                !supply_low && duty[ch] >= OPEN_STRING_DUTY && current < OPEN_STRING_CURRENT_MA;
+            if confirmed(
+                &mut self.open_since_us[ch],
+                looks_open,
+                now_us,
+                OPEN_STRING_CONFIRM_US,
+            ) {
                 self.trip(ch, |f| f.open_string = true);
             }
             if under_voltage {
@@ -135,7 +161,11 @@ mod tests {
     #[test]
     fn nan_current_trips_the_channel() {
         let mut monitor = FaultMonitor::new();
-        let m = Measurements { current_ma: [f32::NAN, 50.0, 50.0, 50.0], supply_mv: 5000.0, temperature_c: 30.0 };
+        let m = Measurements {
+            current_ma: [f32::NAN, 50.0, 50.0, 50.0],
+            supply_mv: 5000.0,
+            temperature_c: 30.0,
+        };
         monitor.check(0, &m, [true; 4], [0.5; 4]);
         assert!(monitor.is_tripped(0) && monitor.flags()[0].over_current);
         assert!(!monitor.is_tripped(1));

@@ -29,7 +29,9 @@ impl Identity {
         let mut s = String::new();
         for byte in self.mcu_uid {
             for nibble in [byte >> 4, byte & 0x0F] {
-                let digit = char::from_digit(u32::from(nibble), 16).unwrap_or('0').to_ascii_uppercase();
+                let digit = char::from_digit(u32::from(nibble), 16)
+                    .unwrap_or('0')
+                    .to_ascii_uppercase();
                 let _ = s.push(digit);
             }
         }
@@ -53,7 +55,12 @@ mod tests {
 
     #[test]
     fn long_texts_are_cut_and_serial_is_hex() {
-        let id = Identity::new("0.1.0", "0123456789abcdef", "nusense-led-board-v1", [0xAB, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 0x0F]);
+        let id = Identity::new(
+            "0.1.0",
+            "0123456789abcdef",
+            "nusense-led-board-v1",
+            [0xAB, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 0x0F],
+        );
         assert_eq!(id.git_hash.as_str(), "0123456789ab");
         assert_eq!(id.board_id.len(), BOARD_ID_LEN);
         assert_eq!(id.serial_number().as_str(), "AB0102030405060708090A0F");

@@ -107,8 +107,8 @@ impl LedPlant {
         let dt_us = dt_us as f32;
         let p = self.params;
         let mut total_ma = 0.0;
-        for ch in 0..CHANNEL_COUNT {
-            let d = clamp_unit(duty[ch]);
+        for (ch, &d) in duty.iter().enumerate() {
+            let d = clamp_unit(d);
             let on_ma = self.on_current_ma(ch);
             self.average_ma[ch] = d * on_ma;
             total_ma += self.average_ma[ch];

@@ -10,6 +10,8 @@
 /// the remaining error per step: a closed-loop time constant of about 3 ms, and stable (no ringing) for plant
 /// gains up to three times nominal.
 pub const INTEGRAL_GAIN_PER_MA_S: f32 = 1.6;
+/// Largest current sample the integrator believes (a shorted string draws about 500 mA).
+const MEASUREMENT_BOUND_MA: f32 = 10_000.0;
 /// Longest step the integrator takes at once, whatever the real interval.
 pub const MAX_STEP_US: u32 = 2_000;
 
@@ -23,7 +25,10 @@ pub struct ChannelRegulator {
 
 impl ChannelRegulator {
     pub const fn new() -> Self {
-        Self { reference_ma: 0.0, duty: 0.0 }
+        Self {
+            reference_ma: 0.0,
+            duty: 0.0,
+        }
     }
 
     /// Channel off: the next start ramps again from zero.
@@ -37,7 +42,11 @@ impl ChannelRegulator {
     /// The reference rises at `target / ramp` (the soft start: 0 to the setpoint in `ramp_ms`) and falls at once:
     /// a lower current is always safe.
     pub fn step(&mut self, target_ma: f32, ramp_ms: u16, measured_ma: f32, dt_us: u32) -> f32 {
-        let target_ma = if target_ma.is_finite() { target_ma.max(0.0) } else { 0.0 };
+        let target_ma = if target_ma.is_finite() {
+            target_ma.max(0.0)
+        } else {
+            0.0
+        };
         let dt_us = dt_us.min(MAX_STEP_US) as f32;
         if ramp_ms == 0 || self.reference_ma >= target_ma {
             self.reference_ma = target_ma;
@@ -47,6 +56,9 @@ impl ChannelRegulator {
         }
         // A non-finite sample carries no information: hold the duty rather than integrate it.
         if measured_ma.is_finite() {
+            // No string carries a negative current or more than a short circuit does: bounding the sample keeps
+            // the arithmetic finite whatever a broken ADC path reports.
+            let measured_ma = measured_ma.clamp(0.0, MEASUREMENT_BOUND_MA);
             let error = self.reference_ma - measured_ma;
             self.duty = (self.duty + INTEGRAL_GAIN_PER_MA_S * error * dt_us * 1e-6).clamp(0.0, 1.0);
         }
@@ -75,7 +87,11 @@ mod tests {
         for _ in 0..25 {
             r.step(100.0, 50, 0.0, 1_000);
         }
-        assert!((r.reference_ma() - 50.0).abs() < 1e-3, "half way after half the ramp: {}", r.reference_ma());
+        assert!(
+            (r.reference_ma() - 50.0).abs() < 1e-3,
+            "half way after half the ramp: {}",
+            r.reference_ma()
+        );
         for _ in 0..30 {
             r.step(100.0, 50, 0.0, 1_000);
         }

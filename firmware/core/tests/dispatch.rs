@@ -15,10 +15,23 @@ use proptest::prelude::*;
 #[test]
 fn handshake_is_required_and_checks_the_version() {
     let mut bench = Bench::new();
-    assert_eq!(bench.request(RequestBody::GetStatus).result, Err(DeviceError::NotHandshaken));
-    let set = RequestBody::SetLed { channel: Channel::All, current_ma: 100, enabled: true };
-    assert_eq!(bench.request(set.clone()).result, Err(DeviceError::NotHandshaken));
-    assert_eq!(bench.request(RequestBody::Ping { nonce: 9 }).result, Ok(Reply::Pong { nonce: 9 }));
+    assert_eq!(
+        bench.request(RequestBody::GetStatus).result,
+        Err(DeviceError::NotHandshaken)
+    );
+    let set = RequestBody::SetLed {
+        channel: Channel::All,
+        current_ma: 100,
+        enabled: true,
+    };
+    assert_eq!(
+        bench.request(set.clone()).result,
+        Err(DeviceError::NotHandshaken)
+    );
+    assert_eq!(
+        bench.request(RequestBody::Ping { nonce: 9 }).result,
+        Ok(Reply::Pong { nonce: 9 })
+    );
     match bench.request(RequestBody::GetInfo).result {
         Ok(Reply::Info(info)) => {
             assert_eq!(info.protocol_version, PROTOCOL_VERSION);
@@ -29,19 +42,37 @@ fn handshake_is_required_and_checks_the_version() {
         }
         other => panic!("info: {other:?}"),
     }
-    let wrong = bench.request(RequestBody::Hello { protocol_version: PROTOCOL_VERSION + 1 });
+    let wrong = bench.request(RequestBody::Hello {
+        protocol_version: PROTOCOL_VERSION + 1,
+    });
     assert_eq!(
         wrong.result,
-        Err(DeviceError::VersionMismatch { device: PROTOCOL_VERSION, host: PROTOCOL_VERSION + 1 })
+        Err(DeviceError::VersionMismatch {
+            device: PROTOCOL_VERSION,
+            host: PROTOCOL_VERSION + 1
+        })
     );
-    assert_eq!(bench.request(set.clone()).result, Err(DeviceError::NotHandshaken));
-    let hello = bench.request(RequestBody::Hello { protocol_version: PROTOCOL_VERSION });
-    assert_eq!(hello.result, Ok(Reply::Hello { protocol_version: PROTOCOL_VERSION }));
+    assert_eq!(
+        bench.request(set.clone()).result,
+        Err(DeviceError::NotHandshaken)
+    );
+    let hello = bench.request(RequestBody::Hello {
+        protocol_version: PROTOCOL_VERSION,
+    });
+    assert_eq!(
+        hello.result,
+        Ok(Reply::Hello {
+            protocol_version: PROTOCOL_VERSION
+        })
+    );
     assert_eq!(bench.request(set.clone()).result, Ok(Reply::Ack));
 
     // A new connection must shake hands again; the LEDs keep their state.
     bench.controller.on_link_reset();
-    assert_eq!(bench.request(RequestBody::GetStatus).result, Err(DeviceError::NotHandshaken));
+    assert_eq!(
+        bench.request(RequestBody::GetStatus).result,
+        Err(DeviceError::NotHandshaken)
+    );
     assert_eq!(bench.controller.config().enabled, [true; 4]);
 }
 
@@ -49,14 +80,25 @@ fn handshake_is_required_and_checks_the_version() {
 fn arguments_out_of_range_are_refused_by_name() {
     let mut bench = Bench::connected();
     assert_eq!(
-        bench.request(RequestBody::SetRamp { ms: MAX_RAMP_MS + 1 }).result,
+        bench
+            .request(RequestBody::SetRamp {
+                ms: MAX_RAMP_MS + 1
+            })
+            .result,
         Err(DeviceError::BadArgument(Argument::RampMs))
     );
     assert_eq!(
-        bench.request(RequestBody::StreamTelemetry { period_ms: MIN_TELEMETRY_PERIOD_MS - 1 }).result,
+        bench
+            .request(RequestBody::StreamTelemetry {
+                period_ms: MIN_TELEMETRY_PERIOD_MS - 1
+            })
+            .result,
         Err(DeviceError::BadArgument(Argument::PeriodMs))
     );
-    assert_eq!(bench.request(RequestBody::SetRamp { ms: 300 }).result, Ok(Reply::Ack));
+    assert_eq!(
+        bench.request(RequestBody::SetRamp { ms: 300 }).result,
+        Ok(Reply::Ack)
+    );
     match bench.request(RequestBody::GetStatus).result {
         Ok(Reply::Status(s)) => assert_eq!(s.ramp_ms, 300),
         other => panic!("{other:?}"),
@@ -72,7 +114,16 @@ fn unknown_request_frame(seq: u16, tag: u8) -> Vec<u8> {
         payload: [u8; 3],
     }
     let mut buf = [0u8; MAX_FRAME_LEN];
-    encode(&Foreign { seq, tag, payload: [1, 2, 3] }, &mut buf).unwrap().to_vec()
+    encode(
+        &Foreign {
+            seq,
+            tag,
+            payload: [1, 2, 3],
+        },
+        &mut buf,
+    )
+    .unwrap()
+    .to_vec()
 }
 
 #[test]
@@ -90,8 +141,18 @@ fn unknown_requests_are_answered_with_an_error_that_carries_their_seq() {
         extra: u32,
     }
     let mut buf = [0u8; MAX_FRAME_LEN];
-    let frame = encode(&Padded { request: Request { seq: 77, body: RequestBody::GetStatus }, extra: 5 }, &mut buf).unwrap();
-    bench.send_bytes(&frame.to_vec());
+    let frame = encode(
+        &Padded {
+            request: Request {
+                seq: 77,
+                body: RequestBody::GetStatus,
+            },
+            extra: 5,
+        },
+        &mut buf,
+    )
+    .unwrap();
+    bench.send_bytes(frame);
     let r = bench.responses.pop().expect("an answer");
     assert_eq!((r.seq, r.result), (77, Err(DeviceError::UnknownRequest)));
 
@@ -105,18 +166,32 @@ fn unknown_requests_are_answered_with_an_error_that_carries_their_seq() {
 fn damaged_frames_are_counted_and_the_link_recovers() {
     let mut bench = Bench::connected();
     let mut buf = [0u8; MAX_FRAME_LEN];
-    let good = encode(&Request { seq: 5, body: RequestBody::Ping { nonce: 1 } }, &mut buf).unwrap().to_vec();
+    let good = encode(
+        &Request {
+            seq: 5,
+            body: RequestBody::Ping { nonce: 1 },
+        },
+        &mut buf,
+    )
+    .unwrap()
+    .to_vec();
     let mut corrupted = good.clone();
     corrupted[3] ^= 0x40;
     bench.send_bytes(&corrupted);
     bench.send_bytes(&[0x55; 600]); // longer than any frame, no delimiter
     bench.send_bytes(&[0x00]);
-    assert!(bench.responses.is_empty(), "nothing to answer: no sequence number survives");
+    assert!(
+        bench.responses.is_empty(),
+        "nothing to answer: no sequence number survives"
+    );
     // Byte by byte, the next good frame is understood.
     for b in &good {
         bench.send_bytes(std::slice::from_ref(b));
     }
-    assert_eq!(bench.responses.pop().map(|r| r.result), Some(Ok(Reply::Pong { nonce: 1 })));
+    assert_eq!(
+        bench.responses.pop().map(|r| r.result),
+        Some(Ok(Reply::Pong { nonce: 1 }))
+    );
     match bench.request(RequestBody::GetStatus).result {
         Ok(Reply::Status(s)) => {
             assert_eq!(s.counters.bad_crc + s.counters.bad_cobs, 1);
@@ -129,14 +204,28 @@ fn damaged_frames_are_counted_and_the_link_recovers() {
 #[test]
 fn telemetry_streams_at_the_requested_period_and_stops() {
     let mut bench = Bench::connected();
-    assert_eq!(bench.request(RequestBody::StreamTelemetry { period_ms: 20 }).result, Ok(Reply::Ack));
+    assert_eq!(
+        bench
+            .request(RequestBody::StreamTelemetry { period_ms: 20 })
+            .result,
+        Ok(Reply::Ack)
+    );
     bench.run_ms(1_000);
     let n = bench.telemetry.len();
     assert!((49..=51).contains(&n), "{n} frames in 1 s at 20 ms");
-    let gaps: Vec<u64> = bench.telemetry.windows(2).map(|w| w[1].uptime_us - w[0].uptime_us).collect();
+    let gaps: Vec<u64> = bench
+        .telemetry
+        .windows(2)
+        .map(|w| w[1].uptime_us - w[0].uptime_us)
+        .collect();
     // The first frame goes out at the first poll after the request, then the cadence is exact.
     assert!(gaps[1..].iter().all(|&g| g == 20_000), "{gaps:?}");
-    assert_eq!(bench.request(RequestBody::StreamTelemetry { period_ms: 0 }).result, Ok(Reply::Ack));
+    assert_eq!(
+        bench
+            .request(RequestBody::StreamTelemetry { period_ms: 0 })
+            .result,
+        Ok(Reply::Ack)
+    );
     bench.telemetry.clear();
     bench.run_ms(200);
     assert!(bench.telemetry.is_empty());
@@ -145,11 +234,21 @@ fn telemetry_streams_at_the_requested_period_and_stops() {
 #[test]
 fn save_config_waits_for_the_flash_and_reports_failure() {
     let mut bench = Bench::connected();
-    let r = bench.request(RequestBody::SetLed { channel: Channel::One(Side::Right), current_ma: 80, enabled: true });
+    let r = bench.request(RequestBody::SetLed {
+        channel: Channel::One(Side::Right),
+        current_ma: 80,
+        enabled: true,
+    });
     assert_eq!(r.result, Ok(Reply::Ack));
     let seq = bench.next_seq();
-    bench.send(&Request { seq, body: RequestBody::SaveConfig });
-    assert!(bench.responses.is_empty(), "no answer before the flash write");
+    bench.send(&Request {
+        seq,
+        body: RequestBody::SaveConfig,
+    });
+    assert!(
+        bench.responses.is_empty(),
+        "no answer before the flash write"
+    );
     let blob = match bench.actions.pop() {
         Some(Action::SaveConfig(blob)) => blob,
         other => panic!("{other:?}"),
@@ -159,42 +258,67 @@ fn save_config_waits_for_the_flash_and_reports_failure() {
     assert_eq!(saved.setpoints_ma[1], 80);
     assert!(saved.enabled[1] && !saved.enabled[0]);
     // Another save while one is in flight is refused.
-    assert_eq!(bench.request(RequestBody::SaveConfig).result, Err(DeviceError::Busy));
+    assert_eq!(
+        bench.request(RequestBody::SaveConfig).result,
+        Err(DeviceError::Busy)
+    );
 
     let mut out = Vec::new();
-    bench.controller.complete_save_config(true, &mut |f: &[u8]| out.extend_from_slice(f));
-    let mut decoder: nusense_protocol::framing::FrameDecoder = nusense_protocol::framing::FrameDecoder::new();
+    bench
+        .controller
+        .complete_save_config(true, &mut |f: &[u8]| out.extend_from_slice(f));
+    let mut decoder: nusense_protocol::framing::FrameDecoder =
+        nusense_protocol::framing::FrameDecoder::new();
     let mut got = Vec::new();
     decoder.feed::<nusense_protocol::BoardMessage>(&out, |m| got.push(m.unwrap()));
     assert_eq!(
         got,
-        vec![nusense_protocol::BoardMessage::Response(nusense_protocol::Response { seq, result: Ok(Reply::Ack) })]
+        vec![nusense_protocol::BoardMessage::Response(
+            nusense_protocol::Response {
+                seq,
+                result: Ok(Reply::Ack)
+            }
+        )]
     );
 
     let seq = bench.next_seq();
-    bench.send(&Request { seq, body: RequestBody::SaveConfig });
+    bench.send(&Request {
+        seq,
+        body: RequestBody::SaveConfig,
+    });
     assert!(matches!(bench.actions.pop(), Some(Action::SaveConfig(_))));
     out.clear();
-    bench.controller.complete_save_config(false, &mut |f: &[u8]| out.extend_from_slice(f));
+    bench
+        .controller
+        .complete_save_config(false, &mut |f: &[u8]| out.extend_from_slice(f));
     got.clear();
     decoder.feed::<nusense_protocol::BoardMessage>(&out, |m| got.push(m.unwrap()));
     assert_eq!(
         got,
-        vec![nusense_protocol::BoardMessage::Response(nusense_protocol::Response {
-            seq,
-            result: Err(DeviceError::Storage)
-        })]
+        vec![nusense_protocol::BoardMessage::Response(
+            nusense_protocol::Response {
+                seq,
+                result: Err(DeviceError::Storage)
+            }
+        )]
     );
 }
 
 #[test]
 fn a_saved_config_comes_back_at_boot() {
-    let config = BoardConfig { setpoints_ma: [100, 100, 90, 0], enabled: [true, true, true, false], ramp_ms: 20 };
+    let config = BoardConfig {
+        setpoints_ma: [100, 100, 90, 0],
+        enabled: [true, true, true, false],
+        ramp_ms: 20,
+    };
     let restored = BoardConfig::from_blob(&config.to_blob()).unwrap();
     let mut bench = Bench::with(restored, Default::default());
     bench.run_ms(150);
     let i = bench.true_current_ma();
-    assert!((i[2] - 90.0).abs() < 1.8 && (i[0] - 100.0).abs() < 2.0 && i[3] == 0.0, "{i:?}");
+    assert!(
+        (i[2] - 90.0).abs() < 1.8 && (i[0] - 100.0).abs() < 2.0 && i[3] == 0.0,
+        "{i:?}"
+    );
 }
 
 #[test]
@@ -202,7 +326,10 @@ fn reset_and_bootloader_are_acked_then_handed_to_the_glue() {
     let mut bench = Bench::connected();
     assert_eq!(bench.request(RequestBody::Reset).result, Ok(Reply::Ack));
     assert_eq!(bench.actions.pop(), Some(Action::Reset));
-    assert_eq!(bench.request(RequestBody::EnterBootloader).result, Ok(Reply::Ack));
+    assert_eq!(
+        bench.request(RequestBody::EnterBootloader).result,
+        Ok(Reply::Ack)
+    );
     assert_eq!(bench.actions.pop(), Some(Action::EnterBootloader));
 }
 
@@ -212,11 +339,18 @@ fn any_body() -> impl Strategy<Value = RequestBody> {
         (0usize..4).prop_map(|i| Channel::One(Side::ALL[i])),
     ];
     prop_oneof![
-        any::<u16>().prop_map(|v| RequestBody::Hello { protocol_version: v }),
+        any::<u16>().prop_map(|v| RequestBody::Hello {
+            protocol_version: v
+        }),
         Just(RequestBody::GetInfo),
         Just(RequestBody::GetStatus),
-        (channel, any::<u16>(), any::<bool>())
-            .prop_map(|(channel, current_ma, enabled)| RequestBody::SetLed { channel, current_ma, enabled }),
+        (channel, any::<u16>(), any::<bool>()).prop_map(|(channel, current_ma, enabled)| {
+            RequestBody::SetLed {
+                channel,
+                current_ma,
+                enabled,
+            }
+        }),
         any::<u16>().prop_map(|ms| RequestBody::SetRamp { ms }),
         any::<u16>().prop_map(|period_ms| RequestBody::StreamTelemetry { period_ms }),
         Just(RequestBody::ClearFaults),

@@ -10,7 +10,11 @@ use nusense_protocol::{Channel, DeviceError, FaultFlags, Reply, RequestBody, Sid
 
 fn lit_bench() -> Bench {
     let mut bench = Bench::connected();
-    let r = bench.request(RequestBody::SetLed { channel: Channel::All, current_ma: 100, enabled: true });
+    let r = bench.request(RequestBody::SetLed {
+        channel: Channel::All,
+        current_ma: 100,
+        enabled: true,
+    });
     assert_eq!(r.result, Ok(Reply::Ack));
     bench.run_ms(200);
     bench
@@ -30,7 +34,9 @@ fn flags(bench: &mut Bench) -> [FaultFlags; 4] {
 #[test]
 fn shorted_string_is_switched_off_within_1_ms() {
     let mut bench = lit_bench();
-    bench.plant.set_fault(Side::Right.index(), StringFault::Shorted);
+    bench
+        .plant
+        .set_fault(Side::Right.index(), StringFault::Shorted);
     let mut off_after_us = None;
     for step in 1..=10u64 {
         let duty = bench.step();
@@ -46,7 +52,10 @@ fn shorted_string_is_switched_off_within_1_ms() {
     assert_eq!(bench.true_current_ma()[1], 0.0);
     let f = flags(&mut bench);
     assert!(f[1].over_current && !f[1].open_string);
-    assert!(!f[0].any() && !f[2].any() && !f[3].any(), "other channels unaffected: {f:?}");
+    assert!(
+        !f[0].any() && !f[2].any() && !f[3].any(),
+        "other channels unaffected: {f:?}"
+    );
     // The others keep regulating.
     bench.run_ms(50);
     assert!((bench.true_current_ma()[0] - 100.0).abs() < 2.0);
@@ -55,11 +64,16 @@ fn shorted_string_is_switched_off_within_1_ms() {
 #[test]
 fn open_string_is_detected_and_the_channel_stops() {
     let mut bench = lit_bench();
-    bench.plant.set_fault(Side::Bottom.index(), StringFault::Open);
+    bench
+        .plant
+        .set_fault(Side::Bottom.index(), StringFault::Open);
     let mut detected_ms = None;
     for ms in 1..=200u64 {
         bench.step();
-        if bench.controller.status(bench.now_us).channels[2].faults.open_string {
+        if bench.controller.status(bench.now_us).channels[2]
+            .faults
+            .open_string
+        {
             detected_ms = Some(ms);
             break;
         }
@@ -83,18 +97,47 @@ fn faults_are_latched_until_cleared_and_come_back_if_still_present() {
     bench.run_ms(100);
     assert!(flags(&mut bench)[0].open_string);
     assert_eq!(bench.true_current_ma()[0], 0.0);
-    let refused = bench.request(RequestBody::SetLed { channel: Channel::One(Side::Top), current_ma: 90, enabled: true });
-    assert_eq!(refused.result, Err(DeviceError::FaultActive { channel: Side::Top }));
-    let refused_all = bench.request(RequestBody::SetLed { channel: Channel::All, current_ma: 90, enabled: true });
-    assert_eq!(refused_all.result, Err(DeviceError::FaultActive { channel: Side::Top }));
+    let refused = bench.request(RequestBody::SetLed {
+        channel: Channel::One(Side::Top),
+        current_ma: 90,
+        enabled: true,
+    });
+    assert_eq!(
+        refused.result,
+        Err(DeviceError::FaultActive { channel: Side::Top })
+    );
+    let refused_all = bench.request(RequestBody::SetLed {
+        channel: Channel::All,
+        current_ma: 90,
+        enabled: true,
+    });
+    assert_eq!(
+        refused_all.result,
+        Err(DeviceError::FaultActive { channel: Side::Top })
+    );
     // Switching a faulted channel off is always allowed.
-    let off = bench.request(RequestBody::SetLed { channel: Channel::One(Side::Top), current_ma: 90, enabled: false });
+    let off = bench.request(RequestBody::SetLed {
+        channel: Channel::One(Side::Top),
+        current_ma: 90,
+        enabled: false,
+    });
     assert_eq!(off.result, Ok(Reply::Ack));
-    let on = bench.request(RequestBody::SetLed { channel: Channel::One(Side::Top), current_ma: 100, enabled: true });
+    let on = bench.request(RequestBody::SetLed {
+        channel: Channel::One(Side::Top),
+        current_ma: 100,
+        enabled: true,
+    });
     assert!(on.result.is_err());
 
-    assert_eq!(bench.request(RequestBody::ClearFaults).result, Ok(Reply::Ack));
-    let on = bench.request(RequestBody::SetLed { channel: Channel::One(Side::Top), current_ma: 100, enabled: true });
+    assert_eq!(
+        bench.request(RequestBody::ClearFaults).result,
+        Ok(Reply::Ack)
+    );
+    let on = bench.request(RequestBody::SetLed {
+        channel: Channel::One(Side::Top),
+        current_ma: 100,
+        enabled: true,
+    });
     assert_eq!(on.result, Ok(Reply::Ack));
     bench.run_ms(200);
     assert!(!flags(&mut bench)[0].any());
@@ -103,7 +146,10 @@ fn faults_are_latched_until_cleared_and_come_back_if_still_present() {
     // Still broken after clearing: found again.
     bench.plant.set_fault(0, StringFault::Open);
     bench.run_ms(100);
-    assert_eq!(bench.request(RequestBody::ClearFaults).result, Ok(Reply::Ack));
+    assert_eq!(
+        bench.request(RequestBody::ClearFaults).result,
+        Ok(Reply::Ack)
+    );
     bench.run_ms(100);
     assert!(flags(&mut bench)[0].open_string);
 }
@@ -122,7 +168,10 @@ fn over_temperature_derates_then_switches_off() {
     }
     let f = flags(&mut bench);
     assert!(f.iter().all(|f| f.over_temperature));
-    assert!(bench.controller.duty().iter().all(|&d| d > 0.0), "still lit while derating");
+    assert!(
+        bench.controller.duty().iter().all(|&d| d > 0.0),
+        "still lit while derating"
+    );
 
     bench.plant.set_ambient_c(SHUTDOWN_C + 5.0);
     bench.plant.set_board_temperature_c(SHUTDOWN_C + 5.0);
@@ -135,7 +184,10 @@ fn over_temperature_derates_then_switches_off() {
     bench.run_ms(100);
     assert_eq!(bench.true_current_ma(), [0.0; 4]);
     assert!(flags(&mut bench).iter().all(|f| f.over_temperature));
-    assert_eq!(bench.request(RequestBody::ClearFaults).result, Ok(Reply::Ack));
+    assert_eq!(
+        bench.request(RequestBody::ClearFaults).result,
+        Ok(Reply::Ack)
+    );
     bench.run_ms(200);
     assert!((bench.true_current_ma()[3] - 100.0).abs() < 2.0);
     assert!(!flags(&mut bench)[3].any());
@@ -144,7 +196,11 @@ fn over_temperature_derates_then_switches_off() {
 #[test]
 fn under_voltage_switches_the_lit_channels_off() {
     let mut bench = Bench::connected();
-    let r = bench.request(RequestBody::SetLed { channel: Channel::One(Side::Left), current_ma: 100, enabled: true });
+    let r = bench.request(RequestBody::SetLed {
+        channel: Channel::One(Side::Left),
+        current_ma: 100,
+        enabled: true,
+    });
     assert_eq!(r.result, Ok(Reply::Ack));
     bench.run_ms(200);
     bench.plant.set_supply_nominal_mv(3_900.0);
@@ -169,8 +225,16 @@ fn a_short_supply_dip_is_ridden_through() {
 #[test]
 fn a_healthy_board_raises_no_fault_in_a_long_run() {
     let mut bench = lit_bench();
-    let r = bench.request(RequestBody::SetLed { channel: Channel::All, current_ma: 120, enabled: true });
+    let r = bench.request(RequestBody::SetLed {
+        channel: Channel::All,
+        current_ma: 120,
+        enabled: true,
+    });
     assert_eq!(r.result, Ok(Reply::Ack));
     bench.run_ms(5_000);
-    assert!(flags(&mut bench).iter().all(|f| !f.any()), "{:?}", flags(&mut bench));
+    assert!(
+        flags(&mut bench).iter().all(|f| !f.any()),
+        "{:?}",
+        flags(&mut bench)
+    );
 }

@@ -12,7 +12,11 @@ use nusense_protocol::{Channel, Reply, RequestBody};
 const SETTLE_BUDGET_MS: u64 = DEFAULT_RAMP_MS as u64 + 50;
 
 fn enable_all(bench: &mut Bench, ma: u16) {
-    let r = bench.request(RequestBody::SetLed { channel: Channel::All, current_ma: ma, enabled: true });
+    let r = bench.request(RequestBody::SetLed {
+        channel: Channel::All,
+        current_ma: ma,
+        enabled: true,
+    });
     assert_eq!(r.result, Ok(Reply::Ack));
 }
 
@@ -25,7 +29,9 @@ fn settle(bench: &mut Bench, target: f32, band: f32, window_ms: u64) -> (Option<
         bench.step();
         let currents = bench.true_current_ma();
         peak = currents.iter().copied().fold(peak, f32::max);
-        let inside = currents.iter().all(|&c| (c - target).abs() <= band * target);
+        let inside = currents
+            .iter()
+            .all(|&c| (c - target).abs() <= band * target);
         match (inside, settled_at) {
             (true, None) => settled_at = Some(step * STEP_US / 1_000),
             (false, Some(_)) => settled_at = None,
@@ -42,7 +48,10 @@ fn converges_from_cold_to_100_ma_within_2_percent_without_overshoot() {
     let (settled_ms, peak) = settle(&mut bench, 100.0, 0.02, 1_000);
     let settled_ms = settled_ms.expect("regulator settles within 2 %");
     println!("settled to 100 mA +/- 2 % after {settled_ms} ms (budget {SETTLE_BUDGET_MS} ms), peak {peak:.2} mA");
-    assert!(settled_ms <= SETTLE_BUDGET_MS, "settled after {settled_ms} ms");
+    assert!(
+        settled_ms <= SETTLE_BUDGET_MS,
+        "settled after {settled_ms} ms"
+    );
     assert!(peak <= 102.0, "overshoot to {peak} mA");
     // The firmware's own view agrees with the plant.
     let status = match bench.request(RequestBody::GetStatus).result {
@@ -59,11 +68,22 @@ fn converges_from_cold_to_100_ma_within_2_percent_without_overshoot() {
 fn never_exceeds_the_limit_during_the_ramp_even_without_soft_start() {
     for ramp_ms in [0u16, 10, DEFAULT_RAMP_MS, 500] {
         let mut bench = Bench::connected();
-        assert_eq!(bench.request(RequestBody::SetRamp { ms: ramp_ms }).result, Ok(Reply::Ack));
+        assert_eq!(
+            bench.request(RequestBody::SetRamp { ms: ramp_ms }).result,
+            Ok(Reply::Ack)
+        );
         enable_all(&mut bench, MAX_CURRENT_MA);
-        let (settled, peak) = settle(&mut bench, f32::from(MAX_CURRENT_MA), 0.02, u64::from(ramp_ms) + 200);
+        let (settled, peak) = settle(
+            &mut bench,
+            f32::from(MAX_CURRENT_MA),
+            0.02,
+            u64::from(ramp_ms) + 200,
+        );
         println!("ramp {ramp_ms} ms to 120 mA: settled at {settled:?} ms, peak {peak:.2} mA");
-        assert!(peak <= f32::from(MAX_CURRENT_MA) * 1.01, "ramp {ramp_ms} ms: peak {peak} mA");
+        assert!(
+            peak <= f32::from(MAX_CURRENT_MA) * 1.01,
+            "ramp {ramp_ms} ms: peak {peak} mA"
+        );
         assert!(settled.is_some(), "ramp {ramp_ms} ms: did not settle");
     }
 }
@@ -71,11 +91,17 @@ fn never_exceeds_the_limit_during_the_ramp_even_without_soft_start() {
 #[test]
 fn soft_start_takes_the_ramp_time() {
     let mut bench = Bench::connected();
-    assert_eq!(bench.request(RequestBody::SetRamp { ms: 200 }).result, Ok(Reply::Ack));
+    assert_eq!(
+        bench.request(RequestBody::SetRamp { ms: 200 }).result,
+        Ok(Reply::Ack)
+    );
     enable_all(&mut bench, 100);
     bench.run_ms(100);
     let half_way = bench.true_current_ma()[0];
-    assert!((40.0..60.0).contains(&half_way), "half way through the ramp: {half_way} mA");
+    assert!(
+        (40.0..60.0).contains(&half_way),
+        "half way through the ramp: {half_way} mA"
+    );
     bench.run_ms(150);
     assert!((bench.true_current_ma()[0] - 100.0).abs() < 2.0);
 }
@@ -103,7 +129,10 @@ fn tracks_the_led_as_the_board_warms() {
     let mut worst = 0.0f32;
     for _ in 0..300 {
         bench.step();
-        worst = bench.true_current_ma().iter().fold(worst, |w, c| w.max((c - 100.0).abs()));
+        worst = bench
+            .true_current_ma()
+            .iter()
+            .fold(worst, |w, c| w.max((c - 100.0).abs()));
     }
     assert!((bench.true_current_ma()[0] - 100.0).abs() < 2.0);
     println!("worst deviation after a 30 K step in board temperature: {worst:.2} mA");
@@ -114,7 +143,11 @@ fn tracks_the_led_as_the_board_warms() {
 fn one_channel_is_regulated_independently_of_the_others() {
     let mut bench = Bench::connected();
     let top = nusense_protocol::Side::Top;
-    let r = bench.request(RequestBody::SetLed { channel: Channel::One(top), current_ma: 60, enabled: true });
+    let r = bench.request(RequestBody::SetLed {
+        channel: Channel::One(top),
+        current_ma: 60,
+        enabled: true,
+    });
     assert_eq!(r.result, Ok(Reply::Ack));
     bench.run_ms(200);
     let i = bench.true_current_ma();

@@ -52,7 +52,10 @@ const TEMPERATURE_SAMPLE_TIME: SampleTime = SampleTime::CYCLES480;
 pub fn clock_config() -> embassy_stm32::Config {
     use embassy_stm32::rcc::*;
     let mut config = embassy_stm32::Config::default();
-    config.rcc.hse = Some(Hse { freq: Hertz(25_000_000), mode: HseMode::Oscillator });
+    config.rcc.hse = Some(Hse {
+        freq: Hertz(25_000_000),
+        mode: HseMode::Oscillator,
+    });
     config.rcc.pll_src = PllSource::HSE;
     config.rcc.pll = Some(Pll {
         prediv: PllPreDiv::DIV25,
@@ -97,7 +100,12 @@ impl Board {
         let adc = Adc::new(p.ADC1);
         let temperature = adc.enable_temperature();
         let sensors = Sensors {
-            sense: [p.PA1.degrade_adc(), p.PA2.degrade_adc(), p.PA3.degrade_adc(), p.PA4.degrade_adc()],
+            sense: [
+                p.PA1.degrade_adc(),
+                p.PA2.degrade_adc(),
+                p.PA3.degrade_adc(),
+                p.PA4.degrade_adc(),
+            ],
             supply: p.PA5.degrade_adc(),
             temperature,
             adc,
@@ -107,7 +115,14 @@ impl Board {
         let mut usb_config = embassy_stm32::usb::Config::default();
         // The board is bus powered: VBUS is always there while USB is, and PA9 is free for other uses.
         usb_config.vbus_detection = false;
-        let usb = Driver::new_fs(p.USB_OTG_FS, Irqs, p.PA12, p.PA11, EP_OUT_BUFFER.init([0; 256]), usb_config);
+        let usb = Driver::new_fs(
+            p.USB_OTG_FS,
+            Irqs,
+            p.PA12,
+            p.PA11,
+            EP_OUT_BUFFER.init([0; 256]),
+            usb_config,
+        );
 
         Self {
             leds: LedDrive { pwm },
@@ -166,9 +181,17 @@ impl Sensors {
             }
         }
         let current_ma = sums.map(|s| sense_counts_to_ma((s / SENSE_OVERSAMPLING) as u16));
-        let supply_mv = divider_counts_to_supply_mv(self.adc.blocking_read(&mut self.supply, SENSE_SAMPLE_TIME));
-        let raw_temperature = self.adc.blocking_read(&mut self.temperature, TEMPERATURE_SAMPLE_TIME);
-        Measurements { current_ma, supply_mv, temperature_c: temperature_c(raw_temperature) }
+        let supply_mv = divider_counts_to_supply_mv(
+            self.adc.blocking_read(&mut self.supply, SENSE_SAMPLE_TIME),
+        );
+        let raw_temperature = self
+            .adc
+            .blocking_read(&mut self.temperature, TEMPERATURE_SAMPLE_TIME);
+        Measurements {
+            current_ma,
+            supply_mv,
+            temperature_c: temperature_c(raw_temperature),
+        }
     }
 }
 
@@ -177,7 +200,10 @@ impl Sensors {
 fn temperature_c(counts: u16) -> f32 {
     // SAFETY: system memory, always mapped and readable on the STM32F411.
     let (cal30, cal110) = unsafe {
-        (core::ptr::read_volatile(0x1FFF_7A2C as *const u16), core::ptr::read_volatile(0x1FFF_7A2E as *const u16))
+        (
+            core::ptr::read_volatile(0x1FFF_7A2C as *const u16),
+            core::ptr::read_volatile(0x1FFF_7A2E as *const u16),
+        )
     };
     if cal30 > 500 && cal110 > cal30 && cal110 < 4095 {
         30.0 + (f32::from(counts) - f32::from(cal30)) * 80.0 / f32::from(cal110 - cal30)

@@ -12,7 +12,12 @@ const SECTOR_LEN: u32 = 0x2_0000;
 fn sector() -> &'static [u8] {
     // SAFETY: the sector is memory-mapped flash, readable at any time; it is only written through `Flash`, and
     // never while this slice is being read (single executor, blocking flash calls).
-    unsafe { core::slice::from_raw_parts((FLASH_BASE as u32 + SECTOR_OFFSET) as *const u8, SECTOR_LEN as usize) }
+    unsafe {
+        core::slice::from_raw_parts(
+            (FLASH_BASE as u32 + SECTOR_OFFSET) as *const u8,
+            SECTOR_LEN as usize,
+        )
+    }
 }
 
 /// The newest saved configuration, or the default (all LEDs off) on a fresh board.
@@ -21,12 +26,19 @@ pub fn load() -> BoardConfig {
 }
 
 /// Appends `blob`; `before_erase` runs before a (rare, up to 2 s) sector erase, to pet the watchdog.
-pub fn save(flash: &mut Flash<'static, Blocking>, blob: &[u8; BoardConfig::BLOB_LEN], before_erase: impl FnOnce()) -> bool {
+pub fn save(
+    flash: &mut Flash<'static, Blocking>,
+    blob: &[u8; BoardConfig::BLOB_LEN],
+    before_erase: impl FnOnce(),
+) -> bool {
     let offset = match scan_log(sector()).next_free {
         Some(offset) => offset as u32,
         None => {
             before_erase();
-            if flash.blocking_erase(SECTOR_OFFSET, SECTOR_OFFSET + SECTOR_LEN).is_err() {
+            if flash
+                .blocking_erase(SECTOR_OFFSET, SECTOR_OFFSET + SECTOR_LEN)
+                .is_err()
+            {
                 return false;
             }
             0

@@ -41,11 +41,14 @@ const USB_PACKET: u16 = 64;
 type Frame = heapless::Vec<u8, MAX_FRAME_LEN>;
 
 /// The board's brain, shared by the control loop and the USB link (never held across an await).
-static CONTROLLER: Mutex<CriticalSectionRawMutex, RefCell<Option<Controller>>> = Mutex::new(RefCell::new(None));
+static CONTROLLER: Mutex<CriticalSectionRawMutex, RefCell<Option<Controller>>> =
+    Mutex::new(RefCell::new(None));
 /// Frames on their way to the host. When the host does not read (port closed), new frames are dropped whole.
 static TX_FRAMES: Channel<CriticalSectionRawMutex, Frame, 8> = Channel::new();
-static WATCHDOG: Mutex<CriticalSectionRawMutex, RefCell<Option<IndependentWatchdog<'static, IWDG>>>> =
-    Mutex::new(RefCell::new(None));
+static WATCHDOG: Mutex<
+    CriticalSectionRawMutex,
+    RefCell<Option<IndependentWatchdog<'static, IWDG>>>,
+> = Mutex::new(RefCell::new(None));
 
 fn with_controller<R>(f: impl FnOnce(&mut Controller) -> R) -> Option<R> {
     CONTROLLER.lock(|c| c.borrow_mut().as_mut().map(f))
@@ -73,10 +76,19 @@ async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(board::clock_config());
     let mut board = Board::new(p);
     let uid = embassy_stm32::uid::uid();
-    let identity = Identity::new(env!("CARGO_PKG_VERSION"), env!("NUSENSE_GIT_HASH"), "nusense-f411", uid);
+    let identity = Identity::new(
+        env!("CARGO_PKG_VERSION"),
+        env!("NUSENSE_GIT_HASH"),
+        "nusense-f411",
+        uid,
+    );
     let config = config_store::load();
-    defmt::info!("NUSense board {} up, config {:?} mA enabled {:?}", embassy_stm32::uid::uid_hex(),
-        config.setpoints_ma, config.enabled);
+    defmt::info!(
+        "NUSense board {} up, config {:?} mA enabled {:?}",
+        embassy_stm32::uid::uid_hex(),
+        config.setpoints_ma,
+        config.enabled
+    );
     CONTROLLER.lock(|c| c.replace(Some(Controller::new(identity, config))));
     board.watchdog.unleash();
     WATCHDOG.lock(|w| w.replace(Some(board.watchdog)));
@@ -104,11 +116,17 @@ async fn main(spawner: Spawner) {
     let usb = builder.build();
 
     spawner.spawn(usb_task(usb).expect("one usb task"));
-    spawner.spawn(control_task(board.leds, board.sensors, board.status_led).expect("one control task"));
+    spawner.spawn(
+        control_task(board.leds, board.sensors, board.status_led).expect("one control task"),
+    );
 
     let (sender, receiver) = class.split();
     let mut flash = board.flash;
-    join(serve_host_to_board(receiver, &mut flash), serve_board_to_host(sender)).await;
+    join(
+        serve_host_to_board(receiver, &mut flash),
+        serve_board_to_host(sender),
+    )
+    .await;
 }
 
 #[embassy_executor::task]
@@ -145,7 +163,10 @@ async fn control_task(mut leds: LedDrive, mut sensors: Sensors, mut status_led: 
 }
 
 /// `loop { wait_connection; serve }`: an unplugged or closed port is a normal event.
-async fn serve_host_to_board(mut receiver: Receiver<'static, Driver<'static, USB_OTG_FS>>, flash: &mut embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>) {
+async fn serve_host_to_board(
+    mut receiver: Receiver<'static, Driver<'static, USB_OTG_FS>>,
+    flash: &mut embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
+) {
     loop {
         receiver.wait_connection().await;
         defmt::info!("host connected");

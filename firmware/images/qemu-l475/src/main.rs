@@ -9,12 +9,12 @@ mod saved_config;
 mod time_driver;
 mod usart;
 
+use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_futures::select::{select, Either};
 use embassy_time::{Duration, Instant, Ticker};
 use nusense_firmware_core::plant::{LedPlant, PlantParams};
 use nusense_firmware_core::{Action, Controller, Identity};
-use defmt_rtt as _;
 use panic_halt as _;
 
 /// MSI at reset: QEMU's RCC model starts the L475 there, and nothing here needs more.
@@ -32,7 +32,12 @@ async fn main(_spawner: Spawner) {
     time_driver::start(core.SYST, CORE_CLOCK_HZ);
     usart::init(CORE_CLOCK_HZ, BAUD);
 
-    let identity = Identity::new(env!("CARGO_PKG_VERSION"), env!("NUSENSE_GIT_HASH"), "qemu-l475", QEMU_UID);
+    let identity = Identity::new(
+        env!("CARGO_PKG_VERSION"),
+        env!("NUSENSE_GIT_HASH"),
+        "qemu-l475",
+        QEMU_UID,
+    );
     let mut controller = Controller::new(identity, saved_config::restore());
     let mut plant = LedPlant::new(PlantParams::default(), 0x5EED);
 
