@@ -44,9 +44,22 @@ pub fn save(
             0
         }
     };
-    if flash.blocking_write(SECTOR_OFFSET + offset, blob).is_err() {
+    let written_ok = flash.blocking_write(SECTOR_OFFSET + offset, blob).is_ok();
+    flush_flash_data_cache();
+    if !written_ok {
         return false;
     }
     let written = &sector()[offset as usize..offset as usize + BoardConfig::BLOB_LEN];
     written == blob
+}
+
+/// The flash data cache may still hold the erased (0xFF) slot that `scan_log` just read; on single-bank F4 parts
+/// embassy does not reset it after programming, so reset it here before anything reads the log again.
+fn flush_flash_data_cache() {
+    use embassy_stm32::pac::FLASH;
+    let enabled = FLASH.acr().read().dcen();
+    FLASH.acr().modify(|w| w.set_dcen(false));
+    FLASH.acr().modify(|w| w.set_dcrst(true));
+    FLASH.acr().modify(|w| w.set_dcrst(false));
+    FLASH.acr().modify(|w| w.set_dcen(enabled));
 }
