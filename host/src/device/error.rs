@@ -4,11 +4,11 @@ use nusense_protocol::DeviceError;
 /// Everything that can go wrong talking to a board, in words a user can act on.
 #[derive(Debug, thiserror::Error)]
 pub enum LinkError {
-    #[error("cannot open the serial device {path}: {source}")]
+    // The cause is part of the message and deliberately not an error `source`: chains would print it twice.
+    #[error("cannot open the serial device {path}: {cause}")]
     Open {
         path: String,
-        #[source]
-        source: serialport::Error,
+        cause: serialport::Error,
     },
     #[error("the board did not answer in time, even after retrying")]
     Timeout,
@@ -38,7 +38,7 @@ pub enum LinkError {
     #[error("cannot encode the request: {0}")]
     Encode(EncodeError),
     #[error("cannot list serial ports: {0}")]
-    Discover(#[source] serialport::Error),
+    Discover(serialport::Error),
     #[error("no NUSense board found (USB {vid:04x}:{pid:04x}{serial}); plug one in, or pass --port PATH or --virtual", serial = serial_hint(.serial_number))]
     NoBoardFound {
         vid: u16,

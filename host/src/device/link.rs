@@ -71,9 +71,9 @@ impl BoardLink {
     /// Opens a serial device (USB CDC-ACM, or a pty from QEMU / the virtual board) and does the Hello handshake.
     pub fn open(path: &str, options: LinkOptions) -> Result<Self, LinkError> {
         let transport =
-            SerialTransport::open(path, options.baud).map_err(|source| LinkError::Open {
+            SerialTransport::open(path, options.baud).map_err(|cause| LinkError::Open {
                 path: path.to_owned(),
-                source,
+                cause,
             })?;
         Self::over(Box::new(transport), options)
     }

@@ -383,10 +383,15 @@ impl Worker {
                         if result.is_ok() {
                             self.remember_led(channel, current_ma, enabled);
                         }
-                        let lost = matches!(&result, Err(error) if error.is_disconnect() || matches!(error, LinkError::Timeout));
+                        // The caller gets the error; the link is rebuilt if the board is gone or not answering.
+                        let lost = match &result {
+                            Err(LinkError::Disconnected) => Some(LinkError::Disconnected),
+                            Err(LinkError::Timeout) => Some(LinkError::Timeout),
+                            _ => None,
+                        };
                         let _ = reply.send(result);
-                        if lost {
-                            return Ended::Lost(LinkError::Disconnected);
+                        if let Some(error) = lost {
+                            return Ended::Lost(error);
                         }
                     }
                     Ok(Command::Stop) | Err(mpsc::TryRecvError::Disconnected) => {

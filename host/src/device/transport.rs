@@ -37,6 +37,8 @@ impl SerialTransport {
             .parity(serialport::Parity::None)
             .stop_bits(serialport::StopBits::One)
             .flow_control(serialport::FlowControl::None)
+            // USB CDC-ACM firmware takes DTR as "a host has the port open"; ptys ignore it.
+            .dtr_on_open(true)
             .timeout(Duration::from_millis(10))
             .open_native()?;
         Ok(Self {
