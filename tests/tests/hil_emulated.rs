@@ -1,0 +1,56 @@
+//! `nusense hil --emulated` as a test: the check suite against the real ARM firmware image under QEMU
+//! (b-l475e-iot01a, USART1 on a pty) with the simulated camera fed by the board's measured currents.
+//! QEMU is started and killed by `nusense::emulator::QemuBoard` (on drop, also when an assertion fails).
+
+use nusense::emulator::QemuOptions;
+use nusense::hil::{run_suite, HilOptions, HilTarget, Verdict};
+
+#[test]
+fn every_hil_check_passes_against_the_qemu_firmware_image() {
+    let target = HilTarget::Emulated {
+        elf: None,
+        build: true,
+        qemu: QemuOptions::default(),
+    };
+    let mut running = target
+        .start()
+        .expect("the QEMU image builds and QEMU starts (see firmware/README.md)");
+    assert!(
+        running.camera.is_some(),
+        "emulated mode looks through the simulated camera"
+    );
+    let report = run_suite(&mut running, &HilOptions::quick(), &mut |result| {
+        eprintln!(
+            "{} {:<18} {}",
+            result.verdict.label(),
+            result.name,
+            result.summary
+        )
+    });
+    drop(running);
+    let failed: Vec<String> = report
+        .checks
+        .iter()
+        .filter(|c| c.verdict != Verdict::Pass)
+        .map(|c| format!("{} {}: {}", c.verdict.label(), c.name, c.summary))
+        .collect();
+    assert!(
+        failed.is_empty(),
+        "{}\n{}",
+        report.summary_line(),
+        failed.join("\n")
+    );
+    assert_eq!(
+        report.summary_line(),
+        format!("hil: {} passed, 0 failed", report.checks.len())
+    );
+    // The numbers behind the verdicts are there for the JSON output.
+    let latency = report.check("latency").expect("latency check");
+    assert!(latency.details["p50_ms"].as_f64().is_some_and(|p| p > 0.0));
+    assert!(latency.details["p99_ms"].as_f64() >= latency.details["p50_ms"].as_f64());
+    let ramp = report.check("led_ramp").expect("ramp check");
+    assert_eq!(
+        ramp.details["steps"].as_array().map(Vec::len),
+        Some(HilOptions::quick().setpoints_ma.len())
+    );
+}
