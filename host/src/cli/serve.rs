@@ -1,8 +1,184 @@
+//! `nusense serve`: the daemon. With no options it runs on the simulator (a virtual LED board and the
+//! simulated camera) and says so.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::process::ExitCode;
 
-#[derive(clap::Args)]
-pub struct Args {}
+use anyhow::{bail, Context};
+use nusense::api::{self, AppState};
+use nusense::capture::{CameraSelector, PixelFormat, V4l2Options, SIM_DEFAULT_FPS, SIM_DEFAULT_HEIGHT, SIM_DEFAULT_WIDTH};
+use nusense::pipeline::{open_sources, BoardChoice, FrameChoice, Pipeline, PipelineOptions};
+use nusense_estimator::{Mode, SensorConfig};
 
-pub fn run(_args: Args) -> anyhow::Result<ExitCode> {
-    anyhow::bail!("`nusense serve` is not built yet")
+pub const DEFAULT_PORT: u16 = 8750;
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    #[command(flatten)]
+    pub source: SourceArgs,
+    /// Address to listen on. Anything but loopback requires a token.
+    #[arg(long, value_name = "ADDR")]
+    pub listen: Option<SocketAddr>,
+    /// Token every request must carry (Authorization: Bearer, or ?token=); required with a non-loopback --listen.
+    #[arg(long, env = "NUSENSE_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// Folder for recordings started from the API without a path.
+    #[arg(long, value_name = "DIR")]
+    pub recordings: Option<PathBuf>,
+}
+
+/// Where frames and LED control come from, and how they are estimated (shared with `nusense record`).
+#[derive(clap::Args, Debug)]
+pub struct SourceArgs {
+    /// Serial device of the LED board (e.g. /dev/ttyACM0, /dev/serial/by-id/...). Without it: the virtual board
+    /// on the simulator, no board with --camera or --replay.
+    #[arg(long, value_name = "PATH")]
+    pub port: Option<String>,
+    /// Camera: a V4L2 device path or the camera's USB serial number.
+    #[arg(long, value_name = "DEVICE|SERIAL", conflicts_with_all = ["replay", "sim"])]
+    pub camera: Option<String>,
+    /// Replay a folder of frames or an MCAP recording instead of a live camera.
+    #[arg(long, value_name = "DIR|FILE.mcap", conflicts_with = "sim")]
+    pub replay: Option<PathBuf>,
+    /// Run on the simulated sensor (the default when neither --camera nor --replay is given).
+    #[arg(long)]
+    pub sim: bool,
+    /// Sensor configuration (TOML); the default fits the real sensor.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Estimator variant.
+    #[arg(long, value_enum, default_value = "fast")]
+    pub mode: ModeArg,
+    /// Frame width and height for the camera or the simulator.
+    #[arg(long, default_value_t = SIM_DEFAULT_WIDTH)]
+    pub width: u32,
+    #[arg(long, default_value_t = SIM_DEFAULT_HEIGHT)]
+    pub height: u32,
+    /// Frames per second for the camera, the simulator, or a folder replay.
+    #[arg(long, default_value_t = SIM_DEFAULT_FPS)]
+    pub fps: f64,
+    /// Camera pixel format (default: MJPEG when offered, else YUYV).
+    #[arg(long, value_enum)]
+    pub pixel_format: Option<PixelFormatArg>,
+    /// Start the replay over when it ends.
+    #[arg(long = "loop")]
+    pub looping: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum ModeArg {
+    Fast,
+    Paper,
+}
+
+impl From<ModeArg> for Mode {
+    fn from(mode: ModeArg) -> Self {
+        match mode {
+            ModeArg::Fast => Mode::Fast,
+            ModeArg::Paper => Mode::Paper,
+        }
+    }
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum PixelFormatArg {
+    Mjpeg,
+    Yuyv,
+}
+
+/// What the frame-source options of `serve` and `record` select.
+pub fn frame_choice(args: &SourceArgs) -> FrameChoice {
+    if let Some(camera) = &args.camera {
+        FrameChoice::Camera {
+            selector: CameraSelector::parse(camera),
+            options: V4l2Options {
+                width: args.width,
+                height: args.height,
+                fps: args.fps.round().clamp(1.0, 1000.0) as u32,
+                format: args.pixel_format.map(|f| match f {
+                    PixelFormatArg::Mjpeg => PixelFormat::Mjpeg,
+                    PixelFormatArg::Yuyv => PixelFormat::Yuyv,
+                }),
+            },
+        }
+    } else if let Some(path) = &args.replay {
+        FrameChoice::Replay { path: path.clone(), fps: args.fps, looping: args.looping }
+    } else {
+        FrameChoice::Simulator { width: args.width, height: args.height, fps: args.fps }
+    }
+}
+
+pub fn board_choice(args: &SourceArgs, frames: &FrameChoice) -> BoardChoice {
+    match (&args.port, frames) {
+        (Some(port), _) => BoardChoice::Port(port.clone()),
+        (None, FrameChoice::Simulator { .. }) => BoardChoice::Virtual,
+        (None, _) => BoardChoice::None,
+    }
+}
+
+pub fn load_config(path: Option<&PathBuf>) -> anyhow::Result<SensorConfig> {
+    match path {
+        Some(path) => SensorConfig::load(path).with_context(|| format!("loading the sensor configuration {}", path.display())),
+        None => Ok(SensorConfig::default()),
+    }
+}
+
+/// Start-up message in plain words: what runs, from where, and where to look.
+pub fn describe_start(frames: &FrameChoice, board: &BoardChoice) -> String {
+    let camera = match frames {
+        FrameChoice::Simulator { width, height, fps } => {
+            format!("on the SIMULATOR: no camera, a simulated sensor renders {width}x{height} frames at {fps} fps")
+        }
+        FrameChoice::Camera { selector, options } => {
+            format!("on camera {selector:?} at {}x{} {} fps", options.width, options.height, options.fps)
+        }
+        FrameChoice::Replay { path, .. } => format!("replaying {}", path.display()),
+    };
+    let board = match board {
+        BoardChoice::Virtual => "a virtual LED board (the firmware's logic with simulated LEDs, over a pty)".to_string(),
+        BoardChoice::Port(port) => format!("the LED board on {port}"),
+        BoardChoice::None => "no LED board".to_string(),
+    };
+    format!("nusense serve: running {camera}, with {board}")
+}
+
+/// Logs to stderr; RUST_LOG overrides the level.
+pub fn init_logging() {
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
+        .with_writer(std::io::stderr)
+        .try_init();
+}
+
+pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    init_logging();
+    let listen = args.listen.unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], DEFAULT_PORT)));
+    let token = args.token.clone().filter(|t| !t.is_empty());
+    if !listen.ip().is_loopback() && token.is_none() {
+        bail!("listening on {listen} (beyond this machine) requires a token: pass --token or set NUSENSE_TOKEN");
+    }
+    let config = load_config(args.source.config.as_ref())?;
+    let frames = frame_choice(&args.source);
+    let board = board_choice(&args.source, &frames);
+    eprintln!("{}", describe_start(&frames, &board));
+    let sources = open_sources(&frames, &board).context("opening the frame source and LED board")?;
+    let pipeline = Pipeline::start(sources.frames, sources.board, PipelineOptions::new(config, args.source.mode.into()))?;
+    let mut state = AppState::new(pipeline.handle(), sources.scene, token);
+    if let Some(dir) = &args.recordings {
+        state.recordings_dir = dir.clone();
+    }
+    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")?;
+    runtime.block_on(async move {
+        let listener = tokio::net::TcpListener::bind(listen).await.with_context(|| format!("listening on {listen}"))?;
+        let local = listener.local_addr()?;
+        eprintln!("nusense serve: dashboard at http://{local}/  (API under /api/, stop with Ctrl-C)");
+        api::serve(listener, state, async {
+            let _ = tokio::signal::ctrl_c().await;
+        })
+        .await
+        .context("serving HTTP")
+    })?;
+    drop(pipeline);
+    Ok(ExitCode::SUCCESS)
 }

@@ -1,0 +1,101 @@
+//! Replay of a folder of still images (PNG or JPEG), in file-name order, at a fixed frame rate.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use super::{decode_jpeg, CaptureError, CapturedImage, FrameSource, SourceInfo};
+
+pub struct ImageFolder {
+    folder: PathBuf,
+    files: Vec<PathBuf>,
+    next: usize,
+    period: Duration,
+    looping: bool,
+    next_due: Option<Instant>,
+    size: (u32, u32),
+}
+
+impl ImageFolder {
+    /// Lists the folder's images; `looping` starts over after the last one instead of ending.
+    pub fn open(folder: &Path, fps: f64, looping: bool) -> Result<Self, CaptureError> {
+        let path_text = folder.display().to_string();
+        let entries = std::fs::read_dir(folder).map_err(|source| CaptureError::Io { path: path_text.clone(), source })?;
+        let mut files: Vec<PathBuf> = entries
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| {
+                let ext = p.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+                matches!(ext.as_str(), "png" | "jpg" | "jpeg")
+            })
+            .collect();
+        files.sort();
+        let first = files.first().ok_or_else(|| CaptureError::Empty(path_text.clone()))?;
+        let size = image::image_dimensions(first)
+            .map_err(|e| CaptureError::Decode { origin: first.display().to_string(), message: e.to_string() })?;
+        let fps = if fps.is_finite() && fps > 0.0 { fps } else { 30.0 };
+        Ok(Self {
+            folder: folder.to_path_buf(),
+            files,
+            next: 0,
+            period: Duration::from_secs_f64(1.0 / fps),
+            looping,
+            next_due: None,
+            size,
+        })
+    }
+
+    /// Hands out frames as fast as they are asked for (batch processing rather than live replay).
+    pub fn unpaced(mut self) -> Self {
+        self.period = Duration::ZERO;
+        self
+    }
+
+    pub fn len(&self) -> usize {
+        self.files.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.files.is_empty()
+    }
+}
+
+impl FrameSource for ImageFolder {
+    fn info(&self) -> SourceInfo {
+        SourceInfo {
+            kind: "replay",
+            name: self.folder.display().to_string(),
+            width: self.size.0,
+            height: self.size.1,
+            fps: if self.period.is_zero() { 0.0 } else { 1.0 / self.period.as_secs_f64() },
+        }
+    }
+
+    fn next_frame(&mut self) -> Result<CapturedImage, CaptureError> {
+        if self.next >= self.files.len() {
+            if !self.looping {
+                return Err(CaptureError::EndOfStream);
+            }
+            self.next = 0;
+        }
+        let path = &self.files[self.next];
+        self.next += 1;
+        if let Some(due) = self.next_due {
+            let now = Instant::now();
+            if due > now {
+                std::thread::sleep(due - now);
+            }
+        }
+        self.next_due = Some(Instant::now() + self.period);
+        let origin = path.display().to_string();
+        let bytes = std::fs::read(path).map_err(|source| CaptureError::Io { path: origin.clone(), source })?;
+        let is_jpeg = bytes.starts_with(&[0xFF, 0xD8]);
+        if is_jpeg {
+            let image = decode_jpeg(&bytes, &origin)?;
+            Ok(CapturedImage::now(image, Some(bytes)))
+        } else {
+            let image = image::load_from_memory(&bytes)
+                .map_err(|e| CaptureError::Decode { origin, message: e.to_string() })?
+                .to_rgb8();
+            Ok(CapturedImage::now(image, None))
+        }
+    }
+}
