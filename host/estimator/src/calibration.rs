@@ -83,7 +83,8 @@ pub fn fit_force_line(samples: &[CalibrationSample], options: &FitOptions) -> Re
     if !(options.confidence > 0.0 && options.confidence < 1.0) {
         return Err(CalibrationError::BadConfidence(options.confidence));
     }
-    if let Some((index, s)) = samples.iter().enumerate().find(|(_, s)| !(s.gamma.is_finite() && s.force_n.is_finite())) {
+    if let Some((index, s)) = samples.iter().enumerate().find(|(_, s)| !(s.gamma.is_finite() && s.force_n.is_finite()))
+    {
         return Err(CalibrationError::NotFinite { index, gamma: s.gamma, force_n: s.force_n });
     }
     let distinct = distinct_count(samples);
@@ -117,7 +118,9 @@ pub fn fit_force_line(samples: &[CalibrationSample], options: &FitOptions) -> Re
         for (w, r) in weights.iter_mut().zip(&residuals) {
             *w = bisquare_weight(r / scale, c);
         }
-        let Some((na, nb)) = weighted_line(&x, &y, &weights) else { break };
+        let Some((na, nb)) = weighted_line(&x, &y, &weights) else {
+            break;
+        };
         let converged = (na - a).abs() <= 1e-12 * (1.0 + a.abs()) && (nb - b).abs() <= 1e-12 * (1.0 + b.abs());
         a = na;
         b = nb;
@@ -488,7 +491,8 @@ pub fn parse_force_log_csv(text: &str, component: ForceComponent) -> Result<Vec<
         .find_map(|&(name, unit)| find_column(&header, &[name]).map(|c| (c, unit)))
         .ok_or_else(|| CalibrationError::MissingColumn { wanted: "timestamp".into(), found: found.clone() })?;
     let column = |name: &str| {
-        find_column(&header, &[name]).ok_or_else(|| CalibrationError::MissingColumn { wanted: name.into(), found: found.clone() })
+        find_column(&header, &[name])
+            .ok_or_else(|| CalibrationError::MissingColumn { wanted: name.into(), found: found.clone() })
     };
     let needed: Vec<(usize, &str)> = match component {
         ForceComponent::Fx => vec![(column("fx")?, "fx")],
@@ -604,7 +608,10 @@ mod tests {
     }
 
     fn line(a: f64, b: f64, gammas: impl Iterator<Item = f64>, amplitude: f64) -> Vec<CalibrationSample> {
-        gammas.enumerate().map(|(i, g)| CalibrationSample { gamma: g, force_n: a * g + b + noise(i, amplitude) }).collect()
+        gammas
+            .enumerate()
+            .map(|(i, g)| CalibrationSample { gamma: g, force_n: a * g + b + noise(i, amplitude) })
+            .collect()
     }
 
     #[test]
@@ -724,10 +731,10 @@ mod tests {
     #[test]
     fn parses_pair_csv_with_and_without_header() {
         let with = parse_pairs_csv("# a comment\nforce_n, gamma\n1.5, 0.8\n3.0,1.3e0\n").unwrap();
-        assert_eq!(with, vec![
-            CalibrationSample { gamma: 0.8, force_n: 1.5 },
-            CalibrationSample { gamma: 1.3, force_n: 3.0 }
-        ]);
+        assert_eq!(
+            with,
+            vec![CalibrationSample { gamma: 0.8, force_n: 1.5 }, CalibrationSample { gamma: 1.3, force_n: 3.0 }]
+        );
         let without = parse_pairs_csv("0.8,1.5\n1.3,3\n").unwrap();
         assert_eq!(without, with);
         assert!(matches!(parse_pairs_csv("gamma,force\n0.8,abc\n"), Err(CalibrationError::Parse { line: 2, .. })));
@@ -742,8 +749,14 @@ mod tests {
         assert_eq!(abs, vec![ForceSample { time_s: 1.0, force_n: 1.2 }, ForceSample { time_s: 1.01, force_n: 2.0 }]);
         let norm = parse_force_log_csv(log, ForceComponent::Norm).unwrap();
         assert!((norm[0].force_n - (0.09f64 + 0.16 + 1.44).sqrt()).abs() < 1e-12);
-        assert!(matches!(parse_force_log_csv("time,fx\n0,1\n", ForceComponent::AbsFz), Err(CalibrationError::MissingColumn { .. })));
-        assert!(matches!(parse_force_log_csv("fz\n1\n", ForceComponent::AbsFz), Err(CalibrationError::MissingColumn { .. })));
+        assert!(matches!(
+            parse_force_log_csv("time,fx\n0,1\n", ForceComponent::AbsFz),
+            Err(CalibrationError::MissingColumn { .. })
+        ));
+        assert!(matches!(
+            parse_force_log_csv("fz\n1\n", ForceComponent::AbsFz),
+            Err(CalibrationError::MissingColumn { .. })
+        ));
     }
 
     #[test]

@@ -42,9 +42,15 @@ fn matches_scipy_for_every_golden_case() {
     let mut checked = 0;
     for case in cases {
         let surface = surface_of(case);
-        let label = format!("case seed {} ({} x {}, degrees {}, {})", case["seed"], case["rows"], case["cols"], case["degree_u"], case["degree_v"]);
+        let label = format!(
+            "case seed {} ({} x {}, degrees {}, {})",
+            case["seed"], case["rows"], case["cols"], case["degree_u"], case["degree_v"]
+        );
         degrees_seen.insert((case["degree_u"].as_u64().unwrap(), case["degree_v"].as_u64().unwrap()));
-        for (ours, theirs) in [(surface.knots_u().knots(), numbers(&case["knots_u"])), (surface.knots_v().knots(), numbers(&case["knots_v"]))] {
+        for (ours, theirs) in [
+            (surface.knots_u().knots(), numbers(&case["knots_u"])),
+            (surface.knots_v().knots(), numbers(&case["knots_v"])),
+        ] {
             assert_eq!(ours.len(), theirs.len(), "{label}: knot count");
             for (a, b) in ours.iter().zip(&theirs) {
                 assert!((a - b).abs() < 1e-15, "{label}: knots {ours:?} vs {theirs:?}");

@@ -11,7 +11,11 @@
 //! [`lattice`]), and missing points stay missing.
 //!
 //! Frames of another size than the calibration's (`config.camera`) get the lens, the ROI and every length
-//! (filter diameter, spatial sigma, area window, pairing distance) scaled to them; grey-level parameters stay.
+//! (filter diameter, spatial sigma, area window, pairing distance) scaled to them by s = new / calibration size.
+//! The gradient threshold is divided by s: the same physical edge spans s times fewer pixels, so its Sobel
+//! response per pixel grows by 1 / s (without this, at half size the edge rings merge and no quad is left).
+//! The fixed 3x3 Sobel and morphology cannot shrink with the pattern: at a quarter size (squares of ~20 px) the
+//! published method finds no quadrilaterals at all, and paper mode reports that as `NoPattern`.
 
 pub mod filters;
 pub mod lattice;
@@ -93,11 +97,7 @@ impl PaperDetector {
     /// Resolves the config for `width x height` frames and builds the remap table (the costly part of setup).
     pub fn new(config: &SensorConfig, width: u32, height: u32) -> Result<Self, EstimateError> {
         if width < MIN_FRAME_SIDE || height < MIN_FRAME_SIDE {
-            return Err(EstimateError::FrameTooSmall {
-                width,
-                height,
-                min: MIN_FRAME_SIDE,
-            });
+            return Err(EstimateError::FrameTooSmall { width, height, min: MIN_FRAME_SIDE });
         }
         let intrinsics = config.camera.scaled_to(width, height);
         let camera = FisheyeCamera::new(intrinsics)?;
@@ -119,7 +119,7 @@ impl PaperDetector {
                 sigma_space: scale_len(p.bilateral_sigma_space),
             },
             sobel_weights: (p.sobel_weight_x as f32, p.sobel_weight_y as f32),
-            binary_threshold: p.binary_threshold.clamp(0.0, 255.0) as u8,
+            binary_threshold: (p.binary_threshold / s).round().clamp(0.0, 255.0) as u8,
             quad_filter: QuadFilter {
                 epsilon_fraction: p.polygon_epsilon_fraction,
                 min_area: p.quad_min_area_px2 * s * s,
@@ -147,12 +147,8 @@ impl PaperDetector {
     /// Stage 2: bilateral filter, Sobel, threshold, closing: the binary edge map of the ROI.
     pub fn edge_map(&self, gray: &GrayImage) -> GrayImage {
         let smoothed = self.bilateral.apply(gray);
-        let binary = filters::sobel_threshold(
-            &smoothed,
-            self.sobel_weights.0,
-            self.sobel_weights.1,
-            self.binary_threshold,
-        );
+        let binary =
+            filters::sobel_threshold(&smoothed, self.sobel_weights.0, self.sobel_weights.1, self.binary_threshold);
         filters::close_3x3(&binary)
     }
 
@@ -176,16 +172,10 @@ impl PaperDetector {
         let pairs = lattice::pair_vertices(quads, self.pair_distance_px);
         let corners_found = lattice::distinct_midpoints(&pairs);
         if quads.is_empty() {
-            return Err(EstimateError::NoPattern {
-                reason: "the published method found no quadrilateral".into(),
-            });
+            return Err(EstimateError::NoPattern { reason: "the published method found no quadrilateral".into() });
         }
         let roi_centre = [f64::from(roi.width) / 2.0, f64::from(roi.height) / 2.0];
-        let colour = FrameColour {
-            frame,
-            camera: &self.camera,
-            roi,
-        };
+        let colour = FrameColour { frame, camera: &self.camera, roi };
         let assignment =
             lattice::assign_lattice(quads, &pairs, &self.pad, roi_centre, &colour).map_err(|e| match e {
                 IndexingFailure::NoPairs => EstimateError::NoPattern {
@@ -196,33 +186,28 @@ impl PaperDetector {
                     reason: "the quadrilaterals span more rows or columns than the pad has".into(),
                 },
             })?;
-        let to_undistorted = |p: [f64; 2]| -> Point2 {
-            // ROI pixel indices to undistorted px: add the ROI origin and move to the pixel centre.
-            [p[0] + f64::from(roi.x) + 0.5, p[1] + f64::from(roi.y) + 0.5]
+        // ROI pixel indices -> undistorted frame indices -> raw px (our convention) -> undistorted px (ours).
+        let locate = |p: [f64; 2]| -> Option<(Point2, Point2)> {
+            let raw = undistort::index_to_raw_px(&self.camera, [p[0] + f64::from(roi.x), p[1] + f64::from(roi.y)]);
+            let undistorted = self.camera.undistort_px(raw)?;
+            raw.iter().chain(&undistorted).all(|v| v.is_finite()).then_some((raw, undistorted))
         };
         let points = assignment
             .corners
             .iter()
-            .map(|(&index, &p)| {
-                let undistorted_px = to_undistorted(p);
-                PaperPoint {
-                    index,
-                    raw_px: self.camera.distort_px(undistorted_px),
-                    undistorted_px,
-                }
+            .filter_map(|(&index, &p)| {
+                locate(p).map(|(raw_px, undistorted_px)| PaperPoint { index, raw_px, undistorted_px })
             })
-            .filter(|p| p.raw_px.iter().chain(&p.undistorted_px).all(|v| v.is_finite()))
             .collect();
         let squares = quads
             .iter()
             .zip(&assignment.squares)
-            .map(|(quad, &index)| {
-                let centre_undistorted_px = to_undistorted(quad.centre());
-                PaperSquare {
+            .filter_map(|(quad, &index)| {
+                locate(quad.centre()).map(|(centre_raw_px, centre_undistorted_px)| PaperSquare {
                     index,
-                    centre_raw_px: self.camera.distort_px(centre_undistorted_px),
+                    centre_raw_px,
                     centre_undistorted_px,
-                }
+                })
             })
             .collect();
         Ok(PaperDetection {
@@ -259,12 +244,7 @@ fn scaled_roi(config: &SensorConfig, sx: f64, sy: f64, width: u32, height: u32) 
     let y = (f64::from(r.y) * sy).round() as u32;
     let w = ((f64::from(r.width) * sx).round() as u32).min(width.saturating_sub(x));
     let h = ((f64::from(r.height) * sy).round() as u32).min(height.saturating_sub(y));
-    (w > 0 && h > 0).then_some(RoiPx {
-        x,
-        y,
-        width: w,
-        height: h,
-    })
+    (w > 0 && h > 0).then_some(RoiPx { x, y, width: w, height: h })
 }
 
 /// Yellowness of the undistorted frame, sampled through the camera model at ROI pixel positions.
@@ -276,7 +256,7 @@ struct FrameColour<'a> {
 
 impl CellColour for FrameColour<'_> {
     fn yellowness(&self, at: [f64; 2]) -> f64 {
-        let p = [at[0] + f64::from(self.roi.x) + 0.5, at[1] + f64::from(self.roi.y) + 0.5];
+        let p = [at[0] + f64::from(self.roi.x), at[1] + f64::from(self.roi.y)];
         let [_, g, b] = undistort::sample_undistorted_rgb(self.frame, self.camera, p);
         // Yellow carries green, the red-magenta background hardly any; blue is low in yellow only.
         f64::from(g) - f64::from(b)

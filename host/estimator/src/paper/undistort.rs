@@ -1,6 +1,12 @@
 //! The published first stage: the whole frame undistorted through the fisheye model with a bilinear remap, then
 //! converted to grey the way OpenCV's `cvtColor(BGR2GRAY)` does.
 //!
+//! The remap reproduces OpenCV's `fisheye::initUndistortRectifyMap`, which reads K (cx = w/2, cy = h/2) and the
+//! new camera matrix in pixel-*index* coordinates (origin at the top-left pixel's centre). Our raw-px convention
+//! puts the origin at the pixel's corner, half a pixel away; evaluating the same formulas on pixel indices keeps
+//! the image identical to the published one (checked against OpenCV: the remaining differences are its 1/32-px
+//! fixed-point interpolation). [`index_to_raw_px`] converts the results back to our convention.
+//!
 //! Only the pixels inside the region of interest are ever read by the later stages, so the table covers exactly
 //! those: the output is the same as remapping the whole frame and cropping, without computing pixels that are
 //! thrown away. The table is built once per camera and frame size (the model inversion is the costly part).
@@ -33,18 +39,11 @@ impl RemapTable {
         let mut taps = Vec::with_capacity(roi.width as usize * roi.height as usize);
         for row in 0..roi.height {
             for col in 0..roi.width {
-                // Pixel centres sit at half-integer px; the raw sample position is converted back to pixel indices.
-                let undistorted = [f64::from(roi.x + col) + 0.5, f64::from(roi.y + row) + 0.5];
-                let raw = camera.distort_px(undistorted);
-                taps.push(tap_for(raw));
+                let source = camera.distort_px([f64::from(roi.x + col), f64::from(roi.y + row)]);
+                taps.push(tap_for(source));
             }
         }
-        Self {
-            roi,
-            raw_width: camera.width(),
-            raw_height: camera.height(),
-            taps,
-        }
+        Self { roi, raw_width: camera.width(), raw_height: camera.height(), taps }
     }
 
     pub fn roi(&self) -> RoiPx {
@@ -59,26 +58,16 @@ impl RemapTable {
     }
 }
 
-fn tap_for(raw: Point2) -> RemapTap {
-    let sx = raw[0] - 0.5;
-    let sy = raw[1] - 0.5;
+/// The bilinear tap at a source position in pixel-index coordinates.
+fn tap_for(source: Point2) -> RemapTap {
+    let [sx, sy] = source;
     if !(sx.is_finite() && sy.is_finite()) || sx.abs() > 1e6 || sy.abs() > 1e6 {
         // Outside the model: reads the constant (black) border like OpenCV's BORDER_CONSTANT.
-        return RemapTap {
-            x0: i32::MIN / 2,
-            y0: i32::MIN / 2,
-            fx: 0.0,
-            fy: 0.0,
-        };
+        return RemapTap { x0: i32::MIN / 2, y0: i32::MIN / 2, fx: 0.0, fy: 0.0 };
     }
     let x0 = sx.floor();
     let y0 = sy.floor();
-    RemapTap {
-        x0: x0 as i32,
-        y0: y0 as i32,
-        fx: (sx - x0) as f32,
-        fy: (sy - y0) as f32,
-    }
+    RemapTap { x0: x0 as i32, y0: y0 as i32, fx: (sx - x0) as f32, fy: (sy - y0) as f32 }
 }
 
 /// Bilinear interpolation with a black constant border, rounded to 8 bits per channel like `cv::remap`.
@@ -111,12 +100,7 @@ fn bilinear_rgb(frame: &RgbImage, tap: &RemapTap) -> [u8; 3] {
             [f32::from(p[0]), f32::from(p[1]), f32::from(p[2])]
         }
     };
-    let (a, b, c, d) = (
-        fetch(x0, y0),
-        fetch(x0 + 1, y0),
-        fetch(x0, y0 + 1),
-        fetch(x0 + 1, y0 + 1),
-    );
+    let (a, b, c, d) = (fetch(x0, y0), fetch(x0 + 1, y0), fetch(x0, y0 + 1), fetch(x0 + 1, y0 + 1));
     let (fx, fy) = (tap.fx, tap.fy);
     let mut out = [0u8; 3];
     for ch in 0..3 {
@@ -136,10 +120,17 @@ pub fn gray_of(rgb: [u8; 3]) -> u8 {
     ((r * R2Y + g * G2Y + b * B2Y + (1 << 13)) >> 14) as u8
 }
 
-/// The colour of the undistorted frame at one undistorted px position (for the few samples the lattice
-/// indexing needs; the bulk of the frame goes through [`RemapTable`]).
-pub fn sample_undistorted_rgb(frame: &RgbImage, camera: &FisheyeCamera, undistorted: Point2) -> [u8; 3] {
-    bilinear_rgb(frame, &tap_for(camera.distort_px(undistorted)))
+/// The colour of the undistorted frame at a position in its pixel-index coordinates (for the few samples the
+/// lattice indexing needs; the bulk of the frame goes through [`RemapTable`]).
+pub fn sample_undistorted_rgb(frame: &RgbImage, camera: &FisheyeCamera, undistorted_index: Point2) -> [u8; 3] {
+    bilinear_rgb(frame, &tap_for(camera.distort_px(undistorted_index)))
+}
+
+/// A position of the undistorted frame in pixel-index coordinates (as the published pipeline sees it) to raw px
+/// in our convention: through the same model as the remap, then half a pixel to the pixel-corner origin.
+pub fn index_to_raw_px(camera: &FisheyeCamera, undistorted_index: Point2) -> Point2 {
+    let raw_index = camera.distort_px(undistorted_index);
+    [raw_index[0] + 0.5, raw_index[1] + 0.5]
 }
 
 #[cfg(test)]
@@ -156,33 +147,25 @@ mod tests {
     }
 
     #[test]
-    fn remap_of_a_flat_frame_is_flat_inside_and_black_outside() {
+    fn remap_of_a_flat_frame_is_flat_where_it_sees_the_frame_and_black_beyond() {
         let camera = FisheyeCamera::paper(64, 48).unwrap();
         let frame = RgbImage::from_pixel(64, 48, image::Rgb([90, 90, 90]));
-        let table = RemapTable::new(
-            &camera,
-            RoiPx {
-                x: 16,
-                y: 12,
-                width: 32,
-                height: 24,
-            },
-        );
-        let gray = table.undistorted_gray(&frame);
-        assert!(gray.pixels().all(|p| p.0[0] == 90));
-        // Balance 1 puts the raw edge midpoints on the frame's edges and the rest of the raw border outside it,
-        // so the whole undistorted frame is covered; only points beyond the raw frame read the black border.
-        let whole = RemapTable::new(
-            &camera,
-            RoiPx {
-                x: 0,
-                y: 0,
-                width: 64,
-                height: 48,
-            },
-        )
-        .undistorted_gray(&frame);
-        assert!(whole.pixels().all(|p| p.0[0] == 90));
+        let roi = RoiPx { x: 0, y: 0, width: 64, height: 48 };
+        let gray = RemapTable::new(&camera, roi).undistorted_gray(&frame);
+        // Balance 1 keeps the farthest edge midpoints on the frame's edge; the others land inside, so parts of the
+        // undistorted frame look past the raw frame: OpenCV fills them from its black constant border.
+        let (mut inside, mut beyond) = (0, 0);
+        for (x, y, p) in gray.enumerate_pixels() {
+            let s = camera.distort_px([f64::from(x), f64::from(y)]);
+            if s[0] >= 0.0 && s[1] >= 0.0 && s[0] <= 63.0 && s[1] <= 47.0 {
+                assert_eq!(p.0[0], 90, "({x}, {y}) samples {s:?}");
+                inside += 1;
+            } else if s[0] <= -1.0 || s[1] <= -1.0 || s[0] >= 64.0 || s[1] >= 48.0 {
+                assert_eq!(p.0[0], 0, "({x}, {y}) samples {s:?}");
+                beyond += 1;
+            }
+        }
+        assert!(inside > 2500 && beyond > 0, "{inside} inside, {beyond} beyond");
         assert_eq!(sample_undistorted_rgb(&frame, &camera, [-40.0, 24.0]), [0, 0, 0]);
         assert_eq!(sample_undistorted_rgb(&frame, &camera, [32.0, 24.0]), [90, 90, 90]);
     }
