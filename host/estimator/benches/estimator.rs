@@ -1,1 +1,115 @@
-fn main() {}
+//! Speed per stage and per frame, fast and paper mode, on the real frames at full, 1/2 and 1/4 size.
+//! `cargo bench -p nusense-estimator` (add `-- --quick` for a short run). After criterion's own report it
+//! prints a table of ms per frame of both modes measured in the same run, with the paper/fast ratio.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use criterion::{black_box, Criterion};
+use image::{imageops, RgbImage};
+use nusense_estimator::contact::{divergence_centre, fit_affine_motion, FieldPoint};
+use nusense_estimator::registration::register;
+use nusense_estimator::shear::{gamma, ShearSampler};
+use nusense_estimator::{Estimator, Mode, SensorConfig};
+
+fn load(name: &str) -> RgbImage {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/real");
+    image::open(dir.join(name)).expect("the real frames are part of the shared data").to_rgb8()
+}
+
+fn sizes() -> Vec<(&'static str, RgbImage, RgbImage)> {
+    let (reference, touch) = (load("reference_fisheye.jpg"), load("touch_fisheye.jpg"));
+    let scaled = |image: &RgbImage, d: u32| {
+        imageops::resize(image, image.width() / d, image.height() / d, imageops::FilterType::Triangle)
+    };
+    vec![
+        ("2048x1536", reference.clone(), touch.clone()),
+        ("1024x768", scaled(&reference, 2), scaled(&touch, 2)),
+        ("512x384", scaled(&reference, 4), scaled(&touch, 4)),
+    ]
+}
+
+fn fast_stages(c: &mut Criterion, label: &str, reference: &RgbImage, touch: &RgbImage) {
+    let config = SensorConfig::default();
+    let mut estimator = Estimator::new(config.clone(), Mode::Fast, reference).expect("reference");
+    let lattice = estimator.detect(touch).expect("touch");
+    let registration = register(estimator.reference_lattice(), &lattice, config.thresholds.max_displacement_cells);
+    let sampler = ShearSampler::new(11, 15, &config.surface).expect("surface");
+    let mapping = estimator.mapping().clone();
+    let paper = |c: Option<[f64; 2]>| c.map(|p| mapping.to_paper(p)).unwrap_or([0.0, 0.0]);
+    let valid: Vec<bool> = registration.corners.iter().map(|c| c.valid).collect();
+    let reference_px: Vec<[f64; 2]> =
+        estimator.reference_lattice().corners.iter().map(|c| paper(c.undistorted_px)).collect();
+    let current_px: Vec<[f64; 2]> = lattice.corners.iter().map(|c| paper(c.undistorted_px)).collect();
+    let field: Vec<FieldPoint> = reference_px
+        .iter()
+        .zip(&current_px)
+        .map(|(r, c)| FieldPoint { position: *r, displacement: [c[0] - r[0], c[1] - r[1]] })
+        .collect();
+
+    let mut group = c.benchmark_group(format!("fast/{label}"));
+    group.bench_function("1 detect (track lattice)", |b| b.iter(|| estimator.detect(black_box(touch)).unwrap()));
+    group.bench_function("2 register", |b| {
+        b.iter(|| register(estimator.reference_lattice(), black_box(&lattice), config.thresholds.max_displacement_cells))
+    });
+    group.bench_function("3 surfaces + gamma", |b| {
+        b.iter(|| gamma(&sampler.sample(&reference_px, black_box(&current_px), &valid).unwrap(), 1.0 / 18000.0))
+    });
+    group.bench_function("4 contact (affine + centre)", |b| {
+        b.iter(|| {
+            let motion = fit_affine_motion(black_box(&field)).unwrap();
+            let residuals: Vec<[f64; 2]> = field.iter().map(|p| motion.residual(p)).collect();
+            divergence_centre(&field, &residuals)
+        })
+    });
+    group.bench_function("frame (estimate)", |b| b.iter(|| estimator.estimate(black_box(touch)).unwrap()));
+    group.finish();
+}
+
+fn paper_frame(c: &mut Criterion, label: &str, reference: &RgbImage, touch: &RgbImage) {
+    let Ok(mut estimator) = Estimator::new(SensorConfig::default(), Mode::Paper, reference) else {
+        eprintln!("paper mode unavailable at {label}");
+        return;
+    };
+    let mut group = c.benchmark_group(format!("paper/{label}"));
+    group.sample_size(10);
+    group.bench_function("frame (estimate)", |b| b.iter(|| estimator.estimate(black_box(touch))));
+    group.finish();
+}
+
+/// Mean ms per `estimate` over `repeats` frames (after one warm-up frame); `None` if the mode fails.
+fn ms_per_frame(mode: Mode, reference: &RgbImage, touch: &RgbImage, repeats: usize) -> Option<f64> {
+    let mut estimator = Estimator::new(SensorConfig::default(), mode, reference).ok()?;
+    estimator.estimate(touch).ok()?;
+    let started = Instant::now();
+    for _ in 0..repeats {
+        black_box(estimator.estimate(touch).ok()?);
+    }
+    Some(started.elapsed().as_secs_f64() * 1e3 / repeats as f64)
+}
+
+fn main() {
+    let mut c = Criterion::default()
+        .warm_up_time(Duration::from_millis(300))
+        .measurement_time(Duration::from_secs(2))
+        .configure_from_args();
+    let frames = sizes();
+    for (label, reference, touch) in &frames {
+        fast_stages(&mut c, label, reference, touch);
+        paper_frame(&mut c, label, reference, touch);
+    }
+    c.final_summary();
+
+    println!("\nms per frame (estimate only, no decoding), both modes in this run:");
+    println!("{:>10} {:>10} {:>10} {:>12}", "size", "fast", "paper", "paper/fast");
+    for (label, reference, touch) in &frames {
+        let fast = ms_per_frame(Mode::Fast, reference, touch, 200);
+        let paper = ms_per_frame(Mode::Paper, reference, touch, 3);
+        let show = |v: Option<f64>| v.map(|v| format!("{v:.3}")).unwrap_or_else(|| "n/a".into());
+        let ratio = match (fast, paper) {
+            (Some(f), Some(p)) if f > 0.0 => format!("{:.0}x", p / f),
+            _ => "n/a".into(),
+        };
+        println!("{label:>10} {:>10} {:>10} {ratio:>12}", show(fast), show(paper));
+    }
+}

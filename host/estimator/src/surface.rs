@@ -30,6 +30,8 @@ pub enum SurfaceError {
     OutOfDomain { u: f64, v: f64 },
 }
 
+const NEGLIGIBLE_WEIGHT: f64 = 1e-12;
+
 /// `rows x cols` control points, row-major, with a validity mask.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ControlNet {
@@ -253,7 +255,9 @@ impl BSplineSurface {
         for (a, &wu) in bu.weights.iter().enumerate() {
             for (b, &wv) in bv.weights.iter().enumerate() {
                 let w = wu * wv;
-                if w == 0.0 {
+                // Round-off leaves weights of 1e-17 where the basis is zero in exact arithmetic (at knots);
+                // such a point does not carry the sample.
+                if w.abs() < NEGLIGIBLE_WEIGHT {
                     continue;
                 }
                 let i = (bu.first + a) * self.net.cols + bv.first + b;
