@@ -9,10 +9,21 @@ pub struct EdgeEstimate {
     /// Degrees from +x towards +y on the pad, in [0, 180); `None` when the contact is round.
     pub angle_deg: Option<f64>,
     pub confidence: f64,
+    /// Centre and reach (mm) of the samples the direction came from.
+    pub region_centre_mm: Point2,
+    pub region_radius_mm: f64,
 }
 
 impl EdgeEstimate {
-    pub const NONE: Self = Self { angle_deg: None, confidence: 0.0 };
+    pub const NONE: Self = Self { angle_deg: None, confidence: 0.0, region_centre_mm: [0.0, 0.0], region_radius_mm: 0.0 };
+
+    /// Scales the confidence by the fraction of the region that was actually seen; a partly seen region can
+    /// look elongated only because of its holes, so below `min_coverage` no direction is claimed.
+    pub fn with_coverage(self, coverage: f64, min_coverage: f64, min_confidence: f64) -> Self {
+        let confidence = self.confidence * coverage.clamp(0.0, 1.0);
+        let keep = coverage >= min_coverage && confidence >= min_confidence;
+        Self { angle_deg: self.angle_deg.filter(|_| keep), confidence, ..self }
+    }
 }
 
 /// `samples`: (position on the pad in mm, shear magnitude). Samples of at least `fraction` of the peak shear
@@ -44,14 +55,16 @@ pub fn edge_direction(samples: &[(Point2, f64)], fraction: f64, min_confidence: 
         return EdgeEstimate::NONE;
     }
     let confidence = (1.0 - minor.max(0.0) / major).clamp(0.0, 1.0);
+    let region_radius_mm = chosen.iter().map(|s| (s.0[0] - mx).hypot(s.0[1] - my)).fold(0.0, f64::max);
+    let region = EdgeEstimate { angle_deg: None, confidence, region_centre_mm: [mx, my], region_radius_mm };
     if confidence < min_confidence {
-        return EdgeEstimate { angle_deg: None, confidence };
+        return region;
     }
     let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
     let degrees = angle.to_degrees().rem_euclid(180.0);
     // rem_euclid can return exactly 180.0 for tiny negative angles.
     let degrees = if degrees >= 180.0 { 0.0 } else { degrees };
-    EdgeEstimate { angle_deg: Some(degrees), confidence }
+    EdgeEstimate { angle_deg: Some(degrees), ..region }
 }
 
 #[cfg(test)]

@@ -118,6 +118,9 @@ pub struct Estimator {
     sampler: ShearSampler,
 }
 
+/// An edge direction needs at least this fraction of the corners around the sheared region.
+const MIN_EDGE_COVERAGE: f64 = 0.9;
+
 /// Fewer valid corners than this fraction of the lattice is not a measurement.
 const MIN_VALID_FRACTION: f64 = 0.25;
 
@@ -277,11 +280,10 @@ impl Estimator {
                     Some((mm, local))
                 })
                 .collect();
-            edge = edge_direction(
-                &sheared,
-                self.config.thresholds.edge_sample_fraction,
-                self.config.thresholds.edge_min_confidence,
-            );
+            let thresholds = &self.config.thresholds;
+            edge = edge_direction(&sheared, thresholds.edge_sample_fraction, thresholds.edge_min_confidence);
+            let coverage = self.coverage(&registration.corners, edge.region_centre_mm, edge.region_radius_mm);
+            edge = edge.with_coverage(coverage, MIN_EDGE_COVERAGE, thresholds.edge_min_confidence);
         }
         let force = force(&self.config.calibration, gamma, contact);
         let shear_field = registration
@@ -322,6 +324,26 @@ impl Estimator {
             return Err(EstimateError::NoPattern { reason: "the measurement is not finite (degenerate lattice)".into() });
         }
         Ok(reading)
+    }
+
+    /// Fraction of the corners within `radius_mm` (plus one cell) of `centre_mm` that are valid, judged on the
+    /// pad's nominal corner positions so that missing corners count too.
+    fn coverage(&self, corners: &[crate::registration::RegisteredCorner], centre_mm: Point2, radius_mm: f64) -> f64 {
+        let pad = &self.config.pad;
+        let reach = radius_mm + pad.pitch_x_mm().max(pad.pitch_y_mm());
+        let (mut seen, mut all) = (0usize, 0usize);
+        for corner in corners {
+            let at = pad.corner_mm(corner.index);
+            if (at[0] - centre_mm[0]).hypot(at[1] - centre_mm[1]) <= reach {
+                all += 1;
+                seen += usize::from(corner.valid);
+            }
+        }
+        if all == 0 {
+            0.0
+        } else {
+            seen as f64 / all as f64
+        }
     }
 
     /// Length in mm of a shift `d` (paper px) at `at` (paper px).

@@ -64,3 +64,17 @@ fn the_rest_frame_against_itself_is_no_contact() {
     assert_eq!(reading.contact_px, None);
     assert_eq!(reading.edge_angle_deg, None);
 }
+
+#[test]
+fn paper_mode_finds_the_same_contact_with_the_published_pipeline() {
+    let mut estimator = Estimator::new(SensorConfig::default(), Mode::Paper, reference()).unwrap();
+    let rest = estimator.reference_lattice().corners_found();
+    let reading = estimator.estimate(touch()).unwrap();
+    // The published method misses squares and corners on this pair; whatever it misses is masked and counted.
+    assert!(rest <= 165 && reading.points_detected <= 165 && reading.points_valid <= reading.points_detected);
+    assert!(reading.samples_used <= reading.samples_total);
+    assert!(reading.contact);
+    let [x, y] = reading.contact_undistorted_px.unwrap();
+    assert!((x - 1000.0).abs() <= 40.0 && (y - 750.0).abs() <= 40.0, "contact at ({x}, {y}) undistorted px");
+    assert!(reading.gamma > 0.0);
+}
