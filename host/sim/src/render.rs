@@ -610,6 +610,7 @@ fn pixel_light(model: &SensorModel, geometry: &[PixelGeometry]) -> Vec<PixelLigh
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mechanics::LoadedPad;
     use crate::scene::Contact;
 
     fn small() -> Renderer {
@@ -703,6 +704,135 @@ mod tests {
         let changed_far = count_changed(&rest, &pressed, [20.0, 20.0], 15.0);
         assert!(changed_near > 100, "{changed_near}");
         assert_eq!(changed_far, 0);
+    }
+
+    #[test]
+    fn yellow_squares_move_as_the_mechanics_says_to_a_fraction_of_a_pixel() {
+        // The renderer's inverse warp, anti-aliasing and the forward mechanics must agree: each yellow square's
+        // intensity centroid near a press moves like the area centroid of the square pushed through the exact
+        // displacement field and the camera.
+        // A plain pad: a blotchy one moves its blotches with the material, which weights the centroid unevenly.
+        let mut model = SensorModel::real(640, 480);
+        model.noise_sigma = 0.0;
+        model.texture_amplitude = 0.0;
+        let r = Renderer::new(model).unwrap();
+        let contact = Contact::sphere(5.0, [1.0, -0.5], 8.0);
+        let loaded = LoadedPad::new(std::slice::from_ref(&contact), &r.model().material);
+        let (rest, _) = r.render(&Scene::rest(), [100.0; 4], 0).unwrap();
+        let (pressed, _) = r.render(&Scene::with_contact(contact), [100.0; 4], 0).unwrap();
+        let pad = r.model().pad;
+        let half = [
+            pad.pitch_x_mm() * r.model().yellow_fill / 2.0,
+            pad.pitch_y_mm() * r.model().yellow_fill / 2.0,
+        ];
+        let mut worst: f64 = 0.0;
+        let mut largest_shift: f64 = 0.0;
+        for row in 3..9u16 {
+            for col in 4..12u16 {
+                let cell = nusense_geometry::SquareIndex { row, col };
+                if !pad.is_yellow(cell) {
+                    continue;
+                }
+                let centre = pad.square_centre_mm(cell);
+                let (before, outline_before) = projected_square(&r, centre, half, |_| [0.0; 3]);
+                let (after, outline_after) = projected_square(&r, centre, half, |p| loaded.displacement_mm(p));
+                let truth_shift = [after[0] - before[0], after[1] - before[1]];
+                let (c0, c1) = (
+                    yellow_centroid(&rest, &outline_before),
+                    yellow_centroid(&pressed, &outline_after),
+                );
+                let image_shift = [c1[0] - c0[0], c1[1] - c0[1]];
+                worst = worst.max((image_shift[0] - truth_shift[0]).hypot(image_shift[1] - truth_shift[1]));
+                largest_shift = largest_shift.max(truth_shift[0].hypot(truth_shift[1]));
+            }
+        }
+        println!("largest square shift {largest_shift:.2} px, worst centroid disagreement {worst:.3} px");
+        assert!(largest_shift > 5.0, "{largest_shift}");
+        // Measured 0.10 px at 640 x 480 with shifts up to 6.2 px.
+        assert!(worst < 0.15, "{worst}");
+    }
+
+    /// Area centroid (raw px) of the square `centre +- half` (pad mm) after displacing it by `u`, from a fine
+    /// grid of small quads; and its four corners pushed 15 % away from that centroid (a window that holds the
+    /// blurred square and none of its neighbours).
+    fn projected_square(
+        r: &Renderer,
+        centre: Point2,
+        half: [f64; 2],
+        u: impl Fn(Point2) -> [f64; 3],
+    ) -> (Point2, [Point2; 4]) {
+        const N: usize = 16;
+        let node = |i: usize, j: usize| {
+            let p = [
+                centre[0] - half[0] + 2.0 * half[0] * i as f64 / N as f64,
+                centre[1] - half[1] + 2.0 * half[1] * j as f64 / N as f64,
+            ];
+            let d = u(p);
+            r.pad_mm_to_raw_px([p[0] + d[0], p[1] + d[1]]).unwrap()
+        };
+        let nodes: Vec<Vec<Point2>> = (0..=N).map(|j| (0..=N).map(|i| node(i, j)).collect()).collect();
+        let (mut area, mut cx, mut cy) = (0.0, 0.0, 0.0);
+        for j in 0..N {
+            for i in 0..N {
+                let quad = [nodes[j][i], nodes[j][i + 1], nodes[j + 1][i + 1], nodes[j + 1][i]];
+                // Shoelace area and centroid of the small quad.
+                for k in 0..4 {
+                    let (a, b) = (quad[k], quad[(k + 1) % 4]);
+                    let cross = a[0] * b[1] - b[0] * a[1];
+                    area += cross / 2.0;
+                    cx += (a[0] + b[0]) * cross / 6.0;
+                    cy += (a[1] + b[1]) * cross / 6.0;
+                }
+            }
+        }
+        let centroid = [cx / area, cy / area];
+        let grow = |p: Point2| {
+            [
+                centroid[0] + 1.15 * (p[0] - centroid[0]),
+                centroid[1] + 1.15 * (p[1] - centroid[1]),
+            ]
+        };
+        (
+            centroid,
+            [
+                grow(nodes[0][0]),
+                grow(nodes[0][N]),
+                grow(nodes[N][N]),
+                grow(nodes[N][0]),
+            ],
+        )
+    }
+
+    /// Centroid of yellowness (green minus blue; zero on the red cells and the lines) inside a convex outline.
+    fn yellow_centroid(img: &RgbImage, outline: &[Point2; 4]) -> [f64; 2] {
+        let inside = |x: f64, y: f64| {
+            let side = |a: Point2, b: Point2| (b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0]);
+            let signs: Vec<f64> = (0..4).map(|k| side(outline[k], outline[(k + 1) % 4])).collect();
+            signs.iter().all(|s| *s >= 0.0) || signs.iter().all(|s| *s <= 0.0)
+        };
+        let min = [
+            outline.iter().map(|p| p[0]).fold(f64::MAX, f64::min),
+            outline.iter().map(|p| p[1]).fold(f64::MAX, f64::min),
+        ];
+        let max = [
+            outline.iter().map(|p| p[0]).fold(f64::MIN, f64::max),
+            outline.iter().map(|p| p[1]).fold(f64::MIN, f64::max),
+        ];
+        let (mut sx, mut sy, mut sw) = (0.0, 0.0, 0.0);
+        for y in (min[1] as u32)..=(max[1] as u32) {
+            for x in (min[0] as u32)..=(max[0] as u32) {
+                let (px, py) = (f64::from(x) + 0.5, f64::from(y) + 0.5);
+                if !inside(px, py) {
+                    continue;
+                }
+                let p = img.get_pixel(x, y);
+                let w = (f64::from(p[1]) - f64::from(p[2])).max(0.0);
+                sx += w * px;
+                sy += w * py;
+                sw += w;
+            }
+        }
+        [sx / sw, sy / sw]
     }
 
     fn count_changed(a: &RgbImage, b: &RgbImage, centre: [f64; 2], radius: f64) -> usize {
