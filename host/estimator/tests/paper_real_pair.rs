@@ -168,3 +168,36 @@ fn bad_frames_give_typed_errors_not_panics() {
     assert!(matches!(PaperDetector::new(&config, 8, 8), Err(EstimateError::FrameTooSmall { .. })));
     assert!(matches!(PaperDetector::new(&config, 0, 0), Err(EstimateError::FrameTooSmall { .. })));
 }
+
+#[test]
+fn paper_mode_estimator_reads_the_touch_with_masked_gaps() {
+    // The whole estimator on paper-mode points: the published method's gaps are masked, not padded, and the
+    // reading still lands on the contact (the authors' heat map: about (960, 768) undistorted px).
+    let (reference, touch) = frames();
+    let mut estimator =
+        nusense_estimator::Estimator::new(SensorConfig::default(), nusense_estimator::Mode::Paper, reference).unwrap();
+    let rest = estimator.estimate(reference).unwrap();
+    let reading = estimator.estimate(touch).unwrap();
+    println!(
+        "paper mode reading: contact {} at {:?} undistorted px, gamma {:.4}, force {:.2} N, {} of {} points, {} valid, \
+         {} of {} samples (rest frame against itself: gamma {:.4}, contact {})",
+        reading.contact,
+        reading.contact_undistorted_px,
+        reading.gamma,
+        reading.force_n,
+        reading.points_detected,
+        reading.points_expected,
+        reading.points_valid,
+        reading.samples_used,
+        reading.samples_total,
+        rest.gamma,
+        rest.contact
+    );
+    assert_eq!(reading.points_expected, 165);
+    assert!(reading.points_detected < 165 && reading.points_valid <= reading.points_detected);
+    assert!(reading.samples_used < reading.samples_total, "samples resting on missing corners must be left out");
+    assert!(!rest.contact && rest.gamma.abs() < 1e-9);
+    assert!(reading.contact && reading.gamma > 0.0);
+    let c = reading.contact_undistorted_px.expect("a contact has a location");
+    assert!((c[0] - 1000.0).abs() <= 40.0 && (c[1] - 750.0).abs() <= 40.0, "contact at {c:?}");
+}
