@@ -25,6 +25,8 @@ use crate::device::LinkOptions;
 #[derive(Clone, Debug)]
 pub struct HilOptions {
     pub link: LinkOptions,
+    /// How long the first connection keeps retrying (a board still booting, a port QEMU has not polled yet).
+    pub connect_timeout: Duration,
     /// LED currents the ramp and brightness checks step through, in mA.
     pub setpoints_ma: Vec<u16>,
     /// Allowed deviation of the settled measured current from its setpoint (0.05 = +/-5 %).
@@ -57,6 +59,7 @@ impl Default for HilOptions {
     fn default() -> Self {
         Self {
             link: LinkOptions::default(),
+            connect_timeout: Duration::from_secs(5),
             setpoints_ma: vec![25, 50, 75, 100],
             current_tolerance: 0.05,
             settle_timeout: Duration::from_secs(3),
