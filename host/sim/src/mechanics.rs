@@ -49,7 +49,8 @@ impl HalfSpace {
         let inv_rho = 1.0 / rho;
         let inv_rho3 = inv_rho / rho2;
         let c = 1.0 - 2.0 * self.poisson_ratio;
-        let inv_rz = 1.0 / (rho + z);
+        // The compressibility terms vanish for the default nu = 0.5; skipping their division is worth it in a mesh.
+        let inv_rz = if c == 0.0 { 0.0 } else { 1.0 / (rho + z) };
         let k = 1.0 / (4.0 * std::f64::consts::PI * self.shear_modulus);
         let [qx, qy, p] = force_n;
 
@@ -97,6 +98,9 @@ pub struct ContactLoad {
     /// first moment, used beyond [`ContactLoad::near_distance_mm`].
     pub coarse: Vec<PointForce>,
     pub near_distance_mm: f64,
+    /// Summed over cells as wide as the whole contact, used beyond [`ContactLoad::far_distance_mm`].
+    pub far: Vec<PointForce>,
+    pub far_distance_mm: f64,
 }
 
 /// Hertz contact radius of a rigid sphere of radius `radius_mm` pressed with `force_n`; capped at the sphere's
@@ -185,6 +189,8 @@ pub fn discretise(contact: &Contact, material: &Material) -> ContactLoad {
             fine: Vec::new(),
             coarse: Vec::new(),
             near_distance_mm: 0.0,
+            far: Vec::new(),
+            far_distance_mm: 0.0,
         };
     }
     let polar_moment: f64 = weighted
@@ -212,13 +218,17 @@ pub fn discretise(contact: &Contact, material: &Material) -> ContactLoad {
         })
         .collect();
     let coarse = group(&fine, centre, 1.5 * depth);
+    let far = group(&fine, centre, 2.0 * extent_mm + 6.0 * depth);
+    let near_distance_mm = extent_mm + 4.0 * depth;
     ContactLoad {
         centre_mm: centre,
         extent_mm,
         contact_radius_mm,
         fine,
         coarse,
-        near_distance_mm: extent_mm + 4.0 * depth,
+        near_distance_mm,
+        far,
+        far_distance_mm: 2.0 * near_distance_mm,
     }
 }
 
@@ -276,8 +286,10 @@ impl LoadedPad {
     pub fn displacement_mm(&self, at_mm: [f64; 2]) -> [f64; 3] {
         let mut u = [0.0; 3];
         for load in &self.loads {
-            let distance = (at_mm[0] - load.centre_mm[0]).hypot(at_mm[1] - load.centre_mm[1]);
-            let forces = if distance > load.near_distance_mm {
+            let distance2 = (at_mm[0] - load.centre_mm[0]).powi(2) + (at_mm[1] - load.centre_mm[1]).powi(2);
+            let forces = if distance2 > load.far_distance_mm.powi(2) {
+                &load.far
+            } else if distance2 > load.near_distance_mm.powi(2) {
                 &load.coarse
             } else {
                 &load.fine
@@ -460,7 +472,7 @@ mod tests {
         contact.tangential_force_n = [0.7, -0.2];
         contact.torsion_nmm = 3.0;
         let load = discretise(&contact, &material);
-        for forces in [&load.fine, &load.coarse] {
+        for forces in [&load.fine, &load.coarse, &load.far] {
             let sum = forces.iter().fold([0.0; 3], |acc, f| {
                 [acc[0] + f.force_n[0], acc[1] + f.force_n[1], acc[2] + f.force_n[2]]
             });
@@ -499,6 +511,7 @@ mod tests {
                 worst = worst.max((a[0] - b[0]).hypot(a[1] - b[1]));
             }
         }
+        println!("grouping error: worst {worst:.5} mm against a peak of {peak:.4} mm");
         assert!(worst < 0.005 * peak, "worst {worst} mm against a peak of {peak} mm");
     }
 

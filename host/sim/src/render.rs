@@ -139,6 +139,7 @@ struct PatternLayout {
     half_height: f32,
     rim: f32,
     pitch: [f32; 2],
+    inv_pitch: [f32; 2],
     /// Gap between a cell's coloured square and the cell's edge (half the line between cells).
     inset: [f32; 2],
     rows: i32,
@@ -156,6 +157,7 @@ impl PatternLayout {
             half_height: (pad.height_mm / 2.0) as f32,
             rim: model.rim_width_mm as f32,
             pitch,
+            inv_pitch: [1.0 / pitch[0], 1.0 / pitch[1]],
             inset: [gap * pitch[0], gap * pitch[1]],
             rows: i32::from(pad.rows),
             cols: i32::from(pad.cols),
@@ -179,8 +181,8 @@ impl PatternLayout {
         }
         // Local coordinates from the pattern's top-left corner; a footprint touches at most a few cells.
         let (x, y) = (p[0] + hw, p[1] + hh);
-        let col_range = cell_range(x, half[0], self.pitch[0], self.cols);
-        let row_range = cell_range(y, half[1], self.pitch[1], self.rows);
+        let col_range = cell_range(x, half[0], self.inv_pitch[0], self.cols);
+        let row_range = cell_range(y, half[1], self.inv_pitch[1], self.rows);
         let (mut yellow, mut red) = (0.0, 0.0);
         for row in row_range.0..=row_range.1 {
             let y0 = row as f32 * self.pitch[1] + self.inset[1];
@@ -210,9 +212,10 @@ fn floor_to_i32(v: f32) -> i32 {
     truncated - i32::from(v < truncated as f32)
 }
 
-fn cell_range(x: f32, h: f32, pitch: f32, count: i32) -> (i32, i32) {
-    let first = floor_to_i32((x - h) / pitch);
-    let last = floor_to_i32((x + h) / pitch);
+#[inline]
+fn cell_range(x: f32, h: f32, inv_pitch: f32, count: i32) -> (i32, i32) {
+    let first = floor_to_i32((x - h) * inv_pitch);
+    let last = floor_to_i32((x + h) * inv_pitch);
     let first = first.clamp(0, count - 1);
     (first, last.clamp(first, (first + 3).min(count - 1)))
 }
@@ -349,50 +352,59 @@ impl Renderer {
             .collect();
         let noise_scale = self.model.noise_sigma * 6f32.sqrt() / 255.0;
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        // The mesh reaches MESH_MARGIN_MM beyond the rim, wider than any pixel footprint.
+        let surround_beyond = [self.mesh_max[0] as f32, self.mesh_max[1] as f32];
 
         let mut image = RgbImage::new(self.model.width, self.model.height);
         for ((out, g), light) in image.as_mut().chunks_exact_mut(3).zip(&self.geometry).zip(&self.light) {
             let q = g.q;
-            let p = match &inverse {
-                Some(mesh) => {
-                    let v = mesh.at(q);
-                    [q[0] + v[0], q[1] + v[1]]
-                }
-                None => q,
-            };
-            let mut half = g.half;
-            let mut yellow_kept = 1.0;
-            for &(missing, centre, radius, smear) in &damage {
-                let distance = (p[0] - centre[0]).hypot(p[1] - centre[1]);
-                let inside = disc_coverage(distance, radius, half[0].max(half[1]));
-                if inside > 0.0 {
-                    if missing {
-                        yellow_kept *= 1.0 - inside;
-                    } else {
-                        half = [half[0] + smear * inside, half[1] + smear * inside];
-                    }
-                }
-            }
-            let (rim, pattern, yellow, red) = self.layout.coverage(p, half);
-            // Where the yellow ink is gone, the red base (the lines' colour) shows.
-            let yellow = yellow * yellow_kept;
-            let shade = if rim > 0.0 {
-                1.0 + texture_amplitude * self.texture.at(p)
-            } else {
-                1.0
-            };
             let brightness = gains[0] * light.side[0]
                 + gains[1] * light.side[1]
                 + gains[2] * light.side[2]
                 + gains[3] * light.side[3]
                 + light.ambient;
-            let mut rgb: [f32; 3] = std::array::from_fn(|k| {
-                let albedo = colours.surround[k] * (1.0 - rim)
-                    + colours.rim[k] * (rim - pattern)
-                    + (colours.lines[k] * (pattern - yellow - red) + colours.red[k] * red + colours.yellow[k] * yellow)
-                        * shade;
-                albedo * brightness
-            });
+            // Beyond the mesh nothing moves and only the surround can be seen: skip the pattern.
+            let albedo = if q[0].abs() > surround_beyond[0] || q[1].abs() > surround_beyond[1] {
+                colours.surround
+            } else {
+                let p = match &inverse {
+                    Some(mesh) => {
+                        let v = mesh.at(q);
+                        [q[0] + v[0], q[1] + v[1]]
+                    }
+                    None => q,
+                };
+                let mut half = g.half;
+                let mut yellow_kept = 1.0;
+                for &(missing, centre, radius, smear) in &damage {
+                    let distance = (p[0] - centre[0]).hypot(p[1] - centre[1]);
+                    let inside = disc_coverage(distance, radius, half[0].max(half[1]));
+                    if inside > 0.0 {
+                        if missing {
+                            yellow_kept *= 1.0 - inside;
+                        } else {
+                            half = [half[0] + smear * inside, half[1] + smear * inside];
+                        }
+                    }
+                }
+                let (rim, pattern, yellow, red) = self.layout.coverage(p, half);
+                // Where the yellow ink is gone, the red base (the lines' colour) shows.
+                let yellow = yellow * yellow_kept;
+                let shade = if rim > 0.0 {
+                    1.0 + texture_amplitude * self.texture.at(p)
+                } else {
+                    1.0
+                };
+                std::array::from_fn(|k| {
+                    colours.surround[k] * (1.0 - rim)
+                        + colours.rim[k] * (rim - pattern)
+                        + (colours.lines[k] * (pattern - yellow - red)
+                            + colours.red[k] * red
+                            + colours.yellow[k] * yellow)
+                            * shade
+                })
+            };
+            let mut rgb: [f32; 3] = albedo.map(|a| a * brightness);
             for &(centre, radius, colour) in &occlusions {
                 let distance = (q[0] - centre[0]).hypot(q[1] - centre[1]);
                 let cover = disc_coverage(distance, radius, g.half[0].max(g.half[1]));
