@@ -34,13 +34,15 @@ fn fast_stages(c: &mut Criterion, label: &str, reference: &RgbImage, touch: &Rgb
     let mut estimator = Estimator::new(config.clone(), Mode::Fast, reference).expect("reference");
     let lattice = estimator.detect(touch).expect("touch");
     let registration = register(estimator.reference_lattice(), &lattice, config.thresholds.max_displacement_cells);
-    let sampler = ShearSampler::new(11, 15, &config.surface).expect("surface");
     let mapping = estimator.mapping().clone();
     let paper = |c: Option<[f64; 2]>| c.map(|p| mapping.to_paper(p)).unwrap_or([0.0, 0.0]);
     let valid: Vec<bool> = registration.corners.iter().map(|c| c.valid).collect();
     let reference_px: Vec<[f64; 2]> =
         estimator.reference_lattice().corners.iter().map(|c| paper(c.undistorted_px)).collect();
     let current_px: Vec<[f64; 2]> = lattice.corners.iter().map(|c| paper(c.undistorted_px)).collect();
+    let reference_valid: Vec<bool> =
+        estimator.reference_lattice().corners.iter().map(|c| c.undistorted_px.is_some()).collect();
+    let sampler = ShearSampler::new(11, 15, &config.surface, &reference_px, &reference_valid).expect("surface");
     let field: Vec<FieldPoint> = reference_px
         .iter()
         .zip(&current_px)
@@ -52,8 +54,8 @@ fn fast_stages(c: &mut Criterion, label: &str, reference: &RgbImage, touch: &Rgb
     group.bench_function("2 register", |b| {
         b.iter(|| register(estimator.reference_lattice(), black_box(&lattice), config.thresholds.max_displacement_cells))
     });
-    group.bench_function("3 surfaces + gamma", |b| {
-        b.iter(|| gamma(&sampler.sample(&reference_px, black_box(&current_px), &valid).unwrap(), 1.0 / 18000.0))
+    group.bench_function("3 surface + gamma", |b| {
+        b.iter(|| gamma(&sampler.sample(black_box(&current_px), &valid).unwrap(), 1.0 / 18000.0))
     });
     group.bench_function("4 contact (affine + centre)", |b| {
         b.iter(|| {
@@ -77,6 +79,22 @@ fn paper_frame(c: &mut Criterion, label: &str, reference: &RgbImage, touch: &Rgb
     group.finish();
 }
 
+/// The published pipeline's stages (paper mode), each on its own input from the stage before.
+fn paper_stages(c: &mut Criterion, label: &str, touch: &RgbImage) {
+    use nusense_estimator::paper::PaperDetector;
+    let Ok(detector) = PaperDetector::new(&SensorConfig::default(), touch.width(), touch.height()) else { return };
+    let Ok(gray) = detector.undistorted_roi_gray(touch) else { return };
+    let edges = detector.edge_map(&gray);
+    let quads = detector.quads(&edges);
+    let mut group = c.benchmark_group(format!("paper/{label}"));
+    group.sample_size(10);
+    group.bench_function("1 remap + grey", |b| b.iter(|| detector.undistorted_roi_gray(black_box(touch))));
+    group.bench_function("2 bilateral + Sobel + closing", |b| b.iter(|| detector.edge_map(black_box(&gray))));
+    group.bench_function("3 contours + quads", |b| b.iter(|| detector.quads(black_box(&edges))));
+    group.bench_function("4 pairing + lattice indices", |b| b.iter(|| detector.index(touch, black_box(&quads))));
+    group.finish();
+}
+
 /// Mean ms per `estimate` over `repeats` frames (after one warm-up frame); `None` if the mode fails.
 fn ms_per_frame(mode: Mode, reference: &RgbImage, touch: &RgbImage, repeats: usize) -> Option<f64> {
     let mut estimator = Estimator::new(SensorConfig::default(), mode, reference).ok()?;
@@ -97,6 +115,7 @@ fn main() {
     for (label, reference, touch) in &frames {
         fast_stages(&mut c, label, reference, touch);
         paper_frame(&mut c, label, reference, touch);
+        paper_stages(&mut c, label, touch);
     }
     c.final_summary();
 
