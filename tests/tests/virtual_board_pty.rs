@@ -100,6 +100,11 @@ fn telemetry_shows_the_regulator_converging_near_the_setpoint() {
         "converged to 100 mA +/- 2 % (5 frames in a row) {:?} after SetLed",
         asked.elapsed()
     );
+    let (steps_before, since) = (board.control_steps(), Instant::now());
+    std::thread::sleep(Duration::from_millis(500));
+    let rate = (board.control_steps() - steps_before) as f64 / since.elapsed().as_secs_f64();
+    println!("virtual board control loop: {rate:.0} steps/s (nominal 1000)");
+    assert!(rate > 0.0);
     let telemetry = telemetry_until(&mut link, Duration::from_secs(1), |_| true);
     assert!(telemetry
         .channels
