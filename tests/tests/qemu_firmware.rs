@@ -182,3 +182,24 @@ fn firmware_under_qemu_survives_garbage_and_counts_it() {
     link.ping(7).expect("the link still works after the noise");
     assert!(board.is_running());
 }
+
+#[test]
+fn firmware_under_qemu_restores_the_saved_config_after_reset() {
+    let board = start_board();
+    let mut link = BoardLink::open(board.pty(), options()).expect("handshake");
+    link.set_ramp(20).unwrap();
+    link.set_led(Channel::One(Side::Right), 80, true).unwrap();
+    link.save_config()
+        .expect("SaveConfig is acknowledged once stored");
+    link.set_led(Channel::One(Side::Right), 40, true).unwrap();
+    link.reset()
+        .expect("Reset is acknowledged before the reboot");
+    drop(link);
+    std::thread::sleep(Duration::from_millis(500));
+    let mut link = BoardLink::open(board.pty(), options()).expect("handshake after the reset");
+    let status = link.status().unwrap();
+    let right = status.channels[Side::Right.index()];
+    // 80, not the unsaved 40: the board rebooted and restored what SaveConfig stored.
+    assert_eq!((right.setpoint_ma, right.enabled), (80, true), "{right:?}");
+    assert_eq!(status.ramp_ms, 20);
+}
