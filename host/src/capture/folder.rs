@@ -99,3 +99,35 @@ impl FrameSource for ImageFolder {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plays_images_in_name_order_then_ends_or_loops() {
+        let dir = tempfile::tempdir().unwrap();
+        for (name, shade) in [("b.png", 20u8), ("a.png", 10), ("c.jpg", 200)] {
+            image::RgbImage::from_pixel(8, 6, image::Rgb([shade; 3])).save(dir.path().join(name)).unwrap();
+        }
+        std::fs::write(dir.path().join("notes.txt"), "not a frame").unwrap();
+        let mut folder = ImageFolder::open(dir.path(), 30.0, false).unwrap().unpaced();
+        assert_eq!(folder.len(), 3);
+        assert_eq!((folder.info().width, folder.info().height), (8, 6));
+        let shades: Vec<u8> = (0..3).map(|_| folder.next_frame().unwrap().image.get_pixel(0, 0)[0]).collect();
+        assert_eq!(&shades[..2], &[10, 20]);
+        assert!(shades[2] > 150, "JPEG frame decoded: {shades:?}");
+        assert!(matches!(folder.next_frame(), Err(CaptureError::EndOfStream)));
+
+        let mut looping = ImageFolder::open(dir.path(), 30.0, true).unwrap().unpaced();
+        for _ in 0..4 {
+            looping.next_frame().unwrap();
+        }
+    }
+
+    #[test]
+    fn an_empty_folder_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        assert!(matches!(ImageFolder::open(dir.path(), 30.0, false), Err(CaptureError::Empty(_))));
+    }
+}

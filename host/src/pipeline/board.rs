@@ -7,8 +7,9 @@ use std::sync::mpsc::Receiver;
 use nusense_protocol::{Side, CHANNEL_COUNT};
 use serde::Serialize;
 
-/// Highest LED current the daemon will ask for, per channel (the LED strings' rating).
-pub const LED_LIMIT_MA: u16 = 120;
+/// Highest LED current the daemon will ask for, per channel: the board's own hard limit, so a request the
+/// board would clamp is refused with a message instead.
+pub const LED_LIMIT_MA: u16 = nusense_firmware_core::limits::MAX_CURRENT_MA;
 
 /// LED state attached to each reading; per channel in Side order: Top, Right, Bottom, Left.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]

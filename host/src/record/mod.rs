@@ -66,3 +66,47 @@ const TELEMETRY_SCHEMA: &str = r#"{
     "telemetry": {"type": "object"}
   }
 }"#;
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::*;
+
+    #[test]
+    fn frames_readings_and_telemetry_round_trip_with_their_schemas() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("roundtrip.mcap");
+        let recorder = Recorder::create(&path, RecorderOptions::default()).unwrap();
+        let image = Arc::new(image::RgbImage::from_fn(32, 24, |x, y| image::Rgb([(x * 8) as u8, (y * 10) as u8, 128])));
+        for frame_id in 0..3u64 {
+            let time_us = 1_700_000_000_000_000 + frame_id * 33_333;
+            recorder.record(RecordItem::Frame { frame_id, capture_time_us: time_us, image: image.clone(), jpeg: None });
+            recorder.record(RecordItem::Reading { frame_id, time_us, json: format!("{{\"frame_id\":{frame_id}}}").into() });
+        }
+        recorder.record(RecordItem::Telemetry { time_us: 1_700_000_000_000_000, json: "{\"telemetry\":{}}".into() });
+        let summary = recorder.finish().unwrap();
+        assert_eq!((summary.frames, summary.readings, summary.telemetry, summary.dropped), (3, 3, 1, 0));
+
+        let recording = read_recording(&path).unwrap();
+        assert!(!recording.truncated, "{:?}", recording.stopped_by);
+        let frames = recording.frames();
+        assert_eq!(frames.iter().map(|f| f.frame_id).collect::<Vec<_>>(), vec![0, 1, 2]);
+        assert_eq!(frames[1].capture_time_us, 1_700_000_000_033_333);
+        let decoded = image::load_from_memory(&frames[0].jpeg).unwrap();
+        assert_eq!((decoded.width(), decoded.height()), (32, 24));
+        let first_frame = recording.on_topic(FRAME_TOPIC).next().unwrap();
+        assert_eq!(first_frame.schema_name.as_deref(), Some("foxglove.CompressedImage"));
+        assert_eq!(recording.on_topic(READING_TOPIC).count(), 3);
+        assert_eq!(recording.on_topic(TELEMETRY_TOPIC).count(), 1);
+    }
+
+    #[test]
+    fn a_file_that_is_not_mcap_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("not.mcap");
+        std::fs::write(&path, b"hello, not an mcap file").unwrap();
+        assert!(matches!(read_recording(&path), Err(RecordError::Empty { .. })));
+        assert!(matches!(read_recording(&dir.path().join("missing.mcap")), Err(RecordError::Open { .. })));
+    }
+}
