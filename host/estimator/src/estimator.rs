@@ -150,15 +150,18 @@ impl Estimator {
         if reference.corners_found() < needed {
             return Err(EstimateError::TooFewPoints { found: reference.corners_found(), needed });
         }
-        let reference_paper_px = reference
+        let reference_paper_px: Vec<Point2> = reference
             .corners
             .iter()
             .map(|c| c.undistorted_px.map(|p| mapping.to_paper(p)).unwrap_or([0.0, 0.0]))
             .collect();
+        let reference_valid: Vec<bool> = reference.corners.iter().map(|c| c.undistorted_px.is_some()).collect();
         let sampler = ShearSampler::new(
             usize::from(pad.corner_rows()),
             usize::from(pad.corner_cols()),
             &config.surface,
+            &reference_paper_px,
+            &reference_valid,
         )?;
         Ok(Self { config, mode, detector, mapping, reference, reference_paper_px, sampler })
     }
@@ -235,7 +238,7 @@ impl Estimator {
             .map(|(c, &ok)| if ok { c.undistorted_px.map(|p| self.mapping.to_paper(p)) } else { None })
             .map(|p| p.unwrap_or([0.0, 0.0]))
             .collect();
-        let samples = self.sampler.sample(&self.reference_paper_px, &current_paper_px, &valid)?;
+        let samples = self.sampler.sample(&current_paper_px, &valid)?;
         let gamma = gamma(&samples, self.config.calibration.alpha);
 
         // Contact: the local shear field after removing the pad's overall (affine) motion.
@@ -268,8 +271,9 @@ impl Estimator {
                 contact_px = self.mapping.distort(undistorted);
                 contact_mm = self.mapping.undistorted_to_mm(undistorted);
             }
-            let sheared: Vec<(Point2, f64)> = samples
-                .reference
+            let sheared: Vec<(Point2, f64)> = self
+                .sampler
+                .reference_samples()
                 .iter()
                 .zip(&samples.displacement)
                 .zip(&samples.valid)

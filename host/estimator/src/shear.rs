@@ -14,16 +14,17 @@ pub struct ShearSampler {
     degree_u: usize,
     degree_v: usize,
     basis: SampleBasis,
+    reference_net: Vec<Point2>,
+    /// The reference surface's samples never change: computed once.
+    reference_samples: Vec<Point2>,
 }
 
-/// Samples of both surfaces.
+/// The shear of one frame at every sample.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ShearSamples {
-    /// Reference surface samples, paper px.
-    pub reference: Vec<Point2>,
     /// s - s_ref, paper px.
     pub displacement: Vec<Point2>,
-    /// Whether the sample rests only on valid corners.
+    /// Whether the sample rests only on corners valid in both frames.
     pub valid: Vec<bool>,
 }
 
@@ -38,31 +39,46 @@ impl ShearSamples {
 }
 
 impl ShearSampler {
-    pub fn new(rows: usize, cols: usize, surface: &SurfaceConfig) -> Result<Self, SurfaceError> {
+    /// `reference` holds the rest frame's `rows x cols` corners in paper px; `reference_valid` masks them.
+    pub fn new(
+        rows: usize,
+        cols: usize,
+        surface: &SurfaceConfig,
+        reference: &[Point2],
+        reference_valid: &[bool],
+    ) -> Result<Self, SurfaceError> {
         let basis = SampleBasis::for_net(rows, cols, surface.degree_u, surface.degree_v, surface.uv_step)?;
-        Ok(Self { rows, cols, degree_u: surface.degree_u, degree_v: surface.degree_v, basis })
+        let net = ControlNet::new(rows, cols, reference.to_vec(), reference_valid.to_vec())?;
+        let reference_samples =
+            BSplineSurface::new(net, surface.degree_u, surface.degree_v)?.sample_on(&basis).points;
+        Ok(Self {
+            rows,
+            cols,
+            degree_u: surface.degree_u,
+            degree_v: surface.degree_v,
+            basis,
+            reference_net: reference.to_vec(),
+            reference_samples,
+        })
     }
 
-    /// Both nets hold `rows x cols` corners in paper px; `valid` masks both.
-    pub fn sample(
-        &self,
-        reference: &[Point2],
-        current: &[Point2],
-        valid: &[bool],
-    ) -> Result<ShearSamples, SurfaceError> {
-        let surface = |points: &[Point2]| -> Result<BSplineSurface, SurfaceError> {
-            let net = ControlNet::new(self.rows, self.cols, points.to_vec(), valid.to_vec())?;
-            BSplineSurface::new(net, self.degree_u, self.degree_v)
-        };
-        let reference = surface(reference)?.sample_on(&self.basis);
-        let current = surface(current)?.sample_on(&self.basis);
-        let displacement = current
-            .points
+    /// Samples of the reference surface, paper px (meaningful where a frame's samples are valid).
+    pub fn reference_samples(&self) -> &[Point2] {
+        &self.reference_samples
+    }
+
+    /// `current` holds the frame's corners in paper px; `valid` marks the corners valid in both frames.
+    /// By linearity s - s_ref is the surface of the corners' displacements, so one surface is evaluated.
+    pub fn sample(&self, current: &[Point2], valid: &[bool]) -> Result<ShearSamples, SurfaceError> {
+        let displacement: Vec<Point2> = current
             .iter()
-            .zip(&reference.points)
-            .map(|(c, r)| [c[0] - r[0], c[1] - r[1]])
+            .zip(&self.reference_net)
+            .zip(valid)
+            .map(|((c, r), &ok)| if ok { [c[0] - r[0], c[1] - r[1]] } else { [0.0, 0.0] })
             .collect();
-        Ok(ShearSamples { reference: reference.points, displacement, valid: reference.rests_on_valid })
+        let net = ControlNet::new(self.rows, self.cols, displacement, valid.to_vec())?;
+        let grid = BSplineSurface::new(net, self.degree_u, self.degree_v)?.sample_on(&self.basis);
+        Ok(ShearSamples { displacement: grid.points, valid: grid.rests_on_valid })
     }
 }
 

@@ -32,10 +32,8 @@ const WINDOW_HALF: f64 = 0.55;
 const SEARCH_MAP_WIDTH: usize = 512;
 /// A tracked square whose yellow area differs from the reference by more than these factors is not trusted.
 const AREA_RATIO_RANGE: (f64, f64) = (0.45, 2.2);
-/// Most centroid passes per square (one, unless the square moved far since the last frame).
-const MAX_PASSES: usize = 4;
-/// A centroid this close (in cells) to its window's centre leaves the whole square inside the window.
-const SETTLED_CELLS: f64 = 0.08;
+/// Most centroid passes per square (one in a steady scene, a few after a fast move).
+const MAX_PASSES: usize = 5;
 /// Samples across a cell the centroid needs; more pixels than this add time, not precision.
 const SAMPLES_PER_CELL: f64 = 36.0;
 
@@ -101,6 +99,9 @@ impl FastTracker {
         let cells = local_cells(&pad, &coarse)?;
         let mut steps: Vec<f64> = cells.iter().flatten().map(CellFrame::min_step).collect();
         let stride = ((median(&mut steps) / SAMPLES_PER_CELL).round() as usize).max(1);
+        let any_cell = cells.iter().flatten().next().copied().ok_or_else(|| EstimateError::NoPattern {
+            reason: "no square has lattice neighbours".into(),
+        })?;
         let squares: Vec<SquareModel> = pad
             .yellow_squares()
             .zip(&cells)
@@ -108,7 +109,7 @@ impl FastTracker {
                 index,
                 reference: None,
                 reference_area: 0.0,
-                cell: cell.unwrap_or_else(|| cells.iter().flatten().next().copied().expect("checked above")),
+                cell: cell.unwrap_or(any_cell),
             })
             .collect();
         let mut tracker =
@@ -275,19 +276,19 @@ impl FastTracker {
             .zip(predicted)
             .map(|(model, p)| {
                 let start = (*p)?;
-                // The window holds the whole square with room to spare, so one pass centred on the prediction
-                // is exact unless the square moved far since; then re-centre and measure again.
-                let settle = SETTLED_CELLS * model.cell.min_step();
+                // The window holds the whole square with room to spare, but a square that moved since the last
+                // frame may be clipped by it: re-centre on the pixel nearest the centroid until that pixel stops
+                // changing. In a steady scene that is one pass, and the result depends on the image alone.
                 let mut centre = [start[0].round(), start[1].round()];
                 let mut result = None;
                 for _ in 0..MAX_PASSES {
                     let (at, area) = centroid(&px, centre, &model.cell, WINDOW_HALF, self.stride, &membership)?;
                     result = Some((at, area));
-                    let moved = sub(at, centre);
-                    if moved[0].hypot(moved[1]) <= settle {
+                    let next = [at[0].round(), at[1].round()];
+                    if next == centre {
                         break;
                     }
-                    centre = [at[0].round(), at[1].round()];
+                    centre = next;
                 }
                 let (at, area) = result?;
                 let offset = model.cell.to_cell(sub(at, start));
