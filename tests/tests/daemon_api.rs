@@ -82,9 +82,19 @@ fn image_dimensions(jpeg: &[u8]) -> (u32, u32) {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn led_commands_reach_the_board_and_bad_requests_get_4xx() {
-    let daemon = start(DaemonSetup { width: 320, height: 240, ..Default::default() }).await;
+    let daemon = start(DaemonSetup {
+        width: 320,
+        height: 240,
+        ..Default::default()
+    })
+    .await;
     let http = reqwest::Client::new();
-    let put = |body: String| http.put(daemon.url("/api/led")).header("content-type", "application/json").body(body).send();
+    let put = |body: String| {
+        http.put(daemon.url("/api/led"))
+            .header("content-type", "application/json")
+            .body(body)
+            .send()
+    };
 
     let (code, body) = json_of(put(json!({ "top": 121 }).to_string()).await.unwrap()).await;
     assert_eq!(code, 422, "{body}");
@@ -97,22 +107,51 @@ async fn led_commands_reach_the_board_and_bad_requests_get_4xx() {
     let (code, body) = json_of(put(json!({}).to_string()).await.unwrap()).await;
     assert_eq!(code, 422, "nothing to set: {body}");
 
-    let (code, body) = json_of(put(json!({ "top": 60, "right": 70, "bottom": 80, "left": 90 }).to_string()).await.unwrap()).await;
+    let (code, body) = json_of(
+        put(json!({ "top": 60, "right": 70, "bottom": 80, "left": 90 }).to_string())
+            .await
+            .unwrap(),
+    )
+    .await;
     assert_eq!(code, 200, "{body}");
     let reading = daemon
-        .wait_reading(Duration::from_secs(10), |r| r["led"]["setpoint_ma"] == json!([60, 70, 80, 90]))
+        .wait_reading(Duration::from_secs(10), |r| {
+            r["led"]["setpoint_ma"] == json!([60, 70, 80, 90])
+        })
         .await
         .expect("readings report the new LED setpoints");
     let measured = reading["led"]["measured_ma"].as_array().unwrap().clone();
     assert_eq!(measured.len(), 4);
 
-    for (path, method) in [("/api/stream?every=0", "GET"), ("/api/nothing", "GET"), ("/api/tare", "GET")] {
-        let response = http.request(method.parse().unwrap(), daemon.url(path)).send().await.unwrap();
+    for (path, method) in [
+        ("/api/stream?every=0", "GET"),
+        ("/api/nothing", "GET"),
+        ("/api/tare", "GET"),
+    ] {
+        let response = http
+            .request(method.parse().unwrap(), daemon.url(path))
+            .send()
+            .await
+            .unwrap();
         assert!(response.status().is_client_error(), "{path}: {}", response.status());
     }
-    let (code, body) = json_of(http.put(daemon.url("/api/sim/scene")).json(&json!({ "scene": { "contacts": "many" } })).send().await.unwrap()).await;
+    let (code, body) = json_of(
+        http.put(daemon.url("/api/sim/scene"))
+            .json(&json!({ "scene": { "contacts": "many" } }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
     assert_eq!(code, 422, "{body}");
-    let (code, body) = json_of(http.post(daemon.url("/api/record")).json(&json!({ "action": "stop" })).send().await.unwrap()).await;
+    let (code, body) = json_of(
+        http.post(daemon.url("/api/record"))
+            .json(&json!({ "action": "stop" }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
     assert_eq!(code, 409, "{body}");
     let (code, _) = json_of(http.post(daemon.url("/api/tare")).send().await.unwrap()).await;
     assert_eq!(code, 202);
@@ -121,18 +160,65 @@ async fn led_commands_reach_the_board_and_bad_requests_get_4xx() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_token_guards_every_request_including_websockets() {
-    let daemon = start(DaemonSetup { width: 320, height: 240, token: Some("s3cret".into()), ..Default::default() }).await;
+    let daemon = start(DaemonSetup {
+        width: 320,
+        height: 240,
+        token: Some("s3cret".into()),
+        ..Default::default()
+    })
+    .await;
     let http = reqwest::Client::new();
-    assert_eq!(http.get(daemon.url("/api/status")).send().await.unwrap().status().as_u16(), 401);
+    assert_eq!(
+        http.get(daemon.url("/api/status"))
+            .send()
+            .await
+            .unwrap()
+            .status()
+            .as_u16(),
+        401
+    );
     assert_eq!(http.get(daemon.url("/")).send().await.unwrap().status().as_u16(), 401);
-    let wrong = http.get(daemon.url("/api/status")).bearer_auth("guess").send().await.unwrap();
+    let wrong = http
+        .get(daemon.url("/api/status"))
+        .bearer_auth("guess")
+        .send()
+        .await
+        .unwrap();
     assert_eq!(wrong.status().as_u16(), 401);
-    assert_eq!(http.get(daemon.url("/api/status")).bearer_auth("s3cret").send().await.unwrap().status().as_u16(), 200);
-    assert_eq!(http.get(daemon.url("/api/status?token=s3cret")).send().await.unwrap().status().as_u16(), 200);
+    assert_eq!(
+        http.get(daemon.url("/api/status"))
+            .bearer_auth("s3cret")
+            .send()
+            .await
+            .unwrap()
+            .status()
+            .as_u16(),
+        200
+    );
+    assert_eq!(
+        http.get(daemon.url("/api/status?token=s3cret"))
+            .send()
+            .await
+            .unwrap()
+            .status()
+            .as_u16(),
+        200
+    );
 
-    assert!(tokio_tungstenite::connect_async(daemon.ws_url("/api/stream")).await.is_err(), "WebSocket without the token");
-    let (mut ws, _) = tokio_tungstenite::connect_async(daemon.ws_url("/api/stream?token=s3cret")).await.expect("with the token");
-    let message = tokio::time::timeout(Duration::from_secs(30), ws.next()).await.expect("a reading in time").unwrap().unwrap();
+    assert!(
+        tokio_tungstenite::connect_async(daemon.ws_url("/api/stream"))
+            .await
+            .is_err(),
+        "WebSocket without the token"
+    );
+    let (mut ws, _) = tokio_tungstenite::connect_async(daemon.ws_url("/api/stream?token=s3cret"))
+        .await
+        .expect("with the token");
+    let message = tokio::time::timeout(Duration::from_secs(30), ws.next())
+        .await
+        .expect("a reading in time")
+        .unwrap()
+        .unwrap();
     let reading: Value = serde_json::from_str(message.to_text().unwrap()).unwrap();
     assert!(reading["frame_id"].is_u64());
     daemon.stop().await;
@@ -140,17 +226,48 @@ async fn a_token_guards_every_request_including_websockets() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn recording_toggled_through_the_api_reads_back() {
-    let daemon = start(DaemonSetup { width: 320, height: 240, ..Default::default() }).await;
+    let daemon = start(DaemonSetup {
+        width: 320,
+        height: 240,
+        ..Default::default()
+    })
+    .await;
     let http = reqwest::Client::new();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("api.mcap");
-    let (code, body) = json_of(http.post(daemon.url("/api/record")).json(&json!({ "action": "start", "path": path })).send().await.unwrap()).await;
+    let (code, body) = json_of(
+        http.post(daemon.url("/api/record"))
+            .json(&json!({ "action": "start", "path": path }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
     assert_eq!(code, 200, "{body}");
-    let (code, body) = json_of(http.post(daemon.url("/api/record")).json(&json!({ "action": "start", "path": path })).send().await.unwrap()).await;
+    let (code, body) = json_of(
+        http.post(daemon.url("/api/record"))
+            .json(&json!({ "action": "start", "path": path }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
     assert_eq!(code, 409, "a second recording: {body}");
     let from = daemon.handle.latest_frame().map(|f| f.frame_id).unwrap_or(0);
-    daemon.wait_reading(Duration::from_secs(30), |r| r["frame_id"].as_u64().unwrap_or(0) >= from + 5).await.expect("frames");
-    let (code, body) = json_of(http.post(daemon.url("/api/record")).json(&json!({ "action": "stop" })).send().await.unwrap()).await;
+    daemon
+        .wait_reading(Duration::from_secs(30), |r| {
+            r["frame_id"].as_u64().unwrap_or(0) >= from + 5
+        })
+        .await
+        .expect("frames");
+    let (code, body) = json_of(
+        http.post(daemon.url("/api/record"))
+            .json(&json!({ "action": "stop" }))
+            .send()
+            .await
+            .unwrap(),
+    )
+    .await;
     assert_eq!(code, 200, "{body}");
     let frames = body["recorded"]["frames"].as_u64().unwrap();
     assert!(frames >= 3, "{body}");
@@ -161,10 +278,17 @@ async fn recording_toggled_through_the_api_reads_back() {
     assert_eq!(recorded.len() as u64, frames);
     let first = image::load_from_memory(&recorded[0].jpeg).expect("recorded frames are JPEG");
     assert_eq!((first.width(), first.height()), (320, 240));
-    let readings: Vec<Value> =
-        recording.on_topic(nusense::record::READING_TOPIC).map(|m| serde_json::from_slice(&m.data).unwrap()).collect();
+    let readings: Vec<Value> = recording
+        .on_topic(nusense::record::READING_TOPIC)
+        .map(|m| serde_json::from_slice(&m.data).unwrap())
+        .collect();
     assert!(!readings.is_empty());
-    assert!(readings.iter().all(|r| r["frame_id"].is_u64() && r.get("estimate").is_some()));
-    assert!(recording.on_topic(nusense::record::TELEMETRY_TOPIC).count() > 0, "board telemetry is recorded");
+    assert!(readings
+        .iter()
+        .all(|r| r["frame_id"].is_u64() && r.get("estimate").is_some()));
+    assert!(
+        recording.on_topic(nusense::record::TELEMETRY_TOPIC).count() > 0,
+        "board telemetry is recorded"
+    );
     daemon.stop().await;
 }

@@ -29,7 +29,9 @@ fn top_level_records(bytes: &[u8]) -> (Vec<(u8, usize)>, usize) {
 }
 
 fn frames_in(path: &Path) -> usize {
-    nusense::record::read_recording(path).map(|r| r.frames().len()).unwrap_or(0)
+    nusense::record::read_recording(path)
+        .map(|r| r.frames().len())
+        .unwrap_or(0)
 }
 
 #[test]
@@ -38,7 +40,17 @@ fn sigkilled_recording_keeps_all_but_its_last_chunk() {
     let path = dir.path().join("killed.mcap");
     let flush_ms = 200;
     let mut child = Command::new(daemon_common::nusense_binary())
-        .args(["record", path.to_str().unwrap(), "--sim", "--width", "320", "--height", "240", "--fps", "15"])
+        .args([
+            "record",
+            path.to_str().unwrap(),
+            "--sim",
+            "--width",
+            "320",
+            "--height",
+            "240",
+            "--fps",
+            "15",
+        ])
         .args(["--flush-ms", &flush_ms.to_string()])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
@@ -68,21 +80,35 @@ fn sigkilled_recording_keeps_all_but_its_last_chunk() {
     assert!(!status.success());
 
     let bytes = std::fs::read(&path).unwrap();
-    assert!(!bytes.ends_with(mcap::MAGIC), "a killed recorder never wrote the footer");
+    assert!(
+        !bytes.ends_with(mcap::MAGIC),
+        "a killed recorder never wrote the footer"
+    );
     let (records, cut_tail) = top_level_records(&bytes);
     const CHUNK: u8 = 0x06;
     let chunks = records.iter().filter(|(op, _)| *op == CHUNK).count();
     assert!(chunks >= 2, "several chunks were closed: {records:?}");
     // What is lost is at most the chunk being written when the kill came (the recorder's chunk bound, 512 KiB).
-    assert!(cut_tail <= 512 * 1024 + 64 * 1024, "{cut_tail} bytes after the last whole record");
+    assert!(
+        cut_tail <= 512 * 1024 + 64 * 1024,
+        "{cut_tail} bytes after the last whole record"
+    );
 
     let recording = nusense::record::read_recording(&path).expect("tolerant reader");
     assert!(recording.truncated);
     let frames = recording.frames();
-    assert!(frames.len() >= seen_before_kill, "frames on disk before the kill survive it ({} < {seen_before_kill})", frames.len());
+    assert!(
+        frames.len() >= seen_before_kill,
+        "frames on disk before the kill survive it ({} < {seen_before_kill})",
+        frames.len()
+    );
     // Frames survive in capture order with no holes: everything up to the last whole chunk is there.
     for pair in frames.windows(2) {
-        assert_eq!(pair[1].frame_id, pair[0].frame_id + 1, "a frame is missing in the middle");
+        assert_eq!(
+            pair[1].frame_id,
+            pair[0].frame_id + 1,
+            "a frame is missing in the middle"
+        );
     }
     for frame in [&frames[0], &frames[frames.len() - 1]] {
         image::load_from_memory(&frame.jpeg).expect("surviving frames decode");

@@ -23,9 +23,16 @@ struct Driver {
 impl Driver {
     async fn start() -> Self {
         for path in [CHROMIUM, CHROMEDRIVER] {
-            assert!(std::path::Path::new(path).exists(), "{path} is missing: run scripts/setup test (installs chromium chromium-driver)");
+            assert!(
+                std::path::Path::new(path).exists(),
+                "{path} is missing: run scripts/setup test (installs chromium chromium-driver)"
+            );
         }
-        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
         let process = Command::new(CHROMEDRIVER)
             .arg(format!("--port={port}"))
             .stdout(Stdio::null())
@@ -63,14 +70,40 @@ impl Driver {
             "browserName": "chrome",
             "goog:chromeOptions": { "binary": CHROMIUM, "args": args }
         }}});
-        let created: Value = http.post(format!("{base}/session")).json(&capabilities).send().await.unwrap().json().await.unwrap();
-        let session = created["value"]["sessionId"].as_str().unwrap_or_else(|| panic!("no session: {created}")).to_string();
-        Self { process, base, session, http, _profile: profile }
+        let created: Value = http
+            .post(format!("{base}/session"))
+            .json(&capabilities)
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        let session = created["value"]["sessionId"]
+            .as_str()
+            .unwrap_or_else(|| panic!("no session: {created}"))
+            .to_string();
+        Self {
+            process,
+            base,
+            session,
+            http,
+            _profile: profile,
+        }
     }
 
     async fn command(&self, path: &str, body: Value) -> Value {
         let url = format!("{}/session/{}/{path}", self.base, self.session);
-        let answer: Value = self.http.post(url).json(&body).send().await.unwrap().json().await.unwrap();
+        let answer: Value = self
+            .http
+            .post(url)
+            .json(&body)
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
         answer["value"].clone()
     }
 
@@ -79,11 +112,16 @@ impl Driver {
     }
 
     async fn eval(&self, script: &str) -> Value {
-        self.command("execute/sync", json!({ "script": script, "args": [] })).await
+        self.command("execute/sync", json!({ "script": script, "args": [] }))
+            .await
     }
 
     async fn text(&self, id: &str) -> String {
-        let value = self.eval(&format!("const e = document.getElementById('{id}'); return e ? e.textContent : null;")).await;
+        let value = self
+            .eval(&format!(
+                "const e = document.getElementById('{id}'); return e ? e.textContent : null;"
+            ))
+            .await;
         value.as_str().unwrap_or_default().to_string()
     }
 
@@ -95,7 +133,10 @@ impl Driver {
             if accept(&value) {
                 return value;
             }
-            assert!(Instant::now() < deadline, "the page never reached the expected state; last: {value}");
+            assert!(
+                Instant::now() < deadline,
+                "the page never reached the expected state; last: {value}"
+            );
             tokio::time::sleep(Duration::from_millis(200)).await;
         }
     }
@@ -115,7 +156,11 @@ const PAGE_STATE: &str = "return { frame: document.getElementById('frame-id').te
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn dashboard_shows_live_readings_that_follow_the_simulated_contact() {
-    let daemon = start(DaemonSetup { fps: 10.0, ..Default::default() }).await;
+    let daemon = start(DaemonSetup {
+        fps: 10.0,
+        ..Default::default()
+    })
+    .await;
     let resting = daemon.settle(rest(), true).await;
     assert_eq!(resting["estimate"]["contact"], json!(false));
 
@@ -123,7 +168,9 @@ async fn dashboard_shows_live_readings_that_follow_the_simulated_contact() {
     driver.goto(&daemon.url("/")).await;
     let before = driver
         .wait_for(PAGE_STATE, Duration::from_secs(60), |s| {
-            s["live"] == json!("live") && s["contact"] == json!("no") && s["force"].as_str().is_some_and(|f| f.parse::<f64>().is_ok())
+            s["live"] == json!("live")
+                && s["contact"] == json!("no")
+                && s["force"].as_str().is_some_and(|f| f.parse::<f64>().is_ok())
                 && s["image"].as_u64() == Some(640)
         })
         .await;
@@ -134,7 +181,10 @@ async fn dashboard_shows_live_readings_that_follow_the_simulated_contact() {
         .wait_for(PAGE_STATE, Duration::from_secs(60), |s| s["contact"] == json!("yes"))
         .await;
     assert_ne!(after["frame"], before["frame"], "frames advance");
-    assert_ne!(after["gamma"], before["gamma"], "the shear shown changes with the contact: {before} -> {after}");
+    assert_ne!(
+        after["gamma"], before["gamma"],
+        "the shear shown changes with the contact: {before} -> {after}"
+    );
 
     // The heat map was drawn (some non-background pixels).
     let painted = driver
@@ -148,16 +198,20 @@ async fn dashboard_shows_live_readings_that_follow_the_simulated_contact() {
         .eval("const f = document.getElementById('led-form'); f.elements['top'].value = '130'; f.requestSubmit(); return true;")
         .await;
     let message = driver
-        .wait_for("return document.getElementById('led-message').textContent;", Duration::from_secs(10), |m| {
-            m.as_str().is_some_and(|m| !m.is_empty())
-        })
+        .wait_for(
+            "return document.getElementById('led-message').textContent;",
+            Duration::from_secs(10),
+            |m| m.as_str().is_some_and(|m| !m.is_empty()),
+        )
         .await;
     assert!(message.as_str().unwrap().contains("120 mA"), "{message}");
     assert_eq!(driver.text("led-message").await, message.as_str().unwrap());
 
     // Release: the contact disappears again.
     daemon.scene.hold(rest()).unwrap();
-    driver.wait_for(PAGE_STATE, Duration::from_secs(60), |s| s["contact"] == json!("no")).await;
+    driver
+        .wait_for(PAGE_STATE, Duration::from_secs(60), |s| s["contact"] == json!("no"))
+        .await;
     drop(driver);
     daemon.stop().await;
 }

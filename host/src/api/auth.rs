@@ -10,7 +10,9 @@ use axum::response::{IntoResponse, Response};
 use super::{ApiError, AppState};
 
 pub async fn require_token(State(state): State<AppState>, request: Request, next: Next) -> Response {
-    let Some(expected) = state.token.as_deref() else { return next.run(request).await };
+    let Some(expected) = state.token.as_deref() else {
+        return next.run(request).await;
+    };
     let from_header = request
         .headers()
         .get(header::AUTHORIZATION)

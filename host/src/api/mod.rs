@@ -78,7 +78,10 @@ pub struct ApiError {
 
 impl ApiError {
     pub fn new(status: StatusCode, message: impl Into<String>) -> Self {
-        Self { status, message: message.into() }
+        Self {
+            status,
+            message: message.into(),
+        }
     }
 }
 
@@ -114,16 +117,21 @@ async fn status(State(state): State<AppState>) -> Json<serde_json::Value> {
 }
 
 async fn reading(State(state): State<AppState>) -> Result<Response, ApiError> {
-    let latest = state
-        .pipeline
-        .latest_reading()
-        .ok_or_else(|| ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "no reading yet: the first frame has not been processed"))?;
+    let latest = state.pipeline.latest_reading().ok_or_else(|| {
+        ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "no reading yet: the first frame has not been processed",
+        )
+    })?;
     Ok(([(header::CONTENT_TYPE, "application/json")], latest.json.clone()).into_response())
 }
 
 async fn tare(State(state): State<AppState>) -> (StatusCode, Json<serde_json::Value>) {
     state.pipeline.request_tare();
-    (StatusCode::ACCEPTED, Json(serde_json::json!({ "tare": "the next frame becomes the rest frame" })))
+    (
+        StatusCode::ACCEPTED,
+        Json(serde_json::json!({ "tare": "the next frame becomes the rest frame" })),
+    )
 }
 
 /// `PUT /api/led`: currents in mA per side, or `all`; `enabled` switches the addressed channels.
@@ -138,12 +146,18 @@ struct LedBody {
     enabled: Option<bool>,
 }
 
-async fn set_led(State(state): State<AppState>, body: Result<Json<LedBody>, JsonRejection>) -> Result<Json<serde_json::Value>, ApiError> {
+async fn set_led(
+    State(state): State<AppState>,
+    body: Result<Json<LedBody>, JsonRejection>,
+) -> Result<Json<serde_json::Value>, ApiError> {
     let Json(body) = body?;
     let per_side = [body.top, body.right, body.bottom, body.left];
     let current_ma = match body.all {
         Some(_) if per_side.iter().any(Option::is_some) => {
-            return Err(ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "give either `all` or per-side currents, not both"))
+            return Err(ApiError::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "give either `all` or per-side currents, not both",
+            ))
         }
         Some(all) => [Some(all); 4],
         None => per_side,
@@ -154,8 +168,13 @@ async fn set_led(State(state): State<AppState>, body: Result<Json<LedBody>, Json
             "nothing to set: give currents in mA as `top`, `right`, `bottom`, `left` or `all`, and/or `enabled`",
         ));
     }
-    let command = LedCommand { current_ma, enabled: body.enabled };
-    command.validate().map_err(|e| ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, e.to_string()))?;
+    let command = LedCommand {
+        current_ma,
+        enabled: body.enabled,
+    };
+    command
+        .validate()
+        .map_err(|e| ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, e.to_string()))?;
     let board = state.pipeline.board().clone();
     let result = tokio::task::spawn_blocking(move || board.set_leds(&command))
         .await
@@ -175,12 +194,20 @@ struct FrameQuery {
     overlay: Option<u8>,
 }
 
-async fn frame_jpeg(State(state): State<AppState>, query: Result<Query<FrameQuery>, QueryRejection>) -> Result<Response, ApiError> {
+async fn frame_jpeg(
+    State(state): State<AppState>,
+    query: Result<Query<FrameQuery>, QueryRejection>,
+) -> Result<Response, ApiError> {
     let Query(query) = query?;
     let overlay = match query.overlay {
         None | Some(0) => false,
         Some(1) => true,
-        Some(other) => return Err(ApiError::new(StatusCode::BAD_REQUEST, format!("overlay must be 0 or 1, not {other}"))),
+        Some(other) => {
+            return Err(ApiError::new(
+                StatusCode::BAD_REQUEST,
+                format!("overlay must be 0 or 1, not {other}"),
+            ))
+        }
     };
     let frame = state
         .pipeline
@@ -199,7 +226,14 @@ async fn frame_jpeg(State(state): State<AppState>, query: Result<Query<FrameQuer
     })
     .await
     .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?;
-    Ok(([(header::CONTENT_TYPE, "image/jpeg"), (header::CACHE_CONTROL, "no-store")], Body::from(bytes)).into_response())
+    Ok((
+        [
+            (header::CONTENT_TYPE, "image/jpeg"),
+            (header::CACHE_CONTROL, "no-store"),
+        ],
+        Body::from(bytes),
+    )
+        .into_response())
 }
 
 #[derive(Debug, Deserialize)]
@@ -217,7 +251,10 @@ struct RecordBody {
     path: Option<PathBuf>,
 }
 
-async fn record(State(state): State<AppState>, body: Result<Json<RecordBody>, JsonRejection>) -> Result<Json<serde_json::Value>, ApiError> {
+async fn record(
+    State(state): State<AppState>,
+    body: Result<Json<RecordBody>, JsonRejection>,
+) -> Result<Json<serde_json::Value>, ApiError> {
     let Json(body) = body?;
     let pipeline = state.pipeline.clone();
     match body.action {
@@ -225,10 +262,15 @@ async fn record(State(state): State<AppState>, body: Result<Json<RecordBody>, Js
             let path = match body.path {
                 Some(path) if path.is_absolute() => path,
                 Some(path) => state.recordings_dir.join(path),
-                None => state.recordings_dir.join(format!("nusense-{}.mcap", crate::capture::unix_time_us() / 1000)),
+                None => state
+                    .recordings_dir
+                    .join(format!("nusense-{}.mcap", crate::capture::unix_time_us() / 1000)),
             };
             if path.extension().and_then(|e| e.to_str()) != Some("mcap") {
-                return Err(ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "the recording's file name must end in .mcap"));
+                return Err(ApiError::new(
+                    StatusCode::UNPROCESSABLE_ENTITY,
+                    "the recording's file name must end in .mcap",
+                ));
             }
             let started = path.clone();
             tokio::task::spawn_blocking(move || pipeline.start_recording(&path, RecorderOptions::default()))
@@ -257,10 +299,12 @@ fn pipeline_error(error: PipelineError) -> ApiError {
 }
 
 fn scene_control(state: &AppState) -> Result<&SceneControl, ApiError> {
-    state
-        .scene
-        .as_ref()
-        .ok_or_else(|| ApiError::new(StatusCode::NOT_FOUND, "the daemon is not running on the simulator (start it with --sim)"))
+    state.scene.as_ref().ok_or_else(|| {
+        ApiError::new(
+            StatusCode::NOT_FOUND,
+            "the daemon is not running on the simulator (start it with --sim)",
+        )
+    })
 }
 
 async fn get_scene(State(state): State<AppState>) -> Result<Json<serde_json::Value>, ApiError> {
@@ -275,12 +319,17 @@ struct SceneBody {
     script: Option<bool>,
 }
 
-async fn put_scene(State(state): State<AppState>, body: Result<Json<SceneBody>, JsonRejection>) -> Result<Json<serde_json::Value>, ApiError> {
+async fn put_scene(
+    State(state): State<AppState>,
+    body: Result<Json<SceneBody>, JsonRejection>,
+) -> Result<Json<serde_json::Value>, ApiError> {
     let control = scene_control(&state)?;
     let Json(body) = body?;
     match (body.scene, body.script) {
         (Some(scene), None | Some(false)) => {
-            control.hold_json(scene).map_err(|e| ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, e))?;
+            control
+                .hold_json(scene)
+                .map_err(|e| ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, e))?;
         }
         (None, Some(true)) => control.resume_script(),
         _ => {
@@ -299,5 +348,7 @@ pub async fn serve(
     state: AppState,
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
-    axum::serve(listener, router(state)).with_graceful_shutdown(shutdown).await
+    axum::serve(listener, router(state))
+        .with_graceful_shutdown(shutdown)
+        .await
 }

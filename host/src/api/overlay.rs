@@ -26,7 +26,9 @@ pub fn draw_overlay(image: &mut RgbImage, reading: &Reading) {
         }
     }
     for v in reading.shear_field.iter().filter(|v| v.valid) {
-        let (Some(r), Some(c)) = (v.reference_px, v.current_px) else { continue };
+        let (Some(r), Some(c)) = (v.reference_px, v.current_px) else {
+            continue;
+        };
         let tip = [r[0] + ARROW_GAIN * (c[0] - r[0]), r[1] + ARROW_GAIN * (c[1] - r[1])];
         draw_line(image, r, tip, SHEAR);
     }

@@ -27,7 +27,9 @@ pub struct StreamOptions {
 
 impl Default for StreamOptions {
     fn default() -> Self {
-        Self { send_timeout: Duration::from_secs(5) }
+        Self {
+            send_timeout: Duration::from_secs(5),
+        }
     }
 }
 
@@ -82,7 +84,10 @@ pub async fn upgrade(
     let Query(query) = query?;
     let every = query.every.unwrap_or(1);
     if every == 0 || every > MAX_EVERY {
-        return Err(ApiError::new(StatusCode::BAD_REQUEST, format!("every must be between 1 and {MAX_EVERY}, not {every}")));
+        return Err(ApiError::new(
+            StatusCode::BAD_REQUEST,
+            format!("every must be between 1 and {MAX_EVERY}, not {every}"),
+        ));
     }
     // Subscribe before the upgrade completes so the client misses nothing published after its request.
     let readings = state.pipeline.subscribe();
@@ -107,7 +112,7 @@ async fn serve_client(
             reading = readings.recv() => match reading {
                 Ok(reading) => {
                     seen += 1;
-                    if (seen - 1) % every as u64 != 0 {
+                    if !(seen - 1).is_multiple_of(every as u64) {
                         continue;
                     }
                     let send = sink.send(Message::Text(reading.json.clone().into()));

@@ -19,18 +19,27 @@ impl ImageFolder {
     /// Lists the folder's images; `looping` starts over after the last one instead of ending.
     pub fn open(folder: &Path, fps: f64, looping: bool) -> Result<Self, CaptureError> {
         let path_text = folder.display().to_string();
-        let entries = std::fs::read_dir(folder).map_err(|source| CaptureError::Io { path: path_text.clone(), source })?;
+        let entries = std::fs::read_dir(folder).map_err(|source| CaptureError::Io {
+            path: path_text.clone(),
+            source,
+        })?;
         let mut files: Vec<PathBuf> = entries
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| {
-                let ext = p.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+                let ext = p
+                    .extension()
+                    .and_then(|e| e.to_str())
+                    .unwrap_or("")
+                    .to_ascii_lowercase();
                 matches!(ext.as_str(), "png" | "jpg" | "jpeg")
             })
             .collect();
         files.sort();
         let first = files.first().ok_or_else(|| CaptureError::Empty(path_text.clone()))?;
-        let size = image::image_dimensions(first)
-            .map_err(|e| CaptureError::Decode { origin: first.display().to_string(), message: e.to_string() })?;
+        let size = image::image_dimensions(first).map_err(|e| CaptureError::Decode {
+            origin: first.display().to_string(),
+            message: e.to_string(),
+        })?;
         let fps = if fps.is_finite() && fps > 0.0 { fps } else { 30.0 };
         Ok(Self {
             folder: folder.to_path_buf(),
@@ -65,7 +74,11 @@ impl FrameSource for ImageFolder {
             name: self.folder.display().to_string(),
             width: self.size.0,
             height: self.size.1,
-            fps: if self.period.is_zero() { 0.0 } else { 1.0 / self.period.as_secs_f64() },
+            fps: if self.period.is_zero() {
+                0.0
+            } else {
+                1.0 / self.period.as_secs_f64()
+            },
         }
     }
 
@@ -86,14 +99,20 @@ impl FrameSource for ImageFolder {
         }
         self.next_due = Some(Instant::now() + self.period);
         let origin = path.display().to_string();
-        let bytes = std::fs::read(path).map_err(|source| CaptureError::Io { path: origin.clone(), source })?;
+        let bytes = std::fs::read(path).map_err(|source| CaptureError::Io {
+            path: origin.clone(),
+            source,
+        })?;
         let is_jpeg = bytes.starts_with(&[0xFF, 0xD8]);
         if is_jpeg {
             let image = decode_jpeg(&bytes, &origin)?;
             Ok(CapturedImage::now(image, Some(bytes)))
         } else {
             let image = image::load_from_memory(&bytes)
-                .map_err(|e| CaptureError::Decode { origin, message: e.to_string() })?
+                .map_err(|e| CaptureError::Decode {
+                    origin,
+                    message: e.to_string(),
+                })?
                 .to_rgb8();
             Ok(CapturedImage::now(image, None))
         }
@@ -108,13 +127,17 @@ mod tests {
     fn plays_images_in_name_order_then_ends_or_loops() {
         let dir = tempfile::tempdir().unwrap();
         for (name, shade) in [("b.png", 20u8), ("a.png", 10), ("c.jpg", 200)] {
-            image::RgbImage::from_pixel(8, 6, image::Rgb([shade; 3])).save(dir.path().join(name)).unwrap();
+            image::RgbImage::from_pixel(8, 6, image::Rgb([shade; 3]))
+                .save(dir.path().join(name))
+                .unwrap();
         }
         std::fs::write(dir.path().join("notes.txt"), "not a frame").unwrap();
         let mut folder = ImageFolder::open(dir.path(), 30.0, false).unwrap().unpaced();
         assert_eq!(folder.len(), 3);
         assert_eq!((folder.info().width, folder.info().height), (8, 6));
-        let shades: Vec<u8> = (0..3).map(|_| folder.next_frame().unwrap().image.get_pixel(0, 0)[0]).collect();
+        let shades: Vec<u8> = (0..3)
+            .map(|_| folder.next_frame().unwrap().image.get_pixel(0, 0)[0])
+            .collect();
         assert_eq!(&shades[..2], &[10, 20]);
         assert!(shades[2] > 150, "JPEG frame decoded: {shades:?}");
         assert!(matches!(folder.next_frame(), Err(CaptureError::EndOfStream)));
@@ -128,6 +151,9 @@ mod tests {
     #[test]
     fn an_empty_folder_is_an_error() {
         let dir = tempfile::tempdir().unwrap();
-        assert!(matches!(ImageFolder::open(dir.path(), 30.0, false), Err(CaptureError::Empty(_))));
+        assert!(matches!(
+            ImageFolder::open(dir.path(), 30.0, false),
+            Err(CaptureError::Empty(_))
+        ));
     }
 }

@@ -24,12 +24,23 @@ pub struct McapReplay {
 impl McapReplay {
     pub fn open(path: &Path, looping: bool) -> Result<Self, CaptureError> {
         let path_text = path.display().to_string();
-        let recording = read_recording(path).map_err(|e| CaptureError::Recording { path: path_text.clone(), message: e.to_string() })?;
+        let recording = read_recording(path).map_err(|e| CaptureError::Recording {
+            path: path_text.clone(),
+            message: e.to_string(),
+        })?;
         let frames = recording.frames();
         let first = frames.first().ok_or_else(|| CaptureError::Empty(path_text.clone()))?;
         let image = decode_jpeg(&first.jpeg, &path_text)?;
-        let span_s = frames.last().map(|l| l.capture_time_us.saturating_sub(first.capture_time_us)).unwrap_or(0) as f64 / 1e6;
-        let fps = if frames.len() > 1 && span_s > 0.0 { (frames.len() - 1) as f64 / span_s } else { 30.0 };
+        let span_s = frames
+            .last()
+            .map(|l| l.capture_time_us.saturating_sub(first.capture_time_us))
+            .unwrap_or(0) as f64
+            / 1e6;
+        let fps = if frames.len() > 1 && span_s > 0.0 {
+            (frames.len() - 1) as f64 / span_s
+        } else {
+            30.0
+        };
         Ok(Self {
             path: path.to_path_buf(),
             size: image.dimensions(),
@@ -60,7 +71,13 @@ impl McapReplay {
 
 impl FrameSource for McapReplay {
     fn info(&self) -> SourceInfo {
-        SourceInfo { kind: "replay", name: self.path.display().to_string(), width: self.size.0, height: self.size.1, fps: self.fps }
+        SourceInfo {
+            kind: "replay",
+            name: self.path.display().to_string(),
+            width: self.size.0,
+            height: self.size.1,
+            fps: self.fps,
+        }
     }
 
     fn next_frame(&mut self) -> Result<CapturedImage, CaptureError> {

@@ -32,7 +32,12 @@ pub struct CapturedImage {
 impl CapturedImage {
     /// A frame captured now.
     pub fn now(image: RgbImage, jpeg: Option<Vec<u8>>) -> Self {
-        Self { image, jpeg, captured_at: Instant::now(), capture_time_us: unix_time_us() }
+        Self {
+            image,
+            jpeg,
+            captured_at: Instant::now(),
+            capture_time_us: unix_time_us(),
+        }
     }
 }
 
@@ -55,7 +60,12 @@ pub enum CaptureError {
     #[error("no V4L2 camera with USB serial number {serial} (seen: {seen})")]
     NoCameraWithSerial { serial: String, seen: String },
     #[error("camera {device} does not offer MJPEG or YUYV at {width}x{height} (it offers {offered})")]
-    UnsupportedFormat { device: String, width: u32, height: u32, offered: String },
+    UnsupportedFormat {
+        device: String,
+        width: u32,
+        height: u32,
+        offered: String,
+    },
     #[error("camera {device} stopped delivering frames: {source}")]
     Vanished { device: String, source: std::io::Error },
     #[error("cannot decode a frame from {origin}: {message}")]
@@ -76,7 +86,10 @@ impl CaptureError {
     /// A source that failed this way may come back (a camera unplugged and replugged); the capture loop
     /// reports it and retries instead of giving up.
     pub fn is_transient(&self) -> bool {
-        matches!(self, CaptureError::Vanished { .. } | CaptureError::Open { .. } | CaptureError::NoCameraWithSerial { .. })
+        matches!(
+            self,
+            CaptureError::Vanished { .. } | CaptureError::Open { .. } | CaptureError::NoCameraWithSerial { .. }
+        )
     }
 }
 
@@ -91,12 +104,18 @@ pub trait FrameSource: Send {
 }
 
 pub fn unix_time_us() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_micros() as u64).unwrap_or(0)
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_micros() as u64)
+        .unwrap_or(0)
 }
 
 /// Decodes a JPEG to RGB.
 pub fn decode_jpeg(bytes: &[u8], origin: &str) -> Result<RgbImage, CaptureError> {
     image::load_from_memory_with_format(bytes, image::ImageFormat::Jpeg)
         .map(|img| img.to_rgb8())
-        .map_err(|e| CaptureError::Decode { origin: origin.to_string(), message: e.to_string() })
+        .map_err(|e| CaptureError::Decode {
+            origin: origin.to_string(),
+            message: e.to_string(),
+        })
 }

@@ -19,7 +19,9 @@ pub type LedCurrents = Arc<dyn Fn() -> [f32; 4] + Send + Sync>;
 #[derive(Clone, Debug)]
 enum SceneMode {
     /// The demo animation, timed from when the script (re)started.
-    Script { since: Instant },
+    Script {
+        since: Instant,
+    },
     Hold(Scene),
 }
 
@@ -32,7 +34,10 @@ pub struct SceneControl {
 
 impl SceneControl {
     pub fn new(pad: PadGeometry) -> Self {
-        Self { mode: Arc::new(Mutex::new(SceneMode::Script { since: Instant::now() })), pad }
+        Self {
+            mode: Arc::new(Mutex::new(SceneMode::Script { since: Instant::now() })),
+            pad,
+        }
     }
 
     /// Holds `scene` (after validating it against the pad) until another scene or the script replaces it.
@@ -83,10 +88,22 @@ pub struct SimulatedCamera {
 impl SimulatedCamera {
     pub fn new(width: u32, height: u32, fps: f64, led_currents: LedCurrents) -> Result<Self, CaptureError> {
         let model = SensorModel::real(width, height);
-        let control = SceneControl::new(model.pad.clone());
+        let control = SceneControl::new(model.pad);
         let renderer = Renderer::new(model).map_err(|e| CaptureError::Simulator(e.to_string()))?;
-        let fps = if fps.is_finite() && fps > 0.0 { fps } else { SIM_DEFAULT_FPS };
-        Ok(Self { renderer, control, led_currents, period: Duration::from_secs_f64(1.0 / fps), next_due: None, frames: 0, size: (width, height) })
+        let fps = if fps.is_finite() && fps > 0.0 {
+            fps
+        } else {
+            SIM_DEFAULT_FPS
+        };
+        Ok(Self {
+            renderer,
+            control,
+            led_currents,
+            period: Duration::from_secs_f64(1.0 / fps),
+            next_due: None,
+            frames: 0,
+            size: (width, height),
+        })
     }
 
     pub fn scene_control(&self) -> SceneControl {
@@ -119,8 +136,10 @@ impl FrameSource for SimulatedCamera {
         self.next_due = Some(due + self.period);
         let scene = self.control.current_scene();
         let currents = (self.led_currents)();
-        let (image, _truth) =
-            self.renderer.render(&scene, currents, self.frames).map_err(|e| CaptureError::Simulator(e.to_string()))?;
+        let (image, _truth) = self
+            .renderer
+            .render(&scene, currents, self.frames)
+            .map_err(|e| CaptureError::Simulator(e.to_string()))?;
         self.frames += 1;
         // Stamped when the frame exists, as a camera driver stamps it on arrival.
         Ok(CapturedImage::now(image, None))

@@ -49,7 +49,12 @@ pub struct V4l2Options {
 
 impl Default for V4l2Options {
     fn default() -> Self {
-        Self { width: 640, height: 480, fps: 30, format: None }
+        Self {
+            width: 640,
+            height: 480,
+            fps: 30,
+            format: None,
+        }
     }
 }
 
@@ -63,7 +68,9 @@ pub struct CameraInfo {
 
 /// Lists V4L2 capture nodes with their names and USB serial numbers.
 pub fn list_cameras() -> Vec<CameraInfo> {
-    let Ok(entries) = std::fs::read_dir("/sys/class/video4linux") else { return Vec::new() };
+    let Ok(entries) = std::fs::read_dir("/sys/class/video4linux") else {
+        return Vec::new();
+    };
     let mut cameras: Vec<CameraInfo> = entries
         .filter_map(|e| e.ok())
         .filter_map(|entry| {
@@ -72,8 +79,15 @@ pub fn list_cameras() -> Vec<CameraInfo> {
                 return None;
             }
             let sys = entry.path();
-            let name = std::fs::read_to_string(sys.join("name")).unwrap_or_default().trim().to_string();
-            Some(CameraInfo { path: format!("/dev/{node}"), name, usb_serial: usb_serial_of(&sys) })
+            let name = std::fs::read_to_string(sys.join("name"))
+                .unwrap_or_default()
+                .trim()
+                .to_string();
+            Some(CameraInfo {
+                path: format!("/dev/{node}"),
+                name,
+                usb_serial: usb_serial_of(&sys),
+            })
         })
         .collect();
     cameras.sort_by(|a, b| a.path.cmp(&b.path));
@@ -112,7 +126,12 @@ struct OpenCamera {
 
 impl V4l2Camera {
     pub fn open(selector: CameraSelector, options: V4l2Options) -> Result<Self, CaptureError> {
-        let mut camera = Self { device_path: describe(&selector), selector, options, open: None };
+        let mut camera = Self {
+            device_path: describe(&selector),
+            selector,
+            options,
+            open: None,
+        };
         camera.reopen()?;
         Ok(camera)
     }
@@ -127,9 +146,11 @@ impl V4l2Camera {
                     .iter()
                     .filter(|c| c.usb_serial.as_deref() == Some(serial.as_str()))
                     .map(|c| PathBuf::from(&c.path))
-                    .find(|p| Device::with_path(p).and_then(|d| d.query_caps()).is_ok_and(|caps| {
-                        caps.capabilities.contains(v4l::capability::Flags::VIDEO_CAPTURE)
-                    }))
+                    .find(|p| {
+                        Device::with_path(p)
+                            .and_then(|d| d.query_caps())
+                            .is_ok_and(|caps| caps.capabilities.contains(v4l::capability::Flags::VIDEO_CAPTURE))
+                    })
                     .ok_or_else(|| CaptureError::NoCameraWithSerial {
                         serial: serial.clone(),
                         seen: cameras
@@ -152,9 +173,17 @@ fn describe(selector: &CameraSelector) -> String {
 
 fn open_camera(path: &Path, options: &V4l2Options) -> Result<OpenCamera, CaptureError> {
     let device_name = path.display().to_string();
-    let open_error = |source| CaptureError::Open { device: device_name.clone(), source };
+    let open_error = |source| CaptureError::Open {
+        device: device_name.clone(),
+        source,
+    };
     let device = Device::with_path(path).map_err(open_error)?;
-    let offered: Vec<FourCC> = device.enum_formats().map_err(open_error)?.into_iter().map(|d| d.fourcc).collect();
+    let offered: Vec<FourCC> = device
+        .enum_formats()
+        .map_err(open_error)?
+        .into_iter()
+        .map(|d| d.fourcc)
+        .collect();
     let mjpeg = FourCC::new(b"MJPG");
     let yuyv = FourCC::new(b"YUYV");
     let wanted: Vec<(PixelFormat, FourCC)> = match options.format {
@@ -168,7 +197,10 @@ fn open_camera(path: &Path, options: &V4l2Options) -> Result<OpenCamera, Capture
         height: options.height,
         offered: offered.iter().map(|f| f.to_string()).collect::<Vec<_>>().join(", "),
     };
-    let (format, fourcc) = wanted.into_iter().find(|(_, f)| offered.contains(f)).ok_or_else(unsupported)?;
+    let (format, fourcc) = wanted
+        .into_iter()
+        .find(|(_, f)| offered.contains(f))
+        .ok_or_else(unsupported)?;
     let mut requested = device.format().map_err(open_error)?;
     requested.width = options.width;
     requested.height = options.height;
@@ -177,7 +209,9 @@ fn open_camera(path: &Path, options: &V4l2Options) -> Result<OpenCamera, Capture
     if granted.fourcc != fourcc {
         return Err(unsupported());
     }
-    let params = device.set_params(&v4l::video::capture::Parameters::with_fps(options.fps.max(1))).map_err(open_error)?;
+    let params = device
+        .set_params(&v4l::video::capture::Parameters::with_fps(options.fps.max(1)))
+        .map_err(open_error)?;
     let fps = if params.interval.numerator > 0 {
         params.interval.denominator as f64 / params.interval.numerator as f64
     } else {
@@ -186,14 +220,30 @@ fn open_camera(path: &Path, options: &V4l2Options) -> Result<OpenCamera, Capture
     let mut stream = Stream::with_buffers(&device, Type::VideoCapture, 4).map_err(open_error)?;
     // A camera that stops answering for this long has vanished (unplugged, or the driver hung).
     stream.set_timeout(Duration::from_secs(2));
-    Ok(OpenCamera { stream, _device: device, format, width: granted.width, height: granted.height, fps })
+    Ok(OpenCamera {
+        stream,
+        _device: device,
+        format,
+        width: granted.width,
+        height: granted.height,
+        fps,
+    })
 }
 
 impl FrameSource for V4l2Camera {
     fn info(&self) -> SourceInfo {
-        let (width, height, fps) =
-            self.open.as_ref().map(|o| (o.width, o.height, o.fps)).unwrap_or((self.options.width, self.options.height, self.options.fps as f64));
-        SourceInfo { kind: "camera", name: self.device_path.clone(), width, height, fps }
+        let (width, height, fps) = self.open.as_ref().map(|o| (o.width, o.height, o.fps)).unwrap_or((
+            self.options.width,
+            self.options.height,
+            self.options.fps as f64,
+        ));
+        SourceInfo {
+            kind: "camera",
+            name: self.device_path.clone(),
+            width,
+            height,
+            fps,
+        }
     }
 
     fn next_frame(&mut self) -> Result<CapturedImage, CaptureError> {
@@ -204,7 +254,10 @@ impl FrameSource for V4l2Camera {
                 source: std::io::Error::new(std::io::ErrorKind::NotConnected, "camera is not open"),
             });
         };
-        let result = open.stream.next().map(|(buf, meta)| buf[..(meta.bytesused as usize).min(buf.len())].to_vec());
+        let result = open
+            .stream
+            .next()
+            .map(|(buf, meta)| buf[..(meta.bytesused as usize).min(buf.len())].to_vec());
         let bytes = match result {
             Ok(bytes) => bytes,
             Err(source) => {
@@ -218,8 +271,10 @@ impl FrameSource for V4l2Camera {
                 Ok(CapturedImage::now(image, Some(bytes)))
             }
             PixelFormat::Yuyv => {
-                let image = yuyv_to_rgb(&bytes, open.width, open.height)
-                    .ok_or_else(|| CaptureError::Decode { origin: device, message: format!("short YUYV frame ({} bytes)", bytes.len()) })?;
+                let image = yuyv_to_rgb(&bytes, open.width, open.height).ok_or_else(|| CaptureError::Decode {
+                    origin: device,
+                    message: format!("short YUYV frame ({} bytes)", bytes.len()),
+                })?;
                 Ok(CapturedImage::now(image, None))
             }
         }
@@ -237,12 +292,17 @@ impl FrameSource for V4l2Camera {
 /// YUYV 4:2:2 (BT.601, limited range) to RGB.
 pub fn yuyv_to_rgb(bytes: &[u8], width: u32, height: u32) -> Option<RgbImage> {
     let pixels = width as usize * height as usize;
-    if width % 2 != 0 || bytes.len() < pixels * 2 {
+    if !width.is_multiple_of(2) || bytes.len() < pixels * 2 {
         return None;
     }
     let mut rgb = Vec::with_capacity(pixels * 3);
     for quad in bytes[..pixels * 2].chunks_exact(4) {
-        let (y0, u, y1, v) = (quad[0] as f32, quad[1] as f32 - 128.0, quad[2] as f32, quad[3] as f32 - 128.0);
+        let (y0, u, y1, v) = (
+            quad[0] as f32,
+            quad[1] as f32 - 128.0,
+            quad[2] as f32,
+            quad[3] as f32 - 128.0,
+        );
         for y in [y0, y1] {
             let c = 1.164 * (y - 16.0);
             rgb.push((c + 1.596 * v).clamp(0.0, 255.0) as u8);
@@ -276,7 +336,10 @@ mod tests {
 
     #[test]
     fn selector_tells_paths_from_serials() {
-        assert_eq!(CameraSelector::parse("/dev/video0"), CameraSelector::Path("/dev/video0".into()));
+        assert_eq!(
+            CameraSelector::parse("/dev/video0"),
+            CameraSelector::Path("/dev/video0".into())
+        );
         assert_eq!(CameraSelector::parse("SN1234"), CameraSelector::Serial("SN1234".into()));
     }
 }

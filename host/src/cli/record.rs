@@ -35,17 +35,32 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     init_logging();
     if args.output.extension().and_then(|e| e.to_str()) != Some("mcap") {
-        anyhow::bail!("the recording's file name must end in .mcap (got {})", args.output.display());
+        anyhow::bail!(
+            "the recording's file name must end in .mcap (got {})",
+            args.output.display()
+        );
     }
     let config = load_config(args.source.config.as_ref())?;
     let frames = frame_choice(&args.source);
     let board = board_choice(&args.source, &frames);
-    eprintln!("{}", describe_start(&frames, &board).replacen("nusense serve", "nusense record", 1));
+    eprintln!(
+        "{}",
+        describe_start(&frames, &board).replacen("nusense serve", "nusense record", 1)
+    );
     let sources = open_sources(&frames, &board).context("opening the frame source and LED board")?;
-    let pipeline = Pipeline::start(sources.frames, sources.board, PipelineOptions::new(config, args.source.mode.into()))?;
+    let pipeline = Pipeline::start(
+        sources.frames,
+        sources.board,
+        PipelineOptions::new(config, args.source.mode.into()),
+    )?;
     let handle = pipeline.handle();
-    let options = RecorderOptions { flush_interval: Duration::from_millis(args.flush_ms.max(10)), ..Default::default() };
-    handle.start_recording(&args.output, options).with_context(|| format!("creating {}", args.output.display()))?;
+    let options = RecorderOptions {
+        flush_interval: Duration::from_millis(args.flush_ms.max(10)),
+        ..Default::default()
+    };
+    handle
+        .start_recording(&args.output, options)
+        .with_context(|| format!("creating {}", args.output.display()))?;
     eprintln!("nusense record: writing {} (stop with Ctrl-C)", args.output.display());
 
     let interrupted = Arc::new(AtomicBool::new(false));
@@ -58,13 +73,17 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         flag.store(true, Ordering::Relaxed);
     });
     let started = Instant::now();
-    let deadline = args.duration.filter(|d| d.is_finite() && *d > 0.0).map(Duration::from_secs_f64);
+    let deadline = args
+        .duration
+        .filter(|d| d.is_finite() && *d > 0.0)
+        .map(Duration::from_secs_f64);
     loop {
         std::thread::sleep(Duration::from_millis(20));
         let status = handle.status();
         let done_frames = args.frames.is_some_and(|n| status.frames_captured >= n);
         let done_time = deadline.is_some_and(|d| started.elapsed() >= d);
-        let source_ended = status.capture_finished && status.frames_processed >= status.frames_captured.saturating_sub(status.frames_dropped);
+        let source_ended = status.capture_finished
+            && status.frames_processed >= status.frames_captured.saturating_sub(status.frames_dropped);
         if interrupted.load(Ordering::Relaxed) || done_frames || done_time || source_ended {
             break;
         }

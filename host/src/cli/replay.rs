@@ -32,7 +32,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     } else {
         let replay = McapReplay::open(&args.input, false)?.unpaced();
         if replay.truncated {
-            eprintln!("nusense replay: {} was cut short (its recorder was killed); replaying what survived", args.input.display());
+            eprintln!(
+                "nusense replay: {} was cut short (its recorder was killed); replaying what survived",
+                args.input.display()
+            );
         }
         Box::new(replay)
     };
@@ -41,7 +44,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let mut failures = 0usize;
     let started = Instant::now();
     if !args.json {
-        println!("{:>6} {:>8} {:>9} {:>10} {:>16} {:>8} {:>9}", "frame", "contact", "force N", "gamma", "contact mm", "edge °", "points");
+        println!(
+            "{:>6} {:>8} {:>9} {:>10} {:>16} {:>8} {:>9}",
+            "frame", "contact", "force N", "gamma", "contact mm", "edge °", "points"
+        );
     }
     loop {
         let frame = match source.next_frame() {
@@ -66,8 +72,12 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                 if r.contact { "yes" } else { "no" },
                 r.force_n,
                 r.gamma,
-                r.contact_mm.map(|c| format!("{:.1}, {:.1}", c[0], c[1])).unwrap_or_else(|| "-".into()),
-                r.edge_angle_deg.map(|a| format!("{a:.1}")).unwrap_or_else(|| "-".into()),
+                r.contact_mm
+                    .map(|c| format!("{:.1}, {:.1}", c[0], c[1]))
+                    .unwrap_or_else(|| "-".into()),
+                r.edge_angle_deg
+                    .map(|a| format!("{a:.1}"))
+                    .unwrap_or_else(|| "-".into()),
                 r.points_detected,
                 r.points_expected
             ),
@@ -88,5 +98,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         "nusense replay: {frames} frames ({failures} without an estimate) in {:.2} s",
         started.elapsed().as_secs_f64()
     );
-    Ok(if failures == 0 { ExitCode::SUCCESS } else { ExitCode::from(2) })
+    Ok(if failures == 0 {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(2)
+    })
 }

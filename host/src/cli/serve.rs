@@ -7,7 +7,9 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context};
 use nusense::api::{self, AppState};
-use nusense::capture::{CameraSelector, PixelFormat, V4l2Options, SIM_DEFAULT_FPS, SIM_DEFAULT_HEIGHT, SIM_DEFAULT_WIDTH};
+use nusense::capture::{
+    CameraSelector, PixelFormat, V4l2Options, SIM_DEFAULT_FPS, SIM_DEFAULT_HEIGHT, SIM_DEFAULT_WIDTH,
+};
 use nusense::pipeline::{open_sources, BoardChoice, FrameChoice, Pipeline, PipelineOptions};
 use nusense_estimator::{Mode, SensorConfig};
 
@@ -103,9 +105,17 @@ pub fn frame_choice(args: &SourceArgs) -> FrameChoice {
             },
         }
     } else if let Some(path) = &args.replay {
-        FrameChoice::Replay { path: path.clone(), fps: args.fps, looping: args.looping }
+        FrameChoice::Replay {
+            path: path.clone(),
+            fps: args.fps,
+            looping: args.looping,
+        }
     } else {
-        FrameChoice::Simulator { width: args.width, height: args.height, fps: args.fps }
+        FrameChoice::Simulator {
+            width: args.width,
+            height: args.height,
+            fps: args.fps,
+        }
     }
 }
 
@@ -119,7 +129,9 @@ pub fn board_choice(args: &SourceArgs, frames: &FrameChoice) -> BoardChoice {
 
 pub fn load_config(path: Option<&PathBuf>) -> anyhow::Result<SensorConfig> {
     match path {
-        Some(path) => SensorConfig::load(path).with_context(|| format!("loading the sensor configuration {}", path.display())),
+        Some(path) => {
+            SensorConfig::load(path).with_context(|| format!("loading the sensor configuration {}", path.display()))
+        }
         None => Ok(SensorConfig::default()),
     }
 }
@@ -131,12 +143,17 @@ pub fn describe_start(frames: &FrameChoice, board: &BoardChoice) -> String {
             format!("on the SIMULATOR: no camera, a simulated sensor renders {width}x{height} frames at {fps} fps")
         }
         FrameChoice::Camera { selector, options } => {
-            format!("on camera {selector:?} at {}x{} {} fps", options.width, options.height, options.fps)
+            format!(
+                "on camera {selector:?} at {}x{} {} fps",
+                options.width, options.height, options.fps
+            )
         }
         FrameChoice::Replay { path, .. } => format!("replaying {}", path.display()),
     };
     let board = match board {
-        BoardChoice::Virtual => "a virtual LED board (the firmware's logic with simulated LEDs, over a pty)".to_string(),
+        BoardChoice::Virtual => {
+            "a virtual LED board (the firmware's logic with simulated LEDs, over a pty)".to_string()
+        }
         BoardChoice::Port(port) => format!("the LED board on {port}"),
         BoardChoice::None => "no LED board".to_string(),
     };
@@ -153,7 +170,9 @@ pub fn init_logging() {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     init_logging();
-    let listen = args.listen.unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], DEFAULT_PORT)));
+    let listen = args
+        .listen
+        .unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], DEFAULT_PORT)));
     let token = args.token.clone().filter(|t| !t.is_empty());
     if !listen.ip().is_loopback() && token.is_none() {
         bail!("listening on {listen} (beyond this machine) requires a token: pass --token or set NUSENSE_TOKEN");
@@ -163,14 +182,23 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let board = board_choice(&args.source, &frames);
     eprintln!("{}", describe_start(&frames, &board));
     let sources = open_sources(&frames, &board).context("opening the frame source and LED board")?;
-    let pipeline = Pipeline::start(sources.frames, sources.board, PipelineOptions::new(config, args.source.mode.into()))?;
+    let pipeline = Pipeline::start(
+        sources.frames,
+        sources.board,
+        PipelineOptions::new(config, args.source.mode.into()),
+    )?;
     let mut state = AppState::new(pipeline.handle(), sources.scene, token);
     if let Some(dir) = &args.recordings {
         state.recordings_dir = dir.clone();
     }
-    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
     runtime.block_on(async move {
-        let listener = tokio::net::TcpListener::bind(listen).await.with_context(|| format!("listening on {listen}"))?;
+        let listener = tokio::net::TcpListener::bind(listen)
+            .await
+            .with_context(|| format!("listening on {listen}"))?;
         let local = listener.local_addr()?;
         eprintln!("nusense serve: dashboard at http://{local}/  (API under /api/, stop with Ctrl-C)");
         api::serve(listener, state, async {

@@ -25,7 +25,11 @@ pub enum BoardError {
     #[error("no LED board is connected")]
     NoBoard,
     #[error("{side:?} LED current {requested_ma} mA is above the {limit_ma} mA limit")]
-    AboveLimit { side: Side, requested_ma: u16, limit_ma: u16 },
+    AboveLimit {
+        side: Side,
+        requested_ma: u16,
+        limit_ma: u16,
+    },
     #[error("the LED board did not accept the command: {0}")]
     Link(String),
 }
@@ -43,7 +47,11 @@ impl LedCommand {
         for side in Side::ALL {
             if let Some(requested_ma) = self.current_ma[side.index()] {
                 if requested_ma > LED_LIMIT_MA {
-                    return Err(BoardError::AboveLimit { side, requested_ma, limit_ma: LED_LIMIT_MA });
+                    return Err(BoardError::AboveLimit {
+                        side,
+                        requested_ma,
+                        limit_ma: LED_LIMIT_MA,
+                    });
                 }
             }
         }
@@ -84,21 +92,6 @@ impl Board for NoBoard {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn currents_above_the_limit_are_refused_naming_the_side() {
-        let command = LedCommand { current_ma: [Some(100), None, Some(LED_LIMIT_MA + 1), None], enabled: None };
-        let error = command.validate().unwrap_err();
-        assert!(matches!(error, BoardError::AboveLimit { side: Side::Bottom, .. }), "{error}");
-        assert!(error.to_string().contains("121 mA"), "{error}");
-        let at_limit = LedCommand { current_ma: [Some(LED_LIMIT_MA); 4], enabled: Some(true) };
-        assert!(at_limit.validate().is_ok());
-    }
-}
-
 /// A board kept connected by the device link (host/src/device), optionally the virtual board behind a pty.
 pub struct LinkedBoard {
     link: crate::device::SupervisedLink,
@@ -122,7 +115,11 @@ impl Board for LinkedBoard {
         let mut led = LedState::default();
         for (i, channel) in telemetry.channels.iter().enumerate() {
             led.setpoint_ma[i] = channel.setpoint_ma;
-            led.measured_ma[i] = if channel.measured_ma.is_finite() { channel.measured_ma } else { 0.0 };
+            led.measured_ma[i] = if channel.measured_ma.is_finite() {
+                channel.measured_ma
+            } else {
+                0.0
+            };
             led.enabled[i] = channel.enabled;
             led.any_fault |= channel.faults.any();
         }
@@ -133,7 +130,9 @@ impl Board for LinkedBoard {
         if let Some(board) = &self.virtual_board {
             return board.led_currents_ma();
         }
-        self.led_state().map(|led| led.measured_ma).unwrap_or([0.0; CHANNEL_COUNT])
+        self.led_state()
+            .map(|led| led.measured_ma)
+            .unwrap_or([0.0; CHANNEL_COUNT])
     }
 
     fn set_leds(&self, command: &LedCommand) -> Result<(), BoardError> {
@@ -147,7 +146,10 @@ impl Board for LinkedBoard {
         let first = command.current_ma[0];
         if first.is_some() && command.current_ma.iter().all(|c| *c == first) {
             // One command for all four: they change in the same regulator step.
-            return self.link.set_led(Channel::All, first.unwrap_or(0), command.enabled.unwrap_or(true)).map_err(link_error);
+            return self
+                .link
+                .set_led(Channel::All, first.unwrap_or(0), command.enabled.unwrap_or(true))
+                .map_err(link_error);
         }
         for side in Side::ALL {
             let i = side.index();
@@ -160,13 +162,19 @@ impl Board for LinkedBoard {
                 .or(state.requested[i].map(|r| r.current_ma))
                 .or(state.telemetry.map(|t| t.channels[i].setpoint_ma))
                 .unwrap_or(0);
-            self.link.set_led(Channel::One(side), current_ma, command.enabled.unwrap_or(true)).map_err(link_error)?;
+            self.link
+                .set_led(Channel::One(side), current_ma, command.enabled.unwrap_or(true))
+                .map_err(link_error)?;
         }
         Ok(())
     }
 
     fn status(&self) -> serde_json::Value {
-        let kind = if self.virtual_board.is_some() { "virtual" } else { "serial" };
+        let kind = if self.virtual_board.is_some() {
+            "virtual"
+        } else {
+            "serial"
+        };
         let mut status = serde_json::to_value(self.link.state()).unwrap_or_default();
         if let Some(object) = status.as_object_mut() {
             object.insert("kind".into(), kind.into());
@@ -183,7 +191,8 @@ impl Board for LinkedBoard {
             .spawn(move || {
                 for event in events {
                     if let crate::device::BoardEvent::Telemetry(telemetry) = event {
-                        let json = serde_json::json!({ "time_us": crate::capture::unix_time_us(), "telemetry": telemetry });
+                        let json =
+                            serde_json::json!({ "time_us": crate::capture::unix_time_us(), "telemetry": telemetry });
                         if sender.send(json.to_string()).is_err() {
                             return;
                         }
@@ -192,5 +201,29 @@ impl Board for LinkedBoard {
             })
             .ok()?;
         Some(receiver)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn currents_above_the_limit_are_refused_naming_the_side() {
+        let command = LedCommand {
+            current_ma: [Some(100), None, Some(LED_LIMIT_MA + 1), None],
+            enabled: None,
+        };
+        let error = command.validate().unwrap_err();
+        assert!(
+            matches!(error, BoardError::AboveLimit { side: Side::Bottom, .. }),
+            "{error}"
+        );
+        assert!(error.to_string().contains("121 mA"), "{error}");
+        let at_limit = LedCommand {
+            current_ma: [Some(LED_LIMIT_MA); 4],
+            enabled: Some(true),
+        };
+        assert!(at_limit.validate().is_ok());
     }
 }

@@ -20,7 +20,7 @@ use serde::Serialize;
 use tokio::sync::broadcast;
 
 use crate::capture::{unix_time_us, CaptureError, FrameSource, SourceInfo};
-use crate::record::{RecordError, RecordItem, Recorder, RecorderOptions, RecordSummary};
+use crate::record::{RecordError, RecordItem, RecordSummary, Recorder, RecorderOptions};
 
 pub use board::{Board, BoardError, LedCommand, LedState, LinkedBoard, NoBoard, LED_LIMIT_MA};
 pub use queue::DropOldestQueue;
@@ -74,7 +74,12 @@ pub struct PipelineOptions {
 
 impl PipelineOptions {
     pub fn new(config: SensorConfig, mode: Mode) -> Self {
-        Self { config, mode, queue_len: 2, broadcast_len: 64 }
+        Self {
+            config,
+            mode,
+            queue_len: 2,
+            broadcast_len: 64,
+        }
     }
 }
 
@@ -145,11 +150,18 @@ pub struct Pipeline {
 }
 
 impl Pipeline {
-    pub fn start(source: Box<dyn FrameSource>, board: Arc<dyn Board>, options: PipelineOptions) -> Result<Self, PipelineError> {
+    pub fn start(
+        source: Box<dyn FrameSource>,
+        board: Arc<dyn Board>,
+        options: PipelineOptions,
+    ) -> Result<Self, PipelineError> {
         let (readings, _) = broadcast::channel(options.broadcast_len.max(1));
         let shared = Arc::new(Shared {
             source_info: Mutex::new(source.info()),
-            capture_state: Mutex::new(CaptureState { running: true, ..Default::default() }),
+            capture_state: Mutex::new(CaptureState {
+                running: true,
+                ..Default::default()
+            }),
             queue: DropOldestQueue::new(options.queue_len),
             counters: Counters::default(),
             latency: Mutex::new(LatencyWindow::new(1024)),
@@ -187,7 +199,10 @@ impl Pipeline {
                     .map_err(|e| PipelineError::Thread("telemetry", e))?,
             );
         }
-        Ok(Self { handle: PipelineHandle { shared }, threads })
+        Ok(Self {
+            handle: PipelineHandle { shared },
+            threads,
+        })
     }
 
     pub fn handle(&self) -> PipelineHandle {
@@ -201,7 +216,14 @@ impl Drop for Pipeline {
         for thread in self.threads.drain(..) {
             let _ = thread.join();
         }
-        if let Some(recorder) = self.handle.shared.recorder.lock().unwrap_or_else(|e| e.into_inner()).take() {
+        if let Some(recorder) = self
+            .handle
+            .shared
+            .recorder
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take()
+        {
             if let Err(error) = recorder.finish() {
                 tracing::warn!("recording did not finish cleanly: {error}");
             }
@@ -229,8 +251,12 @@ fn capture_loop(mut source: Box<dyn FrameSource>, shared: &Shared) {
                         jpeg: jpeg.clone(),
                     });
                 }
-                *shared.latest_frame.write().unwrap_or_else(|e| e.into_inner()) =
-                    Some(FrameSnapshot { frame_id, capture_time_us: frame.capture_time_us, image: image.clone(), jpeg });
+                *shared.latest_frame.write().unwrap_or_else(|e| e.into_inner()) = Some(FrameSnapshot {
+                    frame_id,
+                    capture_time_us: frame.capture_time_us,
+                    image: image.clone(),
+                    jpeg,
+                });
                 shared.queue.push(QueuedFrame {
                     frame_id,
                     captured_at: frame.captured_at,
@@ -264,14 +290,22 @@ fn capture_loop(mut source: Box<dyn FrameSource>, shared: &Shared) {
                         tracing::info!("capture: {} is back", source.info().name);
                     }
                     Err(error) => {
-                        shared.capture_state.lock().unwrap_or_else(|e| e.into_inner()).last_error = Some(error.to_string());
+                        shared
+                            .capture_state
+                            .lock()
+                            .unwrap_or_else(|e| e.into_inner())
+                            .last_error = Some(error.to_string());
                     }
                 }
             }
             Err(error) => {
                 // A frame that does not decode is lost; the next one may be fine.
                 shared.counters.capture_errors.fetch_add(1, Ordering::Relaxed);
-                shared.capture_state.lock().unwrap_or_else(|e| e.into_inner()).last_error = Some(error.to_string());
+                shared
+                    .capture_state
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .last_error = Some(error.to_string());
                 tracing::warn!("capture: {error}");
             }
         }
@@ -289,7 +323,9 @@ fn estimate_loop(config: SensorConfig, mode: Mode, shared: &Shared) {
     let mut estimator: Option<Estimator> = None;
     let mut reference_frame_id = None;
     while !shared.stop.load(Ordering::Relaxed) {
-        let Some(frame) = shared.queue.pop_timeout(Duration::from_millis(50)) else { continue };
+        let Some(frame) = shared.queue.pop_timeout(Duration::from_millis(50)) else {
+            continue;
+        };
         let dequeued_at = Instant::now();
         let mut error = None;
         if shared.tare_requested.swap(false, Ordering::Relaxed) {
@@ -329,7 +365,11 @@ fn estimate_loop(config: SensorConfig, mode: Mode, shared: &Shared) {
             error,
             led: shared.board.led_state(),
         };
-        shared.latency.lock().unwrap_or_else(|e| e.into_inner()).push(reading.latency_ms);
+        shared
+            .latency
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(reading.latency_ms);
         publish(shared, reading);
     }
 }
@@ -337,7 +377,8 @@ fn estimate_loop(config: SensorConfig, mode: Mode, shared: &Shared) {
 fn publish(shared: &Shared, reading: DaemonReading) {
     let json = serde_json::to_string(&reading).unwrap_or_else(|e| {
         // Only a non-finite number could fail here, and the estimator promises none; say so rather than panic.
-        serde_json::json!({ "frame_id": reading.frame_id, "error": format!("reading not serialisable: {e}") }).to_string()
+        serde_json::json!({ "frame_id": reading.frame_id, "error": format!("reading not serialisable: {e}") })
+            .to_string()
     });
     let published = Arc::new(PublishedReading { reading, json });
     if let Some(recorder) = shared.recorder.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
@@ -357,7 +398,10 @@ fn telemetry_loop(telemetry: std::sync::mpsc::Receiver<String>, shared: &Shared)
         match telemetry.recv_timeout(Duration::from_millis(100)) {
             Ok(json) => {
                 if let Some(recorder) = shared.recorder.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
-                    recorder.record(RecordItem::Telemetry { time_us: unix_time_us(), json: json.into() });
+                    recorder.record(RecordItem::Telemetry {
+                        time_us: unix_time_us(),
+                        json: json.into(),
+                    });
                 }
             }
             Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
@@ -403,11 +447,19 @@ impl PipelineHandle {
     }
 
     pub fn latest_reading(&self) -> Option<Arc<PublishedReading>> {
-        self.shared.latest_reading.read().unwrap_or_else(|e| e.into_inner()).clone()
+        self.shared
+            .latest_reading
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
 
     pub fn latest_frame(&self) -> Option<FrameSnapshot> {
-        self.shared.latest_frame.read().unwrap_or_else(|e| e.into_inner()).clone()
+        self.shared
+            .latest_frame
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
 
     /// The next frame becomes the rest frame.
@@ -444,16 +496,21 @@ impl PipelineHandle {
     pub fn status(&self) -> PipelineStatus {
         let shared = &self.shared;
         let capture = shared.capture_state.lock().unwrap_or_else(|e| e.into_inner()).clone();
-        let recording = shared.recorder.lock().unwrap_or_else(|e| e.into_inner()).as_ref().map(|r| {
-            let stats = r.stats();
-            RecordingStatus {
-                path: r.path().display().to_string(),
-                frames: stats.frames.load(Ordering::Relaxed),
-                readings: stats.readings.load(Ordering::Relaxed),
-                telemetry: stats.telemetry.load(Ordering::Relaxed),
-                dropped: stats.dropped.load(Ordering::Relaxed),
-            }
-        });
+        let recording = shared
+            .recorder
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .as_ref()
+            .map(|r| {
+                let stats = r.stats();
+                RecordingStatus {
+                    path: r.path().display().to_string(),
+                    frames: stats.frames.load(Ordering::Relaxed),
+                    readings: stats.readings.load(Ordering::Relaxed),
+                    telemetry: stats.telemetry.load(Ordering::Relaxed),
+                    dropped: stats.dropped.load(Ordering::Relaxed),
+                }
+            });
         PipelineStatus {
             source: shared.source_info.lock().unwrap_or_else(|e| e.into_inner()).clone(),
             capture_running: capture.running,

@@ -15,7 +15,12 @@ pub struct DropOldestQueue<T> {
 
 impl<T> DropOldestQueue<T> {
     pub fn new(capacity: usize) -> Self {
-        Self { items: Mutex::new(VecDeque::new()), ready: Condvar::new(), capacity: capacity.max(1), dropped: AtomicU64::new(0) }
+        Self {
+            items: Mutex::new(VecDeque::new()),
+            ready: Condvar::new(),
+            capacity: capacity.max(1),
+            dropped: AtomicU64::new(0),
+        }
     }
 
     /// Adds an item; returns true when an older one had to be dropped for it.
@@ -36,8 +41,10 @@ impl<T> DropOldestQueue<T> {
     /// The oldest item, waiting at most `timeout` for one.
     pub fn pop_timeout(&self, timeout: Duration) -> Option<T> {
         let items = self.items.lock().unwrap_or_else(|e| e.into_inner());
-        let (mut items, _) =
-            self.ready.wait_timeout_while(items, timeout, |items| items.is_empty()).unwrap_or_else(|e| e.into_inner());
+        let (mut items, _) = self
+            .ready
+            .wait_timeout_while(items, timeout, |items| items.is_empty())
+            .unwrap_or_else(|e| e.into_inner());
         items.pop_front()
     }
 

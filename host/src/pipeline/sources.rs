@@ -4,7 +4,8 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use crate::capture::{
-    CameraSelector, CaptureError, FrameSource, ImageFolder, McapReplay, SceneControl, SimulatedCamera, V4l2Camera, V4l2Options,
+    CameraSelector, CaptureError, FrameSource, ImageFolder, McapReplay, SceneControl, SimulatedCamera, V4l2Camera,
+    V4l2Options,
 };
 use crate::device::{BoardTarget, SupervisedLink, SupervisorOptions};
 use crate::virtual_board::VirtualBoard;
@@ -16,7 +17,10 @@ use super::{Board, LinkedBoard, NoBoard};
 pub enum FrameChoice {
     /// The simulated sensor, lit by the (virtual or real) board's LED currents.
     Simulator { width: u32, height: u32, fps: f64 },
-    Camera { selector: CameraSelector, options: V4l2Options },
+    Camera {
+        selector: CameraSelector,
+        options: V4l2Options,
+    },
     /// A folder of images or an `.mcap` recording.
     Replay { path: PathBuf, fps: f64, looping: bool },
 }
@@ -49,7 +53,10 @@ pub fn open_sources(frames: &FrameChoice, board: &BoardChoice) -> Result<Sources
     let board: Arc<dyn Board> = match board {
         BoardChoice::Virtual => {
             let virtual_board = VirtualBoard::spawn_pty().map_err(|e| SourceError::VirtualBoard(e.to_string()))?;
-            let link = SupervisedLink::spawn(BoardTarget::Path(virtual_board.path().to_string()), SupervisorOptions::default());
+            let link = SupervisedLink::spawn(
+                BoardTarget::Path(virtual_board.path().to_string()),
+                SupervisorOptions::default(),
+            );
             Arc::new(LinkedBoard::new(link, Some(virtual_board)))
         }
         BoardChoice::Port(path) => {
@@ -65,7 +72,9 @@ pub fn open_sources(frames: &FrameChoice, board: &BoardChoice) -> Result<Sources
             let scene = camera.scene_control();
             (Box::new(camera), Some(scene))
         }
-        FrameChoice::Camera { selector, options } => (Box::new(V4l2Camera::open(selector.clone(), options.clone())?), None),
+        FrameChoice::Camera { selector, options } => {
+            (Box::new(V4l2Camera::open(selector.clone(), options.clone())?), None)
+        }
         FrameChoice::Replay { path, fps, looping } => {
             if path.is_dir() {
                 (Box::new(ImageFolder::open(path, *fps, *looping)?), None)

@@ -19,7 +19,10 @@ pub struct LatencySummary {
 
 impl LatencyWindow {
     pub fn new(capacity: usize) -> Self {
-        Self { samples_ms: VecDeque::with_capacity(capacity), capacity: capacity.max(1) }
+        Self {
+            samples_ms: VecDeque::with_capacity(capacity),
+            capacity: capacity.max(1),
+        }
     }
 
     pub fn push(&mut self, latency_ms: f64) {
@@ -45,7 +48,12 @@ pub fn summarise(mut samples: Vec<f64>) -> LatencySummary {
     }
     samples.sort_by(f64::total_cmp);
     let rank = |p: f64| samples[((p * samples.len() as f64).ceil() as usize).clamp(1, samples.len()) - 1];
-    LatencySummary { samples: samples.len(), p50: rank(0.50), p99: rank(0.99), max: samples[samples.len() - 1] }
+    LatencySummary {
+        samples: samples.len(),
+        p50: rank(0.50),
+        p99: rank(0.99),
+        max: samples[samples.len() - 1],
+    }
 }
 
 #[cfg(test)]

@@ -7,8 +7,8 @@
 mod reader;
 mod writer;
 
-pub use reader::{read_recording, Recording, RecordedFrame, RecordedMessage};
-pub use writer::{encode_jpeg, RecordItem, RecordStats, Recorder, RecorderOptions, RecordSummary};
+pub use reader::{read_recording, RecordedFrame, RecordedMessage, Recording};
+pub use writer::{encode_jpeg, RecordItem, RecordStats, RecordSummary, Recorder, RecorderOptions};
 
 /// Frames, as `foxglove.CompressedImage` so that Foxglove and other MCAP viewers show them.
 pub const FRAME_TOPIC: &str = "/camera/image";
@@ -78,15 +78,32 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("roundtrip.mcap");
         let recorder = Recorder::create(&path, RecorderOptions::default()).unwrap();
-        let image = Arc::new(image::RgbImage::from_fn(32, 24, |x, y| image::Rgb([(x * 8) as u8, (y * 10) as u8, 128])));
+        let image = Arc::new(image::RgbImage::from_fn(32, 24, |x, y| {
+            image::Rgb([(x * 8) as u8, (y * 10) as u8, 128])
+        }));
         for frame_id in 0..3u64 {
             let time_us = 1_700_000_000_000_000 + frame_id * 33_333;
-            recorder.record(RecordItem::Frame { frame_id, capture_time_us: time_us, image: image.clone(), jpeg: None });
-            recorder.record(RecordItem::Reading { frame_id, time_us, json: format!("{{\"frame_id\":{frame_id}}}").into() });
+            recorder.record(RecordItem::Frame {
+                frame_id,
+                capture_time_us: time_us,
+                image: image.clone(),
+                jpeg: None,
+            });
+            recorder.record(RecordItem::Reading {
+                frame_id,
+                time_us,
+                json: format!("{{\"frame_id\":{frame_id}}}").into(),
+            });
         }
-        recorder.record(RecordItem::Telemetry { time_us: 1_700_000_000_000_000, json: "{\"telemetry\":{}}".into() });
+        recorder.record(RecordItem::Telemetry {
+            time_us: 1_700_000_000_000_000,
+            json: "{\"telemetry\":{}}".into(),
+        });
         let summary = recorder.finish().unwrap();
-        assert_eq!((summary.frames, summary.readings, summary.telemetry, summary.dropped), (3, 3, 1, 0));
+        assert_eq!(
+            (summary.frames, summary.readings, summary.telemetry, summary.dropped),
+            (3, 3, 1, 0)
+        );
 
         let recording = read_recording(&path).unwrap();
         assert!(!recording.truncated, "{:?}", recording.stopped_by);
@@ -107,6 +124,9 @@ mod tests {
         let path = dir.path().join("not.mcap");
         std::fs::write(&path, b"hello, not an mcap file").unwrap();
         assert!(matches!(read_recording(&path), Err(RecordError::Empty { .. })));
-        assert!(matches!(read_recording(&dir.path().join("missing.mcap")), Err(RecordError::Open { .. })));
+        assert!(matches!(
+            read_recording(&dir.path().join("missing.mcap")),
+            Err(RecordError::Open { .. })
+        ));
     }
 }

@@ -48,7 +48,11 @@ impl Recording {
             .filter_map(|m| {
                 let image: Image = serde_json::from_slice(&m.data).ok()?;
                 let jpeg = base64::engine::general_purpose::STANDARD.decode(image.data).ok()?;
-                Some(RecordedFrame { frame_id: m.sequence, capture_time_us: m.time_us, jpeg })
+                Some(RecordedFrame {
+                    frame_id: m.sequence,
+                    capture_time_us: m.time_us,
+                    jpeg,
+                })
             })
             .collect()
     }
@@ -58,12 +62,19 @@ impl Recording {
 /// recording cut short by a crash yields all its closed chunks.
 pub fn read_recording(path: &Path) -> Result<Recording, RecordError> {
     let path_text = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| RecordError::Open { path: path_text.clone(), source })?;
+    let bytes = std::fs::read(path).map_err(|source| RecordError::Open {
+        path: path_text.clone(),
+        source,
+    })?;
     if !bytes.starts_with(mcap::MAGIC) {
         return Err(RecordError::Empty { path: path_text });
     }
-    let stream = MessageStream::new_with_options(&bytes, Options::IgnoreEndMagic.into())
-        .map_err(|source| RecordError::Mcap { path: path_text.clone(), source })?;
+    let stream = MessageStream::new_with_options(&bytes, Options::IgnoreEndMagic.into()).map_err(|source| {
+        RecordError::Mcap {
+            path: path_text.clone(),
+            source,
+        }
+    })?;
     let mut recording = Recording::default();
     for message in stream {
         match message {

@@ -26,7 +26,11 @@ pub struct RecorderOptions {
 
 impl Default for RecorderOptions {
     fn default() -> Self {
-        Self { chunk_bytes: 512 * 1024, flush_interval: Duration::from_millis(500), queue_len: 256 }
+        Self {
+            chunk_bytes: 512 * 1024,
+            flush_interval: Duration::from_millis(500),
+            queue_len: 256,
+        }
     }
 }
 
@@ -34,9 +38,21 @@ impl Default for RecorderOptions {
 #[derive(Clone, Debug)]
 pub enum RecordItem {
     /// The writer thread encodes `image` when the source gave no JPEG, keeping that cost off the capture path.
-    Frame { frame_id: u64, capture_time_us: u64, image: Arc<image::RgbImage>, jpeg: Option<Arc<Vec<u8>>> },
-    Reading { frame_id: u64, time_us: u64, json: Arc<str> },
-    Telemetry { time_us: u64, json: Arc<str> },
+    Frame {
+        frame_id: u64,
+        capture_time_us: u64,
+        image: Arc<image::RgbImage>,
+        jpeg: Option<Arc<Vec<u8>>>,
+    },
+    Reading {
+        frame_id: u64,
+        time_us: u64,
+        json: Arc<str>,
+    },
+    Telemetry {
+        time_us: u64,
+        json: Arc<str>,
+    },
 }
 
 #[derive(Debug, Default)]
@@ -68,16 +84,26 @@ pub struct Recorder {
 impl Recorder {
     pub fn create(path: &Path, options: RecorderOptions) -> Result<Self, RecordError> {
         let path_text = path.display().to_string();
-        let file = File::create(path).map_err(|source| RecordError::Create { path: path_text.clone(), source })?;
-        let mcap_error = |source| RecordError::Mcap { path: path_text.clone(), source };
+        let file = File::create(path).map_err(|source| RecordError::Create {
+            path: path_text.clone(),
+            source,
+        })?;
+        let mcap_error = |source| RecordError::Mcap {
+            path: path_text.clone(),
+            source,
+        };
         let mut writer = mcap::WriteOptions::new()
             .profile("nusense")
             .chunk_size(Some(options.chunk_bytes))
             .create(BufWriter::new(file))
             .map_err(mcap_error)?;
         let mut channel = |topic: &str, schema_name: &str, schema: &str| -> Result<u16, RecordError> {
-            let schema_id = writer.add_schema(schema_name, "jsonschema", schema.as_bytes()).map_err(mcap_error)?;
-            writer.add_channel(schema_id, topic, "json", &BTreeMap::new()).map_err(mcap_error)
+            let schema_id = writer
+                .add_schema(schema_name, "jsonschema", schema.as_bytes())
+                .map_err(mcap_error)?;
+            writer
+                .add_channel(schema_id, topic, "json", &BTreeMap::new())
+                .map_err(mcap_error)
         };
         let channels = Channels {
             frame: channel(FRAME_TOPIC, "foxglove.CompressedImage", FRAME_SCHEMA)?,
@@ -94,8 +120,16 @@ impl Recorder {
         let thread = std::thread::Builder::new()
             .name("recorder".into())
             .spawn(move || write_loop(writer, channels, receiver, options, thread_stats, thread_path))
-            .map_err(|source| RecordError::Create { path: path_text, source })?;
-        Ok(Self { path: path.to_path_buf(), sender: Some(sender), stats, thread: Some(thread) })
+            .map_err(|source| RecordError::Create {
+                path: path_text,
+                source,
+            })?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            sender: Some(sender),
+            stats,
+            thread: Some(thread),
+        })
     }
 
     pub fn path(&self) -> &Path {
@@ -175,7 +209,10 @@ fn write_loop(
     stats: Arc<RecordStats>,
     path: String,
 ) -> Result<(), RecordError> {
-    let mcap_error = |source| RecordError::Mcap { path: path.clone(), source };
+    let mcap_error = |source| RecordError::Mcap {
+        path: path.clone(),
+        source,
+    };
     let mut last_flush = Instant::now();
     let mut sequence = [0u32; 3];
     loop {
@@ -187,13 +224,21 @@ fn write_loop(
         };
         if let Some(item) = item {
             let (channel, slot, time_us, payload, counter) = match item {
-                RecordItem::Frame { frame_id, capture_time_us, image, jpeg } => {
+                RecordItem::Frame {
+                    frame_id,
+                    capture_time_us,
+                    image,
+                    jpeg,
+                } => {
                     let jpeg = match jpeg {
                         Some(jpeg) => jpeg,
                         None => Arc::new(encode_jpeg(&image, FRAME_JPEG_QUALITY)),
                     };
                     let message = CompressedImage {
-                        timestamp: Timestamp { sec: capture_time_us / 1_000_000, nsec: (capture_time_us % 1_000_000) as u32 * 1000 },
+                        timestamp: Timestamp {
+                            sec: capture_time_us / 1_000_000,
+                            nsec: (capture_time_us % 1_000_000) as u32 * 1000,
+                        },
                         frame_id: "camera",
                         data: base64::engine::general_purpose::STANDARD.encode(jpeg.as_slice()),
                         format: "jpeg",
@@ -202,13 +247,23 @@ fn write_loop(
                     sequence[0] = frame_id as u32;
                     (channels.frame, 0, capture_time_us, json, &stats.frames)
                 }
-                RecordItem::Reading { frame_id, time_us, json } => {
+                RecordItem::Reading {
+                    frame_id,
+                    time_us,
+                    json,
+                } => {
                     sequence[1] = frame_id as u32;
                     (channels.reading, 1, time_us, json.as_bytes().to_vec(), &stats.readings)
                 }
                 RecordItem::Telemetry { time_us, json } => {
                     sequence[2] = sequence[2].wrapping_add(1);
-                    (channels.telemetry, 2, time_us, json.as_bytes().to_vec(), &stats.telemetry)
+                    (
+                        channels.telemetry,
+                        2,
+                        time_us,
+                        json.as_bytes().to_vec(),
+                        &stats.telemetry,
+                    )
                 }
             };
             let header = MessageHeader {

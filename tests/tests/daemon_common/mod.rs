@@ -31,7 +31,14 @@ pub struct DaemonSetup {
 
 impl Default for DaemonSetup {
     fn default() -> Self {
-        Self { width: 640, height: 480, fps: 15.0, token: None, broadcast_len: 64, send_timeout: Duration::from_secs(5) }
+        Self {
+            width: 640,
+            height: 480,
+            fps: 15.0,
+            token: None,
+            broadcast_len: 64,
+            send_timeout: Duration::from_secs(5),
+        }
     }
 }
 
@@ -50,7 +57,11 @@ pub fn press(force_n: f64) -> Scene {
 /// Starts a daemon: simulated camera lit by an in-process virtual board, holding the rest scene.
 pub async fn start(setup: DaemonSetup) -> TestDaemon {
     // The same path as `nusense serve` with no options: the virtual board behind a pty, the simulated camera.
-    let frames = FrameChoice::Simulator { width: setup.width, height: setup.height, fps: setup.fps };
+    let frames = FrameChoice::Simulator {
+        width: setup.width,
+        height: setup.height,
+        fps: setup.fps,
+    };
     let sources = open_sources(&frames, &BoardChoice::Virtual).expect("simulator and virtual board");
     let scene = sources.scene.expect("the simulator has a scene control");
     scene.hold(rest()).expect("rest scene");
@@ -61,7 +72,9 @@ pub async fn start(setup: DaemonSetup) -> TestDaemon {
     let mut state = AppState::new(handle.clone(), Some(scene.clone()), setup.token.clone());
     state.stream_options.send_timeout = setup.send_timeout;
     state.recordings_dir = std::env::temp_dir();
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind loopback");
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+        .await
+        .expect("bind loopback");
     let addr = listener.local_addr().expect("local addr");
     let (shutdown, stopped) = tokio::sync::oneshot::channel::<()>();
     let served = state.clone();
@@ -72,7 +85,15 @@ pub async fn start(setup: DaemonSetup) -> TestDaemon {
         .await
         .expect("serve");
     });
-    TestDaemon { addr, pipeline, handle, scene, state, server, shutdown: Some(shutdown) }
+    TestDaemon {
+        addr,
+        pipeline,
+        handle,
+        scene,
+        state,
+        server,
+        shutdown: Some(shutdown),
+    }
 }
 
 impl TestDaemon {
@@ -110,13 +131,16 @@ impl TestDaemon {
         let from = self.handle.latest_frame().map(|f| f.frame_id + 1).unwrap_or(0);
         if tare {
             // The frame already in the queue may predate the scene; tare on a frame that shows it.
-            self.wait_reading(Duration::from_secs(30), |r| r["frame_id"].as_u64().unwrap_or(0) >= from).await;
+            self.wait_reading(Duration::from_secs(30), |r| r["frame_id"].as_u64().unwrap_or(0) >= from)
+                .await;
             self.handle.request_tare();
         }
         let from = self.handle.latest_frame().map(|f| f.frame_id + 1).unwrap_or(0);
-        self.wait_reading(Duration::from_secs(30), |r| r["frame_id"].as_u64().unwrap_or(0) >= from && r["estimate"].is_object())
-            .await
-            .expect("a reading with an estimate after the scene change")
+        self.wait_reading(Duration::from_secs(30), |r| {
+            r["frame_id"].as_u64().unwrap_or(0) >= from && r["estimate"].is_object()
+        })
+        .await
+        .expect("a reading with an estimate after the scene change")
     }
 
     pub async fn stop(mut self) {
@@ -135,7 +159,11 @@ pub fn nusense_binary() -> std::path::PathBuf {
         .get_or_init(|| {
             let exe = std::env::current_exe().expect("test executable");
             // target/<profile>/deps/<test> -> target/<profile>
-            let profile_dir = exe.parent().and_then(|deps| deps.parent()).expect("target dir").to_path_buf();
+            let profile_dir = exe
+                .parent()
+                .and_then(|deps| deps.parent())
+                .expect("target dir")
+                .to_path_buf();
             let target_dir = profile_dir.parent().expect("target root").to_path_buf();
             let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
             let status = std::process::Command::new(cargo)
