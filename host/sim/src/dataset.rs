@@ -14,9 +14,9 @@ pub const REFERENCE_IMAGE: &str = "reference.png";
 
 #[derive(Debug, Error)]
 pub enum DatasetError {
-    #[error("could not read {path}: {source}")]
+    #[error("could not read {path}")]
     Read { path: PathBuf, source: std::io::Error },
-    #[error("{path} is not a sim manifest: {source}")]
+    #[error("{path} is not a sim manifest")]
     Parse { path: PathBuf, source: serde_json::Error },
 }
 

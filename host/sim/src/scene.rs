@@ -12,9 +12,9 @@ use crate::model::SensorModel;
 
 #[derive(Debug, Error)]
 pub enum SceneError {
-    #[error("could not read scene file {path}: {source}")]
+    #[error("could not read scene file {path}")]
     Read { path: PathBuf, source: std::io::Error },
-    #[error("scene file {path}: {source}")]
+    #[error("scene file {path} is not a valid scene")]
     Parse {
         path: PathBuf,
         source: Box<toml::de::Error>,
@@ -471,6 +471,16 @@ mod tests {
         .unwrap();
         assert_eq!(frames.scenes().len(), 2);
         assert!(frames.scenes()[0].contacts.is_empty());
+    }
+
+    #[test]
+    fn the_example_scene_file_is_valid() {
+        let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/example.toml"));
+        let file = SceneFile::load(path).unwrap();
+        let scenes = file.scenes();
+        assert_eq!(scenes.len(), 3);
+        assert_eq!(scenes[1].contacts.len(), 2);
+        assert_eq!(scenes[2].damage.len(), 2);
     }
 
     #[test]
