@@ -47,10 +47,12 @@ pub fn rest() -> Scene {
     Scene::default()
 }
 
-/// A sphere pressing at the pad centre.
+/// A sphere pressing at the pad centre and dragging along +x (as a finger does when it pushes an object).
 pub fn press(force_n: f64) -> Scene {
+    let mut contact = Contact::sphere(6.0, [0.0, 0.0], force_n);
+    contact.tangential_force_n = [0.4 * force_n, 0.0];
     let mut scene = Scene::default();
-    scene.contacts.push(Contact::sphere(6.0, [0.0, 0.0], force_n));
+    scene.contacts.push(contact);
     scene
 }
 
@@ -128,14 +130,15 @@ impl TestDaemon {
     /// frame captured after the change.
     pub async fn settle(&self, scene: Scene, tare: bool) -> serde_json::Value {
         self.scene.hold(scene).expect("valid scene");
-        let from = self.handle.latest_frame().map(|f| f.frame_id + 1).unwrap_or(0);
+        // The frame being rendered when the scene changed may still show the old one: wait one frame past it.
+        let from = self.handle.latest_frame().map(|f| f.frame_id + 2).unwrap_or(0);
         if tare {
             // The frame already in the queue may predate the scene; tare on a frame that shows it.
             self.wait_reading(Duration::from_secs(30), |r| r["frame_id"].as_u64().unwrap_or(0) >= from)
                 .await;
             self.handle.request_tare();
         }
-        let from = self.handle.latest_frame().map(|f| f.frame_id + 1).unwrap_or(0);
+        let from = self.handle.latest_frame().map(|f| f.frame_id + 2).unwrap_or(0);
         self.wait_reading(Duration::from_secs(30), |r| {
             r["frame_id"].as_u64().unwrap_or(0) >= from && r["estimate"].is_object()
         })
