@@ -88,7 +88,7 @@ pub struct Reading {
     pub points_implausible: usize,
     pub samples_used: usize,
     pub samples_total: usize,
-    /// Second-largest local (non-affine) corner shear, mm: the contact decision's statistic.
+    /// Third-largest local (non-affine) corner shear, mm: the contact decision's statistic.
     pub contact_score_mm: f64,
     /// The fast tracker had to search the whole frame again.
     pub recovered: bool,
@@ -117,6 +117,10 @@ pub struct Estimator {
     reference_paper_px: Vec<Point2>,
     sampler: ShearSampler,
 }
+
+/// A contact moves many corners; one mis-tracked square moves at most a few (an edge square two). The contact
+/// statistic is the residual shear of the corner ranked this high.
+const CONTACT_SUPPORT: usize = 3;
 
 /// An edge direction needs at least this fraction of the corners around the sheared region.
 const MIN_EDGE_COVERAGE: f64 = 0.9;
@@ -259,7 +263,7 @@ impl Estimator {
             .map(|(p, r)| self.paper_shift_to_mm(p.position, *r).unwrap_or(0.0))
             .collect();
         residual_mm.sort_unstable_by(|a, b| b.total_cmp(a));
-        let contact_score_mm = residual_mm.get(1).copied().unwrap_or(0.0);
+        let contact_score_mm = residual_mm.get(CONTACT_SUPPORT - 1).copied().unwrap_or(0.0);
         let contact = contact_score_mm > self.config.thresholds.contact_shear_mm;
 
         let (mut contact_px, mut contact_undistorted_px, mut contact_mm) = (None, None, None);
