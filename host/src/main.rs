@@ -24,6 +24,8 @@ enum Command {
     Info(cli::info::Args),
     /// Set LED currents on a board.
     Led(cli::led::Args),
+    /// Restart a board into its DFU bootloader for flashing without a debug probe.
+    Bootloader(cli::bootloader::Args),
     /// Record frames, readings and telemetry to an MCAP file.
     Record(cli::record::Args),
     /// Replay a recording (or a folder of frames) through the estimator.
@@ -47,6 +49,7 @@ fn main() -> ExitCode {
         Command::Devices(args) => cli::devices::run(args),
         Command::Info(args) => cli::info::run(args),
         Command::Led(args) => cli::led::run(args),
+        Command::Bootloader(args) => cli::bootloader::run(args),
         Command::Record(args) => cli::record::run(args),
         Command::Replay(args) => cli::replay::run(args),
         Command::Analyze(args) => cli::analyze::run(args),

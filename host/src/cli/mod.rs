@@ -3,6 +3,7 @@
 
 pub mod analyze;
 pub mod bench;
+pub mod bootloader;
 pub mod calibrate;
 pub mod devices;
 pub mod hil;

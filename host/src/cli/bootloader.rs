@@ -1,0 +1,29 @@
+//! `nusense bootloader`: restarts a board into the STM32's ROM DFU bootloader, the first step of flashing a board
+//! that has no debug probe (then `dfu-util`, see firmware/README.md).
+
+use std::process::ExitCode;
+
+use nusense_protocol::{Reply, RequestBody};
+
+use super::devices::BoardArgs;
+
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    pub board: BoardArgs,
+}
+
+pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    let mut board = args.board.open()?;
+    match board.link.request(RequestBody::EnterBootloader)? {
+        Reply::Ack => {
+            println!(
+                "Board on {} is restarting into its DFU bootloader; flash it with\n  \
+                 dfu-util -a 0 -s 0x08000000:leave -D nusense-f411.bin",
+                board.port
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        other => anyhow::bail!("the board answered EnterBootloader with {other:?} instead of an acknowledgement"),
+    }
+}
