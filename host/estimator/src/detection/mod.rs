@@ -22,7 +22,7 @@ use crate::config::Thresholds;
 use crate::error::EstimateError;
 use blobs::find_square_blobs;
 use indexing::index_lattice;
-use window::{add_to_histogram, centroid, CellFrame, Pixels};
+use window::{add_to_histogram, centroid, mean_membership, CellFrame, Pixels};
 use yellowness::{otsu, Histogram, YellownessMap};
 
 /// Half-size of a square's search window in cell units: the square (about 0.8 cell) plus room for motion,
@@ -36,6 +36,24 @@ const AREA_RATIO_RANGE: (f64, f64) = (0.45, 2.2);
 const MAX_PASSES: usize = 5;
 /// Samples across a cell the centroid needs; more pixels than this add time, not precision.
 const SAMPLES_PER_CELL: f64 = 36.0;
+/// A found centroid must sit on yellow: the mean membership within CENTRE_HALF cells of it at least this. The
+/// patch lies well inside a square (about 0.4 cell each side), so a true centroid's patch is all ink, though the
+/// LEDs' glare can pale a square's middle towards white to about half membership; a blend of two diagonal squares
+/// sits on the lines and red between them, where only the patch's far corners (a few percent) reach any yellow.
+const MIN_CENTRE_MEMBERSHIP: f32 = 0.25;
+const CENTRE_HALF: f64 = 0.15;
+/// A square's window with more of its pixels clipped white than this holds no square: the yellow and the
+/// lines between cells take about two thirds of a window, so beyond this the red around the square is clipped too.
+const MAX_CLIPPED_FRACTION: f64 = 0.95;
+/// The same for the pattern as a whole: beyond this the frame is refused as over-exposed.
+const MAX_CLIPPED_PATTERN_FRACTION: f64 = 0.9;
+/// A lost square is searched again from its neighbours' motion up to this many times (each round can use
+/// squares found in the round before).
+const NEIGHBOUR_ROUNDS: usize = 3;
+/// Neighbours within this many rows and columns vote on a lost square's position...
+const NEIGHBOUR_REACH: u32 = 2;
+/// ...and at least this many must have been found.
+const MIN_NEIGHBOURS: usize = 3;
 
 #[derive(Clone, Debug)]
 struct SquareModel {
@@ -241,7 +259,9 @@ impl FastTracker {
         Some(aligned)
     }
 
-    /// Sub-pixel centroid and area of every square around its predicted position.
+    /// Sub-pixel centroid and area of every square around its predicted position. A square whose window could
+    /// not settle on it (lost, or caught between two squares after a large motion) is searched again where its
+    /// lattice neighbours say it is, since the pattern moves smoothly.
     fn measure(
         &self,
         frame: &RgbImage,
@@ -259,10 +279,26 @@ impl FastTracker {
         }
         let px = Pixels { raw: frame.as_raw(), width: width as usize, height: height as usize };
         let mut histogram = Histogram::default();
+        let (mut visited, mut clipped) = (0usize, 0usize);
         for (model, p) in self.squares.iter().zip(predicted) {
             if let Some(p) = p {
-                add_to_histogram(&px, *p, &model.cell, WINDOW_HALF, self.stride * 3, &mut histogram);
+                let (v, c) = add_to_histogram(&px, *p, &model.cell, WINDOW_HALF, self.stride * 3, &mut histogram);
+                visited += v;
+                clipped += c;
             }
+        }
+        // Yellow may clip (its own pixels stay yellow against the red); once the red clips as well, most of the
+        // pattern is one white and no centroid means anything.
+        let clipped_fraction = clipped as f64 / visited.max(1) as f64;
+        if clipped_fraction > MAX_CLIPPED_PATTERN_FRACTION {
+            return Err(EstimateError::NoPattern {
+                reason: format!(
+                    "over-exposed: {:.0}% of the pattern's pixels are clipped white in every channel (at most {:.0}% \
+                     can be measured), so yellow and red cannot be told apart; lower the exposure or the LED current",
+                    clipped_fraction * 100.0,
+                    MAX_CLIPPED_PATTERN_FRACTION * 100.0
+                ),
+            });
         }
         let Some(split) = otsu(&histogram).filter(|s| s.contrast() >= 8.0) else {
             return Err(EstimateError::NoPattern {
@@ -270,42 +306,130 @@ impl FastTracker {
             });
         };
         let membership = split.ramp().table();
-        let result = self
+        let check_area = check_area.is_some();
+        let outcomes: Vec<Option<SquareOutcome>> = self
             .squares
             .iter()
             .zip(predicted)
-            .map(|(model, p)| {
-                let start = (*p)?;
-                // The window holds the whole square with room to spare, but a square that moved since the last
-                // frame may be clipped by it: re-centre on the pixel nearest the centroid until that pixel stops
-                // changing. In a steady scene that is one pass, and the result depends on the image alone.
-                let mut centre = [start[0].round(), start[1].round()];
-                let mut result = None;
-                for _ in 0..MAX_PASSES {
-                    let (at, area) = centroid(&px, centre, &model.cell, WINDOW_HALF, self.stride, &membership)?;
-                    result = Some((at, area));
-                    let next = [at[0].round(), at[1].round()];
-                    if next == centre {
-                        break;
-                    }
-                    centre = next;
-                }
-                let (at, area) = result?;
-                let offset = model.cell.to_cell(sub(at, start));
-                if offset[0].abs() > WINDOW_HALF || offset[1].abs() > WINDOW_HALF {
-                    return None;
-                }
-                if check_area.is_some() && model.reference_area > 0.0 {
-                    let ratio = area / model.reference_area;
-                    if ratio < AREA_RATIO_RANGE.0 || ratio > AREA_RATIO_RANGE.1 {
-                        return None;
-                    }
-                }
-                Some((at, area))
+            .map(|(model, p)| p.map(|start| self.measure_square(&px, model, start, &membership, check_area)))
+            .collect();
+        let mut result: Vec<Option<(Point2, f64)>> = outcomes
+            .iter()
+            .map(|o| match o {
+                Some(SquareOutcome::Found(at, area)) => Some((*at, *area)),
+                _ => None,
             })
             .collect();
+        let retry: Vec<bool> = outcomes.iter().map(|o| matches!(o, Some(SquareOutcome::Lost))).collect();
+        for _ in 0..NEIGHBOUR_ROUNDS {
+            let mut progress = false;
+            let snapshot = result.clone();
+            for (slot, model) in self.squares.iter().enumerate() {
+                if !retry[slot] || result[slot].is_some() {
+                    continue;
+                }
+                let Some(start) = self.neighbour_prediction(slot, predicted, &snapshot) else { continue };
+                if let SquareOutcome::Found(at, area) = self.measure_square(&px, model, start, &membership, check_area)
+                {
+                    result[slot] = Some((at, area));
+                    progress = true;
+                }
+            }
+            if !progress {
+                break;
+            }
+        }
         Ok(result)
     }
+
+    /// One square's centroid from a window starting at `start` (raw px).
+    fn measure_square(
+        &self,
+        px: &Pixels,
+        model: &SquareModel,
+        start: Point2,
+        membership: &[f32],
+        check_area: bool,
+    ) -> SquareOutcome {
+        // The window holds the whole square with room to spare, but a square that moved since the last frame may
+        // be clipped by it: re-centre on the pixel nearest the centroid until that pixel stops changing. In a
+        // steady scene that is one pass, and the result depends on the image alone.
+        let mut centre = [start[0].round(), start[1].round()];
+        let mut last = None;
+        for _ in 0..MAX_PASSES {
+            let Some(found) = centroid(px, centre, &model.cell, WINDOW_HALF, self.stride, membership) else {
+                return SquareOutcome::Lost;
+            };
+            let next = [found.at[0].round(), found.at[1].round()];
+            let step = (next[0] - centre[0]).abs().max((next[1] - centre[1]).abs());
+            last = Some((found, step));
+            if step == 0.0 {
+                break;
+            }
+            centre = next;
+        }
+        let Some((found, last_step)) = last else { return SquareOutcome::Lost };
+        // A window still travelling after the last pass was caught between two squares and is slowly leaving one
+        // of them: its centroid is a blend of both.
+        if last_step > 1.0 {
+            return SquareOutcome::Lost;
+        }
+        if found.clipped_fraction > MAX_CLIPPED_FRACTION {
+            return SquareOutcome::Clipped;
+        }
+        let offset = model.cell.to_cell(sub(found.at, start));
+        if offset[0].abs() > WINDOW_HALF || offset[1].abs() > WINDOW_HALF {
+            return SquareOutcome::Lost;
+        }
+        if mean_membership(px, found.at, &model.cell, CENTRE_HALF, self.stride, membership) < MIN_CENTRE_MEMBERSHIP {
+            return SquareOutcome::Lost;
+        }
+        if check_area && model.reference_area > 0.0 {
+            let ratio = found.area / model.reference_area;
+            if ratio < AREA_RATIO_RANGE.0 || ratio > AREA_RATIO_RANGE.1 {
+                return SquareOutcome::Lost;
+            }
+        }
+        SquareOutcome::Found(found.at, found.area)
+    }
+
+    /// Where a square is, judged by how far its measured lattice neighbours (up to two cells away) landed from
+    /// their own predictions: the square's prediction moved by the median of those misses.
+    fn neighbour_prediction(
+        &self,
+        slot: usize,
+        predicted: &[Option<Point2>],
+        measured: &[Option<(Point2, f64)>],
+    ) -> Option<Point2> {
+        let here = self.squares[slot].index;
+        let own = predicted[slot]?;
+        let (mut dx, mut dy) = (Vec::new(), Vec::new());
+        for (other, (p, m)) in self.squares.iter().zip(predicted.iter().zip(measured)) {
+            let (Some(p), Some((m, _))) = (p, m) else { continue };
+            let near = other.index != here
+                && i32::from(other.index.row).abs_diff(i32::from(here.row)) <= NEIGHBOUR_REACH
+                && i32::from(other.index.col).abs_diff(i32::from(here.col)) <= NEIGHBOUR_REACH;
+            if near {
+                dx.push(m[0] - p[0]);
+                dy.push(m[1] - p[1]);
+            }
+        }
+        if dx.len() < MIN_NEIGHBOURS {
+            return None;
+        }
+        let shift = [median(&mut dx), median(&mut dy)];
+        Some([own[0] + shift[0], own[1] + shift[1]])
+    }
+}
+
+/// How the search for one square ended.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum SquareOutcome {
+    Found(Point2, f64),
+    /// Not found where predicted (or not trusted): worth a search where its neighbours say it is.
+    Lost,
+    /// The window is clipped white: nothing to find in it, here or nearby.
+    Clipped,
 }
 
 fn median(values: &mut [f64]) -> f64 {

@@ -97,18 +97,44 @@ fn for_each_row(
     }
 }
 
-/// Adds the window's yellowness values to a histogram.
-pub fn add_to_histogram(px: &Pixels, centre: Point2, cell: &CellFrame, half: f64, stride: usize, h: &mut Histogram) {
+/// Adds the window's yellowness values to a histogram; returns how many pixels it visited and how many of them
+/// were clipped.
+pub fn add_to_histogram(
+    px: &Pixels,
+    centre: Point2,
+    cell: &CellFrame,
+    half: f64,
+    stride: usize,
+    h: &mut Histogram,
+) -> (usize, usize) {
+    let (mut visited, mut clipped) = (0usize, 0usize);
     for_each_row(px, centre, cell, half, stride, |_, line, x0, x1| {
         for x in (x0..=x1).step_by(stride) {
             let p = &line[x * 3..x * 3 + 3];
             h.add(super::yellowness::yellowness(p[0], p[1], p[2]));
+            visited += 1;
+            clipped += usize::from(p[0].min(p[1]).min(p[2]) >= CLIPPED_LEVEL);
         }
     });
+    (visited, clipped)
 }
 
-/// Weighted centroid (raw px) and weighted area (raw px^2) of the yellow inside the window; `None` when the
-/// window holds no yellow.
+/// A pixel with no channel below this is clipped: it no longer tells yellow from red.
+pub const CLIPPED_LEVEL: u8 = 250;
+
+/// What the window around one square holds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WindowCentroid {
+    /// Yellowness-weighted centroid, raw px.
+    pub at: Point2,
+    /// Weighted yellow area, raw px^2.
+    pub area: f64,
+    /// Fraction of the window's pixels clipped in every channel.
+    pub clipped_fraction: f64,
+}
+
+/// Weighted centroid and area of the yellow inside the window, and how much of the window is clipped; `None`
+/// when the window holds no yellow.
 pub fn centroid(
     px: &Pixels,
     centre: Point2,
@@ -116,13 +142,17 @@ pub fn centroid(
     half: f64,
     stride: usize,
     membership: &[f32],
-) -> Option<(Point2, f64)> {
+) -> Option<WindowCentroid> {
     let (mut sum_w, mut sum_x, mut sum_y) = (0f64, 0f64, 0f64);
+    let (mut visited, mut clipped) = (0usize, 0usize);
     for_each_row(px, centre, cell, half, stride, |y, line, x0, x1| {
         let (mut w_row, mut x_row) = (0f32, 0f32);
         for x in (x0..=x1).step_by(stride) {
             let p = &line[x * 3..x * 3 + 3];
-            let value = i32::from(p[0].min(p[1])) - i32::from(p[2]);
+            let low = p[0].min(p[1]);
+            clipped += usize::from(low.min(p[2]) >= CLIPPED_LEVEL);
+            visited += 1;
+            let value = i32::from(low) - i32::from(p[2]);
             let w = membership[(value + 255) as usize];
             w_row += w;
             x_row += w * x as f32;
@@ -134,8 +164,38 @@ pub fn centroid(
     if sum_w <= 0.0 {
         return None;
     }
-    let area = sum_w * (stride * stride) as f64;
-    Some(([sum_x / sum_w + 0.5, sum_y / sum_w + 0.5], area))
+    Some(WindowCentroid {
+        at: [sum_x / sum_w + 0.5, sum_y / sum_w + 0.5],
+        area: sum_w * (stride * stride) as f64,
+        clipped_fraction: clipped as f64 / visited.max(1) as f64,
+    })
+}
+
+/// Mean membership over the window of half-size `half` (cell units) around `centre`; 0 for an empty window. A
+/// centroid that is truly a square's has yellow all around it; one taken over parts of two squares lies on the
+/// lines and red between them.
+pub fn mean_membership(
+    px: &Pixels,
+    centre: Point2,
+    cell: &CellFrame,
+    half: f64,
+    stride: usize,
+    membership: &[f32],
+) -> f32 {
+    let (mut sum, mut visited) = (0f32, 0usize);
+    for_each_row(px, centre, cell, half, stride, |_, line, x0, x1| {
+        for x in (x0..=x1).step_by(stride) {
+            let p = &line[x * 3..x * 3 + 3];
+            let value = i32::from(p[0].min(p[1])) - i32::from(p[2]);
+            sum += membership[(value + 255) as usize];
+            visited += 1;
+        }
+    });
+    if visited == 0 {
+        0.0
+    } else {
+        sum / visited as f32
+    }
 }
 
 #[cfg(test)]
@@ -160,8 +220,13 @@ mod tests {
         let px = Pixels { raw: &raw, width: w, height: h };
         let cell = CellFrame::new([30.0, 0.0], [0.0, 30.0]).unwrap();
         let membership: Vec<f32> = (-255..=255).map(|v| ((f32::from(v as i16) + 20.0) / 140.0).clamp(0.0, 1.0)).collect();
-        let (c, area) = centroid(&px, [48.0, 43.0], &cell, 0.55, 1, &membership).unwrap();
+        let found = centroid(&px, [48.0, 43.0], &cell, 0.55, 1, &membership).unwrap();
+        let (c, area) = (found.at, found.area);
         assert!((c[0] - 50.5).abs() < 0.05 && (c[1] - 40.5).abs() < 0.05, "{c:?}");
         assert!(area > 300.0 && area < 500.0, "{area}");
+        assert_eq!(found.clipped_fraction, 0.0);
+        assert!(mean_membership(&px, c, &cell, 0.15, 1, &membership) > 0.9);
+        // Beside the square (here: on the red) is not on yellow.
+        assert!(mean_membership(&px, [75.0, 40.0], &cell, 0.15, 1, &membership) < 0.1);
     }
 }
