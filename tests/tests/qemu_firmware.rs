@@ -5,11 +5,12 @@
 //! the toolchain or QEMU is missing.
 
 use std::io::Write;
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use nusense::device::{BoardLink, LinkOptions};
+use nusense::emulator::{QemuBoard, QemuImage, QemuOptions};
 use nusense_protocol::{Channel, Side, Telemetry, PROTOCOL_VERSION};
-use nusense_tests::firmware_image::{qemu_image, QemuBoard};
 
 fn options() -> LinkOptions {
     // Emulated time runs close to real time, but the first replies may wait for QEMU's start-up.
@@ -20,9 +21,12 @@ fn options() -> LinkOptions {
     }
 }
 
+/// The same launcher `nusense hil --emulated` uses: builds the image if needed, kills QEMU on drop.
 fn start_board() -> QemuBoard {
-    let elf = qemu_image().unwrap_or_else(|e| panic!("{e}"));
-    QemuBoard::start(&elf).unwrap_or_else(|e| panic!("{e}"))
+    let images = QemuImage::find_images_workspace(Path::new(env!("CARGO_MANIFEST_DIR")))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let image = QemuImage::build(&images).unwrap_or_else(|e| panic!("{e}"));
+    QemuBoard::start(&image, &QemuOptions::default()).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Telemetry until the board's own clock has advanced `board_span_us` past the first frame. Board time, not wall
@@ -51,7 +55,8 @@ fn collect_telemetry(
 #[test]
 fn firmware_under_qemu_handshakes_regulates_and_streams() {
     let mut board = start_board();
-    let mut link = BoardLink::open(board.pty(), options()).expect("handshake with the QEMU board");
+    let mut link =
+        BoardLink::open(board.pty_path(), options()).expect("handshake with the QEMU board");
     assert_eq!(link.device_protocol_version(), PROTOCOL_VERSION);
 
     let info = link.info().unwrap();
@@ -158,10 +163,10 @@ fn firmware_under_qemu_handshakes_regulates_and_streams() {
 fn firmware_under_qemu_survives_garbage_and_counts_it() {
     let mut board = start_board();
     // Wait until the firmware listens (bytes sent while QEMU boots the image may be lost, which would not test it).
-    drop(BoardLink::open(board.pty(), options()).expect("first handshake"));
+    drop(BoardLink::open(board.pty_path(), options()).expect("first handshake"));
     // Line noise before anyone talks properly: a damaged frame, a frame longer than any message, stray zeros.
     {
-        let mut port = serialport::new(board.pty(), 115_200)
+        let mut port = serialport::new(board.pty_path(), 115_200)
             .timeout(Duration::from_millis(200))
             .open_native()
             .expect("open the QEMU pty");
@@ -172,7 +177,7 @@ fn firmware_under_qemu_survives_garbage_and_counts_it() {
         port.flush().unwrap();
         std::thread::sleep(Duration::from_millis(300));
     }
-    let mut link = BoardLink::open(board.pty(), options()).expect("handshake after the noise");
+    let mut link = BoardLink::open(board.pty_path(), options()).expect("handshake after the noise");
     let counters = link.status().unwrap().counters;
     println!("board-side counters after the noise: {counters:?}");
     assert!(counters.bad_cobs + counters.bad_crc >= 1, "{counters:?}");
@@ -186,7 +191,7 @@ fn firmware_under_qemu_survives_garbage_and_counts_it() {
 #[test]
 fn firmware_under_qemu_restores_the_saved_config_after_reset() {
     let board = start_board();
-    let mut link = BoardLink::open(board.pty(), options()).expect("handshake");
+    let mut link = BoardLink::open(board.pty_path(), options()).expect("handshake");
     link.set_ramp(20).unwrap();
     link.set_led(Channel::One(Side::Right), 80, true).unwrap();
     link.save_config()
@@ -196,7 +201,7 @@ fn firmware_under_qemu_restores_the_saved_config_after_reset() {
         .expect("Reset is acknowledged before the reboot");
     drop(link);
     std::thread::sleep(Duration::from_millis(500));
-    let mut link = BoardLink::open(board.pty(), options()).expect("handshake after the reset");
+    let mut link = BoardLink::open(board.pty_path(), options()).expect("handshake after the reset");
     let status = link.status().unwrap();
     let right = status.channels[Side::Right.index()];
     // 80, not the unsaved 40: the board rebooted and restored what SaveConfig stored.
