@@ -13,7 +13,7 @@ use nusense_estimator::shear::{gamma, ShearSampler};
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 
 fn load(name: &str) -> RgbImage {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/real");
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real");
     image::open(dir.join(name)).expect("the real frames are part of the shared data").to_rgb8()
 }
 

@@ -6,7 +6,7 @@ use image::{imageops, Rgb, RgbImage};
 use nusense_estimator::{ConfigError, EstimateError, Estimator, Mode, SensorConfig};
 
 fn quarter_reference() -> RgbImage {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/real");
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real");
     let full = image::open(dir.join("reference_fisheye.jpg")).unwrap().to_rgb8();
     imageops::resize(&full, 512, 384, imageops::FilterType::Triangle)
 }

@@ -11,8 +11,8 @@ use nusense_estimator::{EstimateError, SensorConfig};
 use nusense_geometry::CornerIndex;
 
 fn load(name: &str) -> RgbImage {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/real").join(name);
-    image::open(path).expect("the real frames are part of the shared data").to_rgb8()
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real").join(name);
+    image::open(path).expect("the real frames ship in host/estimator/tests/data/real").to_rgb8()
 }
 
 fn frames() -> &'static (RgbImage, RgbImage) {

@@ -7,11 +7,11 @@ use image::RgbImage;
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 
 fn real_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/real")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real")
 }
 
 fn load(name: &str) -> RgbImage {
-    image::open(real_dir().join(name)).expect("the real frames are part of the shared data").to_rgb8()
+    image::open(real_dir().join(name)).expect("the real frames ship in host/estimator/tests/data/real").to_rgb8()
 }
 
 fn reference() -> &'static RgbImage {

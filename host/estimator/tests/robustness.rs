@@ -9,8 +9,8 @@ use image::{imageops, Rgb, RgbImage};
 use nusense_estimator::{EstimateError, Estimator, Mode, SensorConfig};
 
 fn load(name: &str) -> RgbImage {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/real");
-    image::open(dir.join(name)).expect("the real frames are part of the shared data").to_rgb8()
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real");
+    image::open(dir.join(name)).expect("the real frames ship in host/estimator/tests/data/real").to_rgb8()
 }
 
 fn scaled(image: &RgbImage, divisor: u32) -> RgbImage {

@@ -508,15 +508,15 @@ fn measure_real(
     result
 }
 
-/// The real pair's folder: `shared/data/real` next to or above the repository (`/work/shared` beside
-/// `/work/main`), searched upwards from `start`.
+/// The real pair's folder: the copy the project ships (`host/estimator/tests/data/real`), or `shared/data/real`
+/// next to or above the repository, searched upwards from `start`.
 pub fn find_real_pair(start: &Path) -> Option<PathBuf> {
     let compiled_in = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     start
         .ancestors()
         .chain(compiled_in.ancestors())
         .find_map(|dir| {
-            ["shared/data/real", "../shared/data/real"]
+            ["host/estimator/tests/data/real", "shared/data/real", "../shared/data/real"]
                 .iter()
                 .map(|relative| dir.join(relative))
                 .find(|candidate| candidate.join("reference_fisheye.jpg").is_file())
