@@ -348,6 +348,14 @@ pub async fn serve(
     state: AppState,
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
+    use axum::serve::ListenerExt;
+    // Readings are small frames sent as they happen: Nagle's algorithm would hold one back behind the last
+    // one's ACK, which is latency the stream exists to avoid.
+    let listener = listener.tap_io(|tcp| {
+        if let Err(error) = tcp.set_nodelay(true) {
+            tracing::warn!("could not disable Nagle's algorithm on a client socket: {error}");
+        }
+    });
     axum::serve(listener, router(state))
         .with_graceful_shutdown(shutdown)
         .await
