@@ -390,7 +390,9 @@ fn split_csv(line: &str) -> Vec<&str> {
     line.split(',').map(str::trim).collect()
 }
 
-fn parse_number(field: &str, line: usize, what: &str) -> Result<f64, CalibrationError> {
+/// The finite number in column `col` of a CSV line's `fields`; `what` names the column in the error.
+fn number_at(fields: &[&str], col: usize, line: usize, what: &str) -> Result<f64, CalibrationError> {
+    let field = fields.get(col).ok_or_else(|| CalibrationError::Parse { line, message: format!("no {what} column") })?;
     field
         .parse::<f64>()
         .ok()
@@ -427,12 +429,7 @@ pub fn parse_pairs_csv(text: &str) -> Result<Vec<CalibrationSample>, Calibration
     lines
         .map(|(line, text)| {
             let fields = split_csv(text);
-            let get = |col: usize, what: &str| {
-                fields
-                    .get(col)
-                    .ok_or_else(|| CalibrationError::Parse { line, message: format!("no {what} column") })
-                    .and_then(|f| parse_number(f, line, what))
-            };
+            let get = |col: usize, what: &str| number_at(&fields, col, line, what);
             Ok(CalibrationSample { gamma: get(gamma_col, "gamma")?, force_n: get(force_col, "force")? })
         })
         .collect()
@@ -503,12 +500,7 @@ pub fn parse_force_log_csv(text: &str, component: ForceComponent) -> Result<Vec<
     lines
         .map(|(line, text)| {
             let fields = split_csv(text);
-            let get = |col: usize, what: &str| {
-                fields
-                    .get(col)
-                    .ok_or_else(|| CalibrationError::Parse { line, message: format!("no {what} column") })
-                    .and_then(|f| parse_number(f, line, what))
-            };
+            let get = |col: usize, what: &str| number_at(&fields, col, line, what);
             let time_s = get(time_col, "timestamp")? * time_unit;
             let values: Vec<f64> = needed.iter().map(|&(c, name)| get(c, name)).collect::<Result<_, _>>()?;
             let force_n = match component {
