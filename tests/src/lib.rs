@@ -1,2 +1,3 @@
-//! Helpers shared by the integration tests live beside them (tests/tests/*_common); the QEMU launcher is
-//! the product's own (`nusense::emulator`), so the tests start the board exactly as `nusense hil --emulated` does.
+//! Tests that cross the firmware and the host live here (tests/tests); tests of one crate live with that crate.
+//! The QEMU launcher is the product's own (`nusense_hil::emulator`), so the tests start the board exactly as
+//! `nusense hil --emulated` does.

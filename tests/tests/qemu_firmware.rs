@@ -8,8 +8,8 @@ use std::io::Write;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use nusense::device::{BoardLink, LinkOptions};
-use nusense::emulator::{QemuBoard, QemuImage, QemuOptions};
+use nusense_board::{BoardLink, LinkOptions};
+use nusense_hil::emulator::{QemuBoard, QemuImage, QemuOptions};
 use nusense_protocol::{Channel, Side, Telemetry, PROTOCOL_VERSION};
 
 fn options() -> LinkOptions {
@@ -23,26 +23,19 @@ fn options() -> LinkOptions {
 
 /// The same launcher `nusense hil --emulated` uses: builds the image if needed, kills QEMU on drop.
 fn start_board() -> QemuBoard {
-    let images = QemuImage::find_images_workspace(Path::new(env!("CARGO_MANIFEST_DIR")))
-        .unwrap_or_else(|e| panic!("{e}"));
+    let images =
+        QemuImage::find_images_workspace(Path::new(env!("CARGO_MANIFEST_DIR"))).unwrap_or_else(|e| panic!("{e}"));
     let image = QemuImage::build(&images).unwrap_or_else(|e| panic!("{e}"));
     QemuBoard::start(&image, &QemuOptions::default()).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Telemetry until the board's own clock has advanced `board_span_us` past the first frame. Board time, not wall
 /// time: on a loaded machine the emulator runs slower than real time. `wall_limit` only stops a dead link.
-fn collect_telemetry(
-    link: &mut BoardLink,
-    board_span_us: u64,
-    wall_limit: Duration,
-) -> Vec<Telemetry> {
+fn collect_telemetry(link: &mut BoardLink, board_span_us: u64, wall_limit: Duration) -> Vec<Telemetry> {
     let deadline = Instant::now() + wall_limit;
     let mut frames: Vec<Telemetry> = Vec::new();
     while Instant::now() < deadline {
-        if let Some(t) = link
-            .next_telemetry(Duration::from_millis(100))
-            .expect("link alive")
-        {
+        if let Some(t) = link.next_telemetry(Duration::from_millis(100)).expect("link alive") {
             frames.push(t);
             if t.uptime_us - frames[0].uptime_us >= board_span_us {
                 break;
@@ -55,8 +48,7 @@ fn collect_telemetry(
 #[test]
 fn firmware_under_qemu_handshakes_regulates_and_streams() {
     let mut board = start_board();
-    let mut link =
-        BoardLink::open(board.pty_path(), options()).expect("handshake with the QEMU board");
+    let mut link = BoardLink::open(board.pty_path(), options()).expect("handshake with the QEMU board");
     assert_eq!(link.device_protocol_version(), PROTOCOL_VERSION);
 
     let info = link.info().unwrap();
@@ -74,8 +66,7 @@ fn firmware_under_qemu_handshakes_regulates_and_streams() {
     let lit_at = Instant::now();
     link.set_led(Channel::All, 100, true).unwrap();
     let frames = collect_telemetry(&mut link, 1_500_000, Duration::from_secs(60));
-    let span_us =
-        frames.last().map_or(0, |t| t.uptime_us) - frames.first().map_or(0, |t| t.uptime_us);
+    let span_us = frames.last().map_or(0, |t| t.uptime_us) - frames.first().map_or(0, |t| t.uptime_us);
     assert!(
         span_us >= 1_500_000,
         "telemetry stopped after {span_us} us of board time ({} frames)",
@@ -101,11 +92,7 @@ fn firmware_under_qemu_handshakes_regulates_and_streams() {
         .find(|t| t.channels.iter().all(|c| c.enabled))
         .expect("LEDs enabled")
         .uptime_us;
-    let inside = |t: &Telemetry| {
-        t.channels
-            .iter()
-            .all(|c| (c.measured_ma - 100.0).abs() <= 2.0)
-    };
+    let inside = |t: &Telemetry| t.channels.iter().all(|c| (c.measured_ma - 100.0).abs() <= 2.0);
     let last_outside = frames.iter().rposition(|t| !inside(t));
     let settled = match last_outside {
         None => frames.first(),
@@ -140,8 +127,7 @@ fn firmware_under_qemu_handshakes_regulates_and_streams() {
     assert!(last.supply_mv > 4_500 && last.temperature_c > 20.0);
 
     // Setpoints are clamped whatever the host sends; one channel can be switched off alone.
-    link.set_led(Channel::One(Side::Left), 60_000, true)
-        .unwrap();
+    link.set_led(Channel::One(Side::Left), 60_000, true).unwrap();
     link.set_led(Channel::One(Side::Top), 100, false).unwrap();
     link.stream_telemetry(0).unwrap();
     std::thread::sleep(Duration::from_millis(300));
@@ -194,11 +180,9 @@ fn firmware_under_qemu_restores_the_saved_config_after_reset() {
     let mut link = BoardLink::open(board.pty_path(), options()).expect("handshake");
     link.set_ramp(20).unwrap();
     link.set_led(Channel::One(Side::Right), 80, true).unwrap();
-    link.save_config()
-        .expect("SaveConfig is acknowledged once stored");
+    link.save_config().expect("SaveConfig is acknowledged once stored");
     link.set_led(Channel::One(Side::Right), 40, true).unwrap();
-    link.reset()
-        .expect("Reset is acknowledged before the reboot");
+    link.reset().expect("Reset is acknowledged before the reboot");
     drop(link);
     std::thread::sleep(Duration::from_millis(500));
     let mut link = BoardLink::open(board.pty_path(), options()).expect("handshake after the reset");

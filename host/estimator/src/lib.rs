@@ -20,6 +20,7 @@ pub mod pad_map;
 pub mod paper;
 pub mod registration;
 pub mod shear;
+pub mod stats;
 pub mod surface;
 
 pub use config::{ConfigError, ForceCalibration, PaperParams, Roi, SensorConfig, SurfaceConfig, Thresholds};

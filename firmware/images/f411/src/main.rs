@@ -31,7 +31,7 @@ use static_cell::StaticCell;
 
 use crate::board::{Board, LedDrive, Sensors, CONTROL_PERIOD_US};
 
-/// USB identity (pid.codes): the host finds the board by these, see nusense::device::discover.
+/// USB identity (pid.codes): the host finds the board by these, see nusense_board::discover.
 const USB_VID: u16 = 0x1209;
 const USB_PID: u16 = 0x4E55;
 const USB_PRODUCT: &str = "NUSense LED board";

@@ -1,0 +1,357 @@
+//! A V4L2 camera (the `v4l` crate): MJPEG or YUYV, chosen by device path or USB serial number.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use image::RgbImage;
+use serde::Serialize;
+use v4l::buffer::Type;
+use v4l::io::mmap::Stream;
+use v4l::io::traits::CaptureStream;
+use v4l::video::Capture;
+use v4l::{Device, FourCC};
+
+use super::{decode_jpeg, CaptureError, CapturedImage, FrameSource, SourceInfo};
+
+/// Which camera: a device node, or the USB serial number of the camera (stable across replugging and
+/// re-enumeration, unlike /dev/videoN).
+#[derive(Clone, Debug, PartialEq)]
+pub enum CameraSelector {
+    Path(PathBuf),
+    Serial(String),
+}
+
+impl CameraSelector {
+    /// `/dev/...` or any existing path is a device; anything else is a serial number.
+    pub fn parse(text: &str) -> Self {
+        if text.starts_with('/') || Path::new(text).exists() {
+            CameraSelector::Path(PathBuf::from(text))
+        } else {
+            CameraSelector::Serial(text.to_string())
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum PixelFormat {
+    Mjpeg,
+    Yuyv,
+}
+
+impl std::str::FromStr for PixelFormat {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "mjpeg" | "mjpg" => Ok(Self::Mjpeg),
+            "yuyv" => Ok(Self::Yuyv),
+            other => Err(format!("unknown pixel format `{other}`; allowed: mjpeg, yuyv")),
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct V4l2Options {
+    pub width: u32,
+    pub height: u32,
+    pub fps: u32,
+    /// None: MJPEG when offered, else YUYV.
+    pub format: Option<PixelFormat>,
+}
+
+impl Default for V4l2Options {
+    fn default() -> Self {
+        Self {
+            width: 640,
+            height: 480,
+            fps: 30,
+            format: None,
+        }
+    }
+}
+
+/// A capture node found under /sys/class/video4linux.
+#[derive(Clone, Debug, Serialize)]
+pub struct CameraInfo {
+    pub path: String,
+    pub name: String,
+    pub usb_serial: Option<String>,
+}
+
+/// Lists V4L2 capture nodes with their names and USB serial numbers.
+pub fn list_cameras() -> Vec<CameraInfo> {
+    let Ok(entries) = std::fs::read_dir("/sys/class/video4linux") else {
+        return Vec::new();
+    };
+    let mut cameras: Vec<CameraInfo> = entries
+        .filter_map(|e| e.ok())
+        .filter_map(|entry| {
+            let node = entry.file_name().to_string_lossy().to_string();
+            if !node.starts_with("video") {
+                return None;
+            }
+            let sys = entry.path();
+            let name = std::fs::read_to_string(sys.join("name"))
+                .unwrap_or_default()
+                .trim()
+                .to_string();
+            Some(CameraInfo {
+                path: format!("/dev/{node}"),
+                name,
+                usb_serial: usb_serial_of(&sys),
+            })
+        })
+        .collect();
+    cameras.sort_by(|a, b| a.path.cmp(&b.path));
+    cameras
+}
+
+/// The `serial` attribute of the USB device a video node hangs off (the node's device is a USB interface,
+/// whose parent is the device).
+fn usb_serial_of(sys_node: &Path) -> Option<String> {
+    let mut dir = std::fs::canonicalize(sys_node.join("device")).ok()?;
+    for _ in 0..3 {
+        if let Ok(serial) = std::fs::read_to_string(dir.join("serial")) {
+            return Some(serial.trim().to_string());
+        }
+        dir = dir.parent()?.to_path_buf();
+    }
+    None
+}
+
+pub struct V4l2Camera {
+    selector: CameraSelector,
+    options: V4l2Options,
+    device_path: String,
+    open: Option<OpenCamera>,
+}
+
+struct OpenCamera {
+    // Field order matters: the stream must be dropped (streaming stopped, buffers unmapped) before the device.
+    stream: Stream<'static>,
+    _device: Device,
+    format: PixelFormat,
+    width: u32,
+    height: u32,
+    fps: f64,
+}
+
+impl V4l2Camera {
+    pub fn open(selector: CameraSelector, options: V4l2Options) -> Result<Self, CaptureError> {
+        let mut camera = Self {
+            device_path: describe(&selector),
+            selector,
+            options,
+            open: None,
+        };
+        camera.reopen()?;
+        Ok(camera)
+    }
+
+    fn resolve(&self) -> Result<PathBuf, CaptureError> {
+        match &self.selector {
+            CameraSelector::Path(path) => Ok(path.clone()),
+            CameraSelector::Serial(serial) => {
+                let cameras = list_cameras();
+                // A UVC camera has several nodes (video and metadata); the first capture-capable one wins.
+                cameras
+                    .iter()
+                    .filter(|c| c.usb_serial.as_deref() == Some(serial.as_str()))
+                    .map(|c| PathBuf::from(&c.path))
+                    .find(|p| {
+                        Device::with_path(p)
+                            .and_then(|d| d.query_caps())
+                            .is_ok_and(|caps| caps.capabilities.contains(v4l::capability::Flags::VIDEO_CAPTURE))
+                    })
+                    .ok_or_else(|| CaptureError::NoCameraWithSerial {
+                        serial: serial.clone(),
+                        seen: cameras
+                            .iter()
+                            .map(|c| format!("{} ({})", c.path, c.usb_serial.as_deref().unwrap_or("no serial")))
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                    })
+            }
+        }
+    }
+}
+
+fn describe(selector: &CameraSelector) -> String {
+    match selector {
+        CameraSelector::Path(p) => p.display().to_string(),
+        CameraSelector::Serial(s) => format!("camera with serial {s}"),
+    }
+}
+
+fn open_camera(path: &Path, options: &V4l2Options) -> Result<OpenCamera, CaptureError> {
+    let device_name = path.display().to_string();
+    let open_error = |source| CaptureError::Open {
+        device: device_name.clone(),
+        source,
+    };
+    let device = Device::with_path(path).map_err(open_error)?;
+    let offered: Vec<FourCC> = device
+        .enum_formats()
+        .map_err(open_error)?
+        .into_iter()
+        .map(|d| d.fourcc)
+        .collect();
+    let mjpeg = FourCC::new(b"MJPG");
+    let yuyv = FourCC::new(b"YUYV");
+    let wanted: Vec<(PixelFormat, FourCC)> = match options.format {
+        Some(PixelFormat::Mjpeg) => vec![(PixelFormat::Mjpeg, mjpeg)],
+        Some(PixelFormat::Yuyv) => vec![(PixelFormat::Yuyv, yuyv)],
+        None => vec![(PixelFormat::Mjpeg, mjpeg), (PixelFormat::Yuyv, yuyv)],
+    };
+    let unsupported = || CaptureError::UnsupportedFormat {
+        device: device_name.clone(),
+        width: options.width,
+        height: options.height,
+        offered: offered.iter().map(|f| f.to_string()).collect::<Vec<_>>().join(", "),
+    };
+    let (format, fourcc) = wanted
+        .into_iter()
+        .find(|(_, f)| offered.contains(f))
+        .ok_or_else(unsupported)?;
+    let mut requested = device.format().map_err(open_error)?;
+    requested.width = options.width;
+    requested.height = options.height;
+    requested.fourcc = fourcc;
+    let granted = device.set_format(&requested).map_err(open_error)?;
+    if granted.fourcc != fourcc {
+        return Err(unsupported());
+    }
+    let params = device
+        .set_params(&v4l::video::capture::Parameters::with_fps(options.fps.max(1)))
+        .map_err(open_error)?;
+    let fps = if params.interval.numerator > 0 {
+        params.interval.denominator as f64 / params.interval.numerator as f64
+    } else {
+        options.fps as f64
+    };
+    let mut stream = Stream::with_buffers(&device, Type::VideoCapture, 4).map_err(open_error)?;
+    // A camera that stops answering for this long has vanished (unplugged, or the driver hung).
+    stream.set_timeout(Duration::from_secs(2));
+    Ok(OpenCamera {
+        stream,
+        _device: device,
+        format,
+        width: granted.width,
+        height: granted.height,
+        fps,
+    })
+}
+
+impl FrameSource for V4l2Camera {
+    fn info(&self) -> SourceInfo {
+        let (width, height, fps) = self.open.as_ref().map(|o| (o.width, o.height, o.fps)).unwrap_or((
+            self.options.width,
+            self.options.height,
+            self.options.fps as f64,
+        ));
+        SourceInfo {
+            kind: "camera",
+            name: self.device_path.clone(),
+            width,
+            height,
+            fps,
+        }
+    }
+
+    fn next_frame(&mut self) -> Result<CapturedImage, CaptureError> {
+        let device = self.device_path.clone();
+        let Some(open) = self.open.as_mut() else {
+            return Err(CaptureError::Vanished {
+                device,
+                source: std::io::Error::new(std::io::ErrorKind::NotConnected, "camera is not open"),
+            });
+        };
+        let result = open
+            .stream
+            .next()
+            .map(|(buf, meta)| buf[..(meta.bytesused as usize).min(buf.len())].to_vec());
+        let bytes = match result {
+            Ok(bytes) => bytes,
+            Err(source) => {
+                self.open = None;
+                return Err(CaptureError::Vanished { device, source });
+            }
+        };
+        match open.format {
+            PixelFormat::Mjpeg => {
+                let image = decode_jpeg(&bytes, &device)?;
+                Ok(CapturedImage::now(image, Some(bytes)))
+            }
+            PixelFormat::Yuyv => {
+                let image = yuyv_to_rgb(&bytes, open.width, open.height).ok_or_else(|| CaptureError::Decode {
+                    origin: device,
+                    message: format!("short YUYV frame ({} bytes)", bytes.len()),
+                })?;
+                Ok(CapturedImage::now(image, None))
+            }
+        }
+    }
+
+    fn reopen(&mut self) -> Result<(), CaptureError> {
+        self.open = None;
+        let path = self.resolve()?;
+        self.device_path = path.display().to_string();
+        self.open = Some(open_camera(&path, &self.options)?);
+        Ok(())
+    }
+}
+
+/// YUYV 4:2:2 (BT.601, limited range) to RGB.
+pub fn yuyv_to_rgb(bytes: &[u8], width: u32, height: u32) -> Option<RgbImage> {
+    let pixels = width as usize * height as usize;
+    if !width.is_multiple_of(2) || bytes.len() < pixels * 2 {
+        return None;
+    }
+    let mut rgb = Vec::with_capacity(pixels * 3);
+    for quad in bytes[..pixels * 2].chunks_exact(4) {
+        let (y0, u, y1, v) = (
+            quad[0] as f32,
+            quad[1] as f32 - 128.0,
+            quad[2] as f32,
+            quad[3] as f32 - 128.0,
+        );
+        for y in [y0, y1] {
+            let c = 1.164 * (y - 16.0);
+            rgb.push((c + 1.596 * v).clamp(0.0, 255.0) as u8);
+            rgb.push((c - 0.392 * u - 0.813 * v).clamp(0.0, 255.0) as u8);
+            rgb.push((c + 2.017 * u).clamp(0.0, 255.0) as u8);
+        }
+    }
+    RgbImage::from_raw(width, height, rgb)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn yuyv_grey_and_colour_convert_to_rgb() {
+        // Two pixels of mid grey (Y=126, no chroma) then two of saturated red (BT.601: Y=81 U=90 V=240).
+        let bytes = [126, 128, 126, 128, 81, 90, 81, 240];
+        let img = yuyv_to_rgb(&bytes, 4, 1).expect("whole frame");
+        let grey = img.get_pixel(0, 0).0;
+        assert!(grey.iter().all(|&c| (c as i32 - 128).abs() <= 2), "{grey:?}");
+        let red = img.get_pixel(2, 0).0;
+        assert!(red[0] > 240 && red[1] < 15 && red[2] < 15, "{red:?}");
+    }
+
+    #[test]
+    fn short_yuyv_frame_is_rejected() {
+        assert!(yuyv_to_rgb(&[0; 6], 4, 1).is_none());
+        assert!(yuyv_to_rgb(&[0; 6], 3, 1).is_none());
+    }
+
+    #[test]
+    fn selector_tells_paths_from_serials() {
+        assert_eq!(
+            CameraSelector::parse("/dev/video0"),
+            CameraSelector::Path("/dev/video0".into())
+        );
+        assert_eq!(CameraSelector::parse("SN1234"), CameraSelector::Serial("SN1234".into()));
+    }
+}

@@ -1,0 +1,66 @@
+//! `nusense bench`: every estimator variant's speed against its error, written as a markdown table, JSON and
+//! an SVG of the Pareto front.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use nusense_bench::{find_real_pair, report, run_bench, BenchOptions};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Folder for bench.md, bench.json and pareto.svg.
+    #[arg(long, value_name = "DIR", default_value = "bench-out")]
+    out: PathBuf,
+    /// CI-sized run: half-size frames, a quarter of each sweep, one timing pass.
+    #[arg(long)]
+    quick: bool,
+    /// Folder with the real pair (reference_fisheye.jpg, touch_fisheye.jpg); by default shared/data/real is
+    /// searched next to and above the repository.
+    #[arg(long, value_name = "DIR")]
+    real: Option<PathBuf>,
+    /// Print the results as JSON on stdout as well.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    let mut options = if args.quick {
+        BenchOptions::quick()
+    } else {
+        BenchOptions::full()
+    };
+    let cwd = std::env::current_dir().context("cannot read the current directory")?;
+    options.real_dir = match args.real {
+        Some(dir) => Some(dir),
+        None => find_real_pair(&cwd),
+    };
+    if options.real_dir.is_none() {
+        eprintln!("nusense bench: the real pair was not found (pass --real DIR); its columns stay empty");
+    }
+    let bar = indicatif::ProgressBar::new_spinner();
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    let report = run_bench(&options, &mut |step: &str| bar.set_message(step.to_owned()))
+        .context("the benchmark could not run")?;
+    bar.finish_and_clear();
+
+    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    let markdown = report::markdown(&report);
+    let write = |name: &str, text: &str| {
+        let path = args.out.join(name);
+        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))
+    };
+    write("bench.md", &markdown)?;
+    write("bench.json", &serde_json::to_string_pretty(&report)?)?;
+    write("pareto.svg", &report::pareto_svg(&report))?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!("{markdown}");
+        println!(
+            "written: {}",
+            args.out.join("{bench.md,bench.json,pareto.svg}").display()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}

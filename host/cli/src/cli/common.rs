@@ -1,0 +1,125 @@
+//! What several subcommands share: the frame-source options of `serve` and `record`, loading the sensor
+//! config, logging.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use nusense_capture::{
+    CameraSelector, PixelFormat, V4l2Options, SIM_DEFAULT_FPS, SIM_DEFAULT_HEIGHT, SIM_DEFAULT_WIDTH,
+};
+use nusense_daemon::pipeline::{BoardChoice, FrameChoice};
+use nusense_estimator::{Mode, SensorConfig};
+
+/// Where frames and LED control come from, and how they are estimated (shared with `nusense record`).
+#[derive(clap::Args, Debug)]
+pub struct SourceArgs {
+    /// Serial device of the LED board (e.g. /dev/ttyACM0, /dev/serial/by-id/...). Without it: the virtual board
+    /// on the simulator, no board with --camera or --replay.
+    #[arg(long, value_name = "PATH")]
+    pub port: Option<String>,
+    /// Camera: a V4L2 device path or the camera's USB serial number.
+    #[arg(long, value_name = "DEVICE|SERIAL", conflicts_with_all = ["replay", "sim"])]
+    pub camera: Option<String>,
+    /// Replay a folder of frames or an MCAP recording instead of a live camera.
+    #[arg(long, value_name = "DIR|FILE.mcap", conflicts_with = "sim")]
+    pub replay: Option<PathBuf>,
+    /// Run on the simulated sensor (the default when neither --camera nor --replay is given).
+    #[arg(long)]
+    pub sim: bool,
+    /// Sensor configuration (TOML); the default fits the real sensor.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Estimator variant (fast or paper).
+    #[arg(long, default_value = "fast")]
+    pub mode: Mode,
+    /// Frame width and height for the camera or the simulator.
+    #[arg(long, default_value_t = SIM_DEFAULT_WIDTH)]
+    pub width: u32,
+    #[arg(long, default_value_t = SIM_DEFAULT_HEIGHT)]
+    pub height: u32,
+    /// Frames per second for the camera, the simulator, or a folder replay.
+    #[arg(long, default_value_t = SIM_DEFAULT_FPS)]
+    pub fps: f64,
+    /// Camera pixel format, mjpeg or yuyv (default: MJPEG when offered, else YUYV).
+    #[arg(long)]
+    pub pixel_format: Option<PixelFormat>,
+    /// Start the replay over when it ends.
+    #[arg(long = "loop")]
+    pub looping: bool,
+}
+
+/// What the frame-source options of `serve` and `record` select.
+pub fn frame_choice(args: &SourceArgs) -> FrameChoice {
+    if let Some(camera) = &args.camera {
+        FrameChoice::Camera {
+            selector: CameraSelector::parse(camera),
+            options: V4l2Options {
+                width: args.width,
+                height: args.height,
+                fps: args.fps.round().clamp(1.0, 1000.0) as u32,
+                format: args.pixel_format,
+            },
+        }
+    } else if let Some(path) = &args.replay {
+        FrameChoice::Replay {
+            path: path.clone(),
+            fps: args.fps,
+            looping: args.looping,
+        }
+    } else {
+        FrameChoice::Simulator {
+            width: args.width,
+            height: args.height,
+            fps: args.fps,
+        }
+    }
+}
+
+pub fn board_choice(args: &SourceArgs, frames: &FrameChoice) -> BoardChoice {
+    match (&args.port, frames) {
+        (Some(port), _) => BoardChoice::Port(port.clone()),
+        (None, FrameChoice::Simulator { .. }) => BoardChoice::Virtual,
+        (None, _) => BoardChoice::None,
+    }
+}
+
+pub fn load_config(path: Option<&PathBuf>) -> anyhow::Result<SensorConfig> {
+    match path {
+        Some(path) => {
+            SensorConfig::load(path).with_context(|| format!("loading the sensor configuration {}", path.display()))
+        }
+        None => Ok(SensorConfig::default()),
+    }
+}
+
+/// Start-up message in plain words: what runs, from where, and where to look.
+pub fn describe_start(frames: &FrameChoice, board: &BoardChoice) -> String {
+    let camera = match frames {
+        FrameChoice::Simulator { width, height, fps } => {
+            format!("on the SIMULATOR: no camera, a simulated sensor renders {width}x{height} frames at {fps} fps")
+        }
+        FrameChoice::Camera { selector, options } => {
+            format!(
+                "on camera {selector:?} at {}x{} {} fps",
+                options.width, options.height, options.fps
+            )
+        }
+        FrameChoice::Replay { path, .. } => format!("replaying {}", path.display()),
+    };
+    let board = match board {
+        BoardChoice::Virtual => {
+            "a virtual LED board (the firmware's logic with simulated LEDs, over a pty)".to_string()
+        }
+        BoardChoice::Port(port) => format!("the LED board on {port}"),
+        BoardChoice::None => "no LED board".to_string(),
+    };
+    format!("nusense serve: running {camera}, with {board}")
+}
+
+/// Logs to stderr; RUST_LOG overrides the level.
+pub fn init_logging() {
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
+        .with_writer(std::io::stderr)
+        .try_init();
+}

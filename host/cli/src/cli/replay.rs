@@ -1,0 +1,110 @@
+//! `nusense replay IN.mcap|DIR`: runs recorded frames (or a folder of images) through the estimator, as fast
+//! as it goes; the first frame is the rest frame. Prints a table, or one JSON reading per line with --json.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::Context;
+use nusense_capture::{CaptureError, FrameSource, ImageFolder};
+use nusense_daemon::record::McapReplay;
+use nusense_estimator::{Estimator, Mode};
+
+use super::common::load_config;
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// An MCAP recording (from `nusense record` or the API) or a folder of PNG/JPEG frames.
+    pub input: PathBuf,
+    /// Sensor configuration (TOML).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Estimator variant (fast or paper).
+    #[arg(long, default_value = "fast")]
+    pub mode: Mode,
+    /// One JSON object per frame instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(args: Args) -> anyhow::Result<ExitCode> {
+    let config = load_config(args.config.as_ref())?;
+    let mut source: Box<dyn FrameSource> = if args.input.is_dir() {
+        Box::new(ImageFolder::open(&args.input, f64::INFINITY, false)?.unpaced())
+    } else {
+        let replay = McapReplay::open(&args.input, false)?.unpaced();
+        if replay.truncated {
+            eprintln!(
+                "nusense replay: {} was cut short (its recorder was killed); replaying what survived",
+                args.input.display()
+            );
+        }
+        Box::new(replay)
+    };
+    let mut estimator: Option<Estimator> = None;
+    let mut frames = 0usize;
+    let mut failures = 0usize;
+    let started = Instant::now();
+    if !args.json {
+        println!(
+            "{:>6} {:>8} {:>9} {:>10} {:>16} {:>8} {:>9}",
+            "frame", "contact", "force N", "gamma", "contact mm", "edge °", "points"
+        );
+    }
+    loop {
+        let frame = match source.next_frame() {
+            Ok(frame) => frame,
+            Err(CaptureError::EndOfStream) => break,
+            Err(error) => return Err(error).context("reading frames"),
+        };
+        let index = frames;
+        frames += 1;
+        if estimator.is_none() {
+            estimator = Some(
+                Estimator::new(config.clone(), args.mode, &frame.image)
+                    .with_context(|| format!("frame {index} cannot be the rest frame"))?,
+            );
+        }
+        let Some(estimator) = estimator.as_mut() else {
+            continue;
+        };
+        match estimator.estimate(&frame.image) {
+            Ok(reading) if args.json => println!("{}", serde_json::json!({ "frame": index, "estimate": reading })),
+            Ok(r) => println!(
+                "{:>6} {:>8} {:>9.3} {:>10.5} {:>16} {:>8} {:>4}/{:<4}",
+                index,
+                if r.contact { "yes" } else { "no" },
+                r.force_n,
+                r.gamma,
+                r.contact_mm
+                    .map(|c| format!("{:.1}, {:.1}", c[0], c[1]))
+                    .unwrap_or_else(|| "-".into()),
+                r.edge_angle_deg
+                    .map(|a| format!("{a:.1}"))
+                    .unwrap_or_else(|| "-".into()),
+                r.points_detected,
+                r.points_expected
+            ),
+            Err(error) => {
+                failures += 1;
+                if args.json {
+                    println!("{}", serde_json::json!({ "frame": index, "error": error.to_string() }));
+                } else {
+                    println!("{index:>6} error: {error}");
+                }
+            }
+        }
+    }
+    if frames == 0 {
+        anyhow::bail!("{} holds no frames", args.input.display());
+    }
+    eprintln!(
+        "nusense replay: {frames} frames ({failures} without an estimate) in {:.2} s",
+        started.elapsed().as_secs_f64()
+    );
+    Ok(if failures == 0 {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(2)
+    })
+}

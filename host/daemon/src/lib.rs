@@ -1,0 +1,10 @@
+//! The nusense daemon: frames from a source (camera, recording or simulator) through the estimator, with the
+//! LED board kept in step, published over HTTP/WebSocket with a dashboard, and recorded to MCAP.
+//!
+//! [`pipeline`] runs capture, estimation and publication; [`api`] serves them (and the dashboard); [`record`]
+//! writes and reads recordings.
+
+pub mod api;
+mod dashboard;
+pub mod pipeline;
+pub mod record;

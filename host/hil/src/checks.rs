@@ -1,0 +1,641 @@
+//! The checks, in the order they run. Each takes the session (the open link, reopened after a disconnect) and
+//! returns its verdict with the numbers it measured; a link error fails that check and the suite goes on.
+
+use std::time::{Duration, Instant};
+
+use nusense_protocol::{Channel, DeviceError, Side, Status, Telemetry, CHANNEL_COUNT, PROTOCOL_VERSION};
+use serde_json::{json, Value};
+
+use super::camera::BrightnessProbe;
+use super::{CheckResult, HilOptions, HilReport, RunningTarget, Verdict};
+use nusense_board::{BoardLink, LinkError};
+use nusense_estimator::stats::{mean, pearson, quantile, std_dev};
+
+/// Consecutive telemetry frames within tolerance that count as "settled".
+const SETTLED_RUN: usize = 5;
+/// How long a single telemetry read waits before the settle loop looks at its deadline again.
+const TELEMETRY_POLL: Duration = Duration::from_millis(100);
+/// The nominal LED current, restored after the clamp check when the board's own state is unknown.
+const NOMINAL_MA: u16 = nusense_firmware_core::limits::NOMINAL_CURRENT_MA;
+
+type Outcome = Result<(Verdict, String, Value), CheckError>;
+
+#[derive(Debug, thiserror::Error)]
+enum CheckError {
+    #[error("{0}")]
+    Link(#[from] LinkError),
+    #[error("no telemetry arrived within {0:?} although streaming was requested")]
+    NoTelemetry(Duration),
+    #[error("{0}")]
+    Camera(#[from] super::CameraProbeError),
+}
+
+struct Session<'a> {
+    port: &'a str,
+    options: &'a HilOptions,
+    link: Option<BoardLink>,
+    /// The board's state before the suite touched it, restored at the end.
+    initial: Option<Status>,
+    max_current_ma: Option<u16>,
+    /// Attempts the last (re)open of the link took.
+    open_attempts: u32,
+}
+
+/// Opens `port` with the handshake, retrying until `options.connect_timeout`; returns the link and the number
+/// of attempts, or the last attempt's error.
+fn open_with_retries(port: &str, options: &HilOptions) -> Result<(BoardLink, u32), LinkError> {
+    let started = Instant::now();
+    let mut attempts = 0;
+    loop {
+        attempts += 1;
+        match BoardLink::open(port, options.link) {
+            Ok(link) => return Ok((link, attempts)),
+            Err(error) if started.elapsed() >= options.connect_timeout => return Err(error),
+            Err(_) => std::thread::sleep(Duration::from_millis(100)),
+        }
+    }
+}
+
+impl Session<'_> {
+    /// The open link, opening it when needed. A board that has just booted (QEMU starting, USB enumerating) or
+    /// a port that was just closed may not answer at once: opening is retried for `connect_timeout`.
+    fn link(&mut self) -> Result<&mut BoardLink, LinkError> {
+        if self.link.is_none() {
+            let (link, attempts) = open_with_retries(self.port, self.options)?;
+            self.open_attempts = attempts;
+            self.link = Some(link);
+        }
+        Ok(self.link.as_mut().expect("opened above"))
+    }
+
+    fn ramp_ms(&self) -> u64 {
+        self.initial.map_or(0, |status| u64::from(status.ramp_ms))
+    }
+}
+
+/// Runs every check against `target` and returns the report; `on_result` sees each result as it is decided
+/// (for live output).
+pub fn run_suite(
+    target: &mut RunningTarget,
+    options: &HilOptions,
+    on_result: &mut dyn FnMut(&CheckResult),
+) -> HilReport {
+    let mut session = Session {
+        port: &target.port,
+        options,
+        link: None,
+        initial: None,
+        max_current_ma: None,
+        open_attempts: 0,
+    };
+    let camera_name = target.camera.as_ref().map(|c| c.describe());
+    let camera = target.camera.as_deref_mut();
+    let mut results = Vec::new();
+    let mut record = |name: &'static str, started: Instant, outcome: Outcome, session: &mut Session| {
+        let (verdict, summary, details) = match outcome {
+            Ok(result) => result,
+            Err(error) => {
+                if matches!(error, CheckError::Link(ref e) if e.is_disconnect()) {
+                    session.link = None;
+                }
+                (Verdict::Fail, error.to_string(), json!({ "error": error.to_string() }))
+            }
+        };
+        let result = CheckResult {
+            name,
+            verdict,
+            summary,
+            details,
+            elapsed_ms: started.elapsed().as_secs_f64() * 1e3,
+        };
+        on_result(&result);
+        results.push(result);
+    };
+
+    let started = Instant::now();
+    let outcome = handshake_and_versions(&mut session);
+    record("handshake", started, outcome, &mut session);
+
+    let started = Instant::now();
+    let outcome = led_ramp(&mut session);
+    record("led_ramp", started, outcome, &mut session);
+
+    let started = Instant::now();
+    let outcome = match camera {
+        Some(camera) => brightness_follows_current(&mut session, camera),
+        None => Ok((
+            Verdict::Skip,
+            "no camera attached (pass --camera DEV)".into(),
+            Value::Null,
+        )),
+    };
+    record("camera_brightness", started, outcome, &mut session);
+
+    let started = Instant::now();
+    let outcome = telemetry_rate_and_jitter(&mut session);
+    record("telemetry_rate", started, outcome, &mut session);
+
+    let started = Instant::now();
+    let outcome = round_trip_latency(&mut session);
+    record("latency", started, outcome, &mut session);
+
+    let started = Instant::now();
+    let outcome = over_limit_is_clamped(&mut session);
+    record("over_limit_clamp", started, outcome, &mut session);
+
+    let started = Instant::now();
+    let outcome = recovery_after_reopen(&mut session);
+    record("reopen_recovery", started, outcome, &mut session);
+
+    restore(&mut session);
+    HilReport::new(
+        format!("{} ({})", target.description, target.port),
+        camera_name,
+        results,
+    )
+}
+
+fn handshake_and_versions(session: &mut Session) -> Outcome {
+    let started = Instant::now();
+    session.link()?;
+    let handshake_ms = started.elapsed().as_secs_f64() * 1e3;
+    let attempts = session.open_attempts;
+    let link = session.link()?;
+    let info = link.info()?;
+    let status = link.status()?;
+    let serial: String = info.mcu_uid.iter().map(|b| format!("{b:02X}")).collect();
+    let mut problems = Vec::new();
+    if info.protocol_version != PROTOCOL_VERSION {
+        problems.push(format!(
+            "protocol v{} (host v{PROTOCOL_VERSION})",
+            info.protocol_version
+        ));
+    }
+    if usize::from(info.channel_count) != CHANNEL_COUNT {
+        problems.push(format!(
+            "{} LED channels (expected {CHANNEL_COUNT})",
+            info.channel_count
+        ));
+    }
+    if info.firmware_version.is_empty() {
+        problems.push("empty firmware version".into());
+    }
+    if info.max_current_ma > session.options.hard_limit_ma {
+        problems.push(format!(
+            "declares a limit of {} mA, above the hard limit {} mA",
+            info.max_current_ma, session.options.hard_limit_ma
+        ));
+    }
+    let faults: Vec<String> = Side::ALL
+        .iter()
+        .filter(|side| status.channels[side.index()].faults.any())
+        .map(|side| format!("{side}: {:?}", status.channels[side.index()].faults))
+        .collect();
+    session.initial = Some(status);
+    session.max_current_ma = Some(info.max_current_ma);
+    let details = json!({
+        "handshake_ms": handshake_ms,
+        "open_attempts": attempts,
+        "protocol_version": info.protocol_version,
+        "host_protocol_version": PROTOCOL_VERSION,
+        "firmware_version": info.firmware_version.as_str(),
+        "git_hash": info.git_hash.as_str(),
+        "board_id": info.board_id.as_str(),
+        "serial_number": serial,
+        "channel_count": info.channel_count,
+        "max_current_ma": info.max_current_ma,
+        "host_version": env!("CARGO_PKG_VERSION"),
+        "latched_faults_at_start": faults,
+    });
+    if problems.is_empty() {
+        let summary = format!(
+            "protocol v{}, firmware {} ({}), board {}, serial {serial}, handshake {handshake_ms:.1} ms \
+             ({attempts} attempt{})",
+            info.protocol_version,
+            info.firmware_version.as_str(),
+            info.git_hash.as_str(),
+            info.board_id.as_str(),
+            if attempts == 1 { "" } else { "s" }
+        );
+        Ok((Verdict::Pass, summary, details))
+    } else {
+        Ok((Verdict::Fail, problems.join("; "), details))
+    }
+}
+
+/// The current after a change, once it has settled (or the wait ran out).
+struct Settled {
+    target_ma: u16,
+    /// Time from the request to the first of [`SETTLED_RUN`] frames within tolerance; `None` if it never settled.
+    settled_after_ms: Option<f64>,
+    mean_ma: [f64; CHANNEL_COUNT],
+    reported_setpoint_ma: [u16; CHANNEL_COUNT],
+    over_current: bool,
+}
+
+impl Settled {
+    fn worst_error(&self) -> f64 {
+        self.mean_ma
+            .iter()
+            .map(|m| (m - f64::from(self.target_ma)).abs() / f64::from(self.target_ma.max(1)))
+            .fold(0.0, f64::max)
+    }
+
+    fn mean_f32(&self) -> [f32; CHANNEL_COUNT] {
+        self.mean_ma.map(|m| m as f32)
+    }
+
+    fn to_json(&self) -> Value {
+        json!({
+            "target_ma": self.target_ma,
+            "settled_after_ms": self.settled_after_ms,
+            "measured_ma": self.mean_ma,
+            "reported_setpoint_ma": self.reported_setpoint_ma,
+            "worst_error_percent": self.worst_error() * 100.0,
+            "over_current_fault": self.over_current,
+        })
+    }
+}
+
+/// Sets every string to `request_ma`, waits until the telemetry says all of them carry the current the board
+/// should regulate to (`target_ma`, the request clamped), then averages the next frames.
+fn set_and_settle(session: &mut Session, request_ma: u16, target_ma: u16) -> Result<Settled, CheckError> {
+    let options = session.options;
+    let deadline_after = Duration::from_millis(session.ramp_ms()) + options.settle_timeout;
+    let link = session.link()?;
+    link.stream_telemetry(options.telemetry_period_ms)?;
+    link.set_led(Channel::All, request_ma, true)?;
+    let requested_at = Instant::now();
+    // Frames queued before the request describe the old setpoint.
+    link.drain_telemetry().for_each(drop);
+    let within = |t: &Telemetry| {
+        t.channels.iter().all(|c| {
+            (f64::from(c.measured_ma) - f64::from(target_ma)).abs() <= options.current_tolerance * f64::from(target_ma)
+        })
+    };
+    let mut run = 0usize;
+    let mut settled_after_ms = None;
+    let mut recent: Vec<Telemetry> = Vec::new();
+    let mut any = false;
+    while requested_at.elapsed() < deadline_after {
+        let Some(telemetry) = link.next_telemetry(TELEMETRY_POLL)? else {
+            continue;
+        };
+        any = true;
+        run = if within(&telemetry) { run + 1 } else { 0 };
+        recent.push(telemetry);
+        if run == SETTLED_RUN {
+            settled_after_ms = Some(requested_at.elapsed().as_secs_f64() * 1e3);
+            break;
+        }
+    }
+    if !any {
+        return Err(CheckError::NoTelemetry(deadline_after));
+    }
+    if settled_after_ms.is_some() {
+        recent.clear();
+        let averaging_deadline = Instant::now()
+            + Duration::from_millis(u64::from(options.telemetry_period_ms) * options.settled_frames as u64 * 3)
+            + TELEMETRY_POLL;
+        while recent.len() < options.settled_frames && Instant::now() < averaging_deadline {
+            if let Some(telemetry) = link.next_telemetry(TELEMETRY_POLL)? {
+                recent.push(telemetry);
+            }
+        }
+    }
+    let window = &recent[recent.len().saturating_sub(options.settled_frames)..];
+    let last = window.last().ok_or(CheckError::NoTelemetry(deadline_after))?;
+    let mean_ma = std::array::from_fn(|ch| {
+        let values: Vec<f64> = window.iter().map(|t| f64::from(t.channels[ch].measured_ma)).collect();
+        mean(&values).unwrap_or(0.0)
+    });
+    Ok(Settled {
+        target_ma,
+        settled_after_ms,
+        mean_ma,
+        reported_setpoint_ma: last.channels.map(|c| c.setpoint_ma),
+        over_current: window.iter().any(|t| t.channels.iter().any(|c| c.faults.over_current)),
+    })
+}
+
+fn led_ramp(session: &mut Session) -> Outcome {
+    let tolerance = session.options.current_tolerance;
+    let mut steps = Vec::new();
+    let mut failures = Vec::new();
+    let mut worst = 0.0f64;
+    for &setpoint in &session.options.setpoints_ma.clone() {
+        let settled = set_and_settle(session, setpoint, setpoint)?;
+        worst = worst.max(settled.worst_error());
+        if settled.worst_error() > tolerance {
+            failures.push(format!(
+                "{setpoint} mA: measured {:.1?} mA{}",
+                settled.mean_ma,
+                if settled.settled_after_ms.is_none() {
+                    " (never settled)"
+                } else {
+                    ""
+                }
+            ));
+        }
+        if settled.reported_setpoint_ma.iter().any(|&s| s != setpoint) {
+            failures.push(format!(
+                "{setpoint} mA: board reports setpoints {:?}",
+                settled.reported_setpoint_ma
+            ));
+        }
+        steps.push(settled.to_json());
+    }
+    let details = json!({ "tolerance_percent": tolerance * 100.0, "steps": steps });
+    if failures.is_empty() {
+        let summary = format!(
+            "{} setpoints {:?} mA, all strings within {:.2} % (limit {:.0} %)",
+            session.options.setpoints_ma.len(),
+            session.options.setpoints_ma,
+            worst * 100.0,
+            tolerance * 100.0
+        );
+        Ok((Verdict::Pass, summary, details))
+    } else {
+        Ok((Verdict::Fail, failures.join("; "), details))
+    }
+}
+
+/// Least correlation between LED current and mean image brightness accepted as "follows".
+const MIN_BRIGHTNESS_CORRELATION: f64 = 0.95;
+
+fn brightness_follows_current(session: &mut Session, camera: &mut dyn BrightnessProbe) -> Outcome {
+    let mut currents = Vec::new();
+    let mut brightness = Vec::new();
+    let mut steps = Vec::new();
+    for &setpoint in &session.options.setpoints_ma.clone() {
+        let settled = set_and_settle(session, setpoint, setpoint)?;
+        let level = camera.brightness(settled.mean_f32())?;
+        let mean_current = settled.mean_ma.iter().sum::<f64>() / CHANNEL_COUNT as f64;
+        currents.push(mean_current);
+        brightness.push(level);
+        steps.push(json!({ "setpoint_ma": setpoint, "measured_ma": mean_current, "mean_luma": level }));
+    }
+    let increasing = brightness.windows(2).all(|pair| pair[1] > pair[0]);
+    let correlation = pearson(&currents, &brightness);
+    let details = json!({
+        "camera": camera.describe(),
+        "steps": steps,
+        "correlation": correlation,
+        "strictly_increasing": increasing,
+        "min_correlation": MIN_BRIGHTNESS_CORRELATION,
+    });
+    let levels: Vec<String> = brightness.iter().map(|b| format!("{b:.1}")).collect();
+    let summary = format!(
+        "mean luma {} at {:?} mA, correlation {}",
+        levels.join(" < "),
+        session.options.setpoints_ma,
+        correlation.map_or("undefined".into(), |r| format!("{r:.3}"))
+    );
+    let passed = increasing && correlation.is_some_and(|r| r >= MIN_BRIGHTNESS_CORRELATION);
+    Ok((if passed { Verdict::Pass } else { Verdict::Fail }, summary, details))
+}
+
+fn telemetry_rate_and_jitter(session: &mut Session) -> Outcome {
+    let options = session.options;
+    let period_ms = f64::from(options.telemetry_period_ms);
+    let link = session.link()?;
+    link.stream_telemetry(options.telemetry_period_ms)?;
+    // Let the stream start, then forget what is queued: arrival times must be measured, not read from a queue.
+    std::thread::sleep(Duration::from_millis(u64::from(options.telemetry_period_ms) * 3));
+    while link.next_telemetry(Duration::ZERO)?.is_some() {}
+    let started = Instant::now();
+    let mut arrivals = Vec::new();
+    let mut uptimes = Vec::new();
+    while started.elapsed() < options.telemetry_window {
+        if let Some(telemetry) = link.next_telemetry(TELEMETRY_POLL)? {
+            arrivals.push(started.elapsed().as_secs_f64() * 1e3);
+            uptimes.push(telemetry.uptime_us);
+        }
+    }
+    let window_ms = started.elapsed().as_secs_f64() * 1e3;
+    if uptimes.len() < 3 {
+        return Err(CheckError::NoTelemetry(options.telemetry_window));
+    }
+    let requested_hz = 1e3 / period_ms;
+    let host_rate_hz = arrivals.len() as f64 / (window_ms / 1e3);
+    let board_span_ms = (uptimes[uptimes.len() - 1].saturating_sub(uptimes[0])) as f64 / 1e3;
+    let board_rate_hz = (uptimes.len() - 1) as f64 / (board_span_ms / 1e3).max(f64::EPSILON);
+    let board_intervals: Vec<f64> = uptimes
+        .windows(2)
+        .map(|w| w[1].saturating_sub(w[0]) as f64 / 1e3)
+        .collect();
+    let host_intervals: Vec<f64> = arrivals.windows(2).map(|w| w[1] - w[0]).collect();
+    let deviation = |intervals: &[f64]| -> Vec<f64> { intervals.iter().map(|i| (i - period_ms).abs()).collect() };
+    let board_jitter_std = std_dev(&board_intervals).unwrap_or(0.0);
+    let board_p99_dev = quantile(&deviation(&board_intervals), 0.99).unwrap_or(0.0);
+    let host_jitter_std = std_dev(&host_intervals).unwrap_or(0.0);
+    let host_p99_dev = quantile(&deviation(&host_intervals), 0.99).unwrap_or(0.0);
+    // Board time over host time while the frames came: 1 for a board on a crystal; an emulator starved of CPU
+    // runs its clock slow, and then sends at the requested rate of its own clock only.
+    let host_span_ms = arrivals[arrivals.len() - 1] - arrivals[0];
+    let board_clock_ratio = (host_span_ms > 0.0).then(|| board_span_ms / host_span_ms);
+    let missed = board_intervals.iter().filter(|&&i| i > 1.5 * period_ms).count();
+    let rate_ok = |rate: f64| (rate - requested_hz).abs() <= options.rate_tolerance * requested_hz;
+    let mut problems = Vec::new();
+    if !rate_ok(board_rate_hz) {
+        problems.push(format!("board sends at {board_rate_hz:.1} Hz"));
+    }
+    if !rate_ok(host_rate_hz) {
+        let clock = match board_clock_ratio {
+            Some(ratio) if (ratio - 1.0).abs() > options.rate_tolerance => {
+                format!(" (the board's clock ran at {ratio:.2}x wall time)")
+            }
+            _ => String::new(),
+        };
+        problems.push(format!("host receives {host_rate_hz:.1} Hz{clock}"));
+    }
+    if board_p99_dev > options.max_jitter_fraction * period_ms {
+        problems.push(format!("board-side p99 interval deviation {board_p99_dev:.2} ms"));
+    }
+    let details = json!({
+        "period_ms": period_ms,
+        "requested_hz": requested_hz,
+        "frames": uptimes.len(),
+        "window_ms": window_ms,
+        "board_rate_hz": board_rate_hz,
+        "host_rate_hz": host_rate_hz,
+        "board_interval_std_ms": board_jitter_std,
+        "board_interval_p99_deviation_ms": board_p99_dev,
+        "host_interval_std_ms": host_jitter_std,
+        "host_interval_p99_deviation_ms": host_p99_dev,
+        "host_interval_max_ms": host_intervals.iter().copied().fold(0.0, f64::max),
+        "missed_intervals": missed,
+        "board_clock_ratio": board_clock_ratio,
+        "rate_tolerance_percent": options.rate_tolerance * 100.0,
+        "max_jitter_ms": options.max_jitter_fraction * period_ms,
+    });
+    let summary = format!(
+        "{requested_hz:.0} Hz requested: board {board_rate_hz:.1} Hz, host {host_rate_hz:.1} Hz; jitter board \
+         std {board_jitter_std:.3} ms p99 {board_p99_dev:.3} ms, host std {host_jitter_std:.2} ms p99 {host_p99_dev:.2} ms"
+    );
+    if problems.is_empty() {
+        Ok((Verdict::Pass, summary, details))
+    } else {
+        Ok((Verdict::Fail, format!("{}; {summary}", problems.join("; ")), details))
+    }
+}
+
+fn round_trip_latency(session: &mut Session) -> Outcome {
+    let options = session.options;
+    let link = session.link()?;
+    // Without telemetry in the way, the round trip is the command path alone.
+    link.stream_telemetry(0)?;
+    std::thread::sleep(Duration::from_millis(20));
+    link.drain_telemetry().for_each(drop);
+    let mut latencies_ms = Vec::with_capacity(options.pings);
+    let mut errors = 0usize;
+    for nonce in 0..options.pings {
+        match link.ping(0xA5A5_0000 ^ nonce as u32) {
+            Ok(rtt) => latencies_ms.push(rtt.as_secs_f64() * 1e3),
+            Err(error) if error.is_disconnect() => return Err(error.into()),
+            Err(_) => errors += 1,
+        }
+    }
+    let p50 = quantile(&latencies_ms, 0.5);
+    let p90 = quantile(&latencies_ms, 0.9);
+    let p99 = quantile(&latencies_ms, 0.99);
+    let max = latencies_ms
+        .iter()
+        .copied()
+        .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v))));
+    let stats = link.stats();
+    let details = json!({
+        "pings": options.pings,
+        "answered": latencies_ms.len(),
+        "failed": errors,
+        "p50_ms": p50, "p90_ms": p90, "p99_ms": p99, "max_ms": max,
+        "max_p99_ms": options.max_p99_latency_ms,
+        "link_retries": stats.retries,
+        "link_timeouts": stats.timeouts,
+    });
+    let fmt = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.3}"));
+    let summary = format!(
+        "{} pings: p50 {} ms, p90 {} ms, p99 {} ms, max {} ms, {errors} unanswered",
+        options.pings,
+        fmt(p50),
+        fmt(p90),
+        fmt(p99),
+        fmt(max)
+    );
+    let passed = errors == 0 && p99.is_some_and(|p| p <= options.max_p99_latency_ms);
+    Ok((if passed { Verdict::Pass } else { Verdict::Fail }, summary, details))
+}
+
+fn over_limit_is_clamped(session: &mut Session) -> Outcome {
+    let options = session.options;
+    let limit = options
+        .hard_limit_ma
+        .min(session.max_current_ma.unwrap_or(options.hard_limit_ma));
+    let request = options.over_limit_request_ma;
+    let link = session.link()?;
+    match link.set_led(Channel::All, request, true) {
+        Ok(()) => {}
+        Err(LinkError::Device(DeviceError::BadArgument(argument))) => {
+            let summary = format!("the board rejected {request} mA ({argument}) instead of clamping it");
+            return Ok((
+                Verdict::Fail,
+                summary,
+                json!({ "request_ma": request, "rejected": true }),
+            ));
+        }
+        Err(error) => return Err(error.into()),
+    }
+    let status = link.status()?;
+    let reported: Vec<u16> = status.channels.iter().map(|c| c.setpoint_ma).collect();
+    let settled = set_and_settle(session, request, limit)?;
+    let peak = settled.mean_ma.iter().copied().fold(0.0, f64::max);
+    let mut problems = Vec::new();
+    if reported.iter().any(|&s| s > limit) {
+        problems.push(format!("reported setpoints {reported:?} mA exceed {limit} mA"));
+    }
+    if peak > f64::from(limit) * (1.0 + options.current_tolerance) {
+        problems.push(format!("strings carry up to {peak:.1} mA"));
+    }
+    if settled.over_current {
+        problems.push("the over-current fault tripped".into());
+    }
+    let details = json!({
+        "request_ma": request,
+        "limit_ma": limit,
+        "reported_setpoint_ma": reported,
+        "settled": settled.to_json(),
+    });
+    // Back to nominal so the remaining checks do not run the strings at their limit.
+    session.link()?.set_led(Channel::All, NOMINAL_MA, true)?;
+    if problems.is_empty() {
+        let summary = format!(
+            "{request} mA requested: setpoints {reported:?} mA, strings settle at {peak:.1} mA (limit {limit} mA)"
+        );
+        Ok((Verdict::Pass, summary, details))
+    } else {
+        Ok((Verdict::Fail, problems.join("; "), details))
+    }
+}
+
+fn recovery_after_reopen(session: &mut Session) -> Outcome {
+    let options = session.options;
+    // Close with the stream running: the hardest case, bytes in flight when the port goes.
+    session.link()?.stream_telemetry(options.telemetry_period_ms)?;
+    std::thread::sleep(Duration::from_millis(50));
+    session.link = None;
+    std::thread::sleep(Duration::from_millis(100));
+    let started = Instant::now();
+    let reopen_options = HilOptions {
+        connect_timeout: options.recovery_timeout,
+        ..options.clone()
+    };
+    let (link, attempts) = match open_with_retries(session.port, &reopen_options) {
+        Ok(opened) => opened,
+        Err(error) => {
+            let summary = format!("could not reopen within {:?}: {error}", options.recovery_timeout);
+            let details = json!({ "reopen_ms": started.elapsed().as_secs_f64() * 1e3, "error": error.to_string() });
+            return Ok((Verdict::Fail, summary, details));
+        }
+    };
+    let reopen_ms = started.elapsed().as_secs_f64() * 1e3;
+    let link = session.link.insert(link);
+    let ping_ms = link.ping(0x5EC0_4E55)?.as_secs_f64() * 1e3;
+    link.status()?;
+    link.stream_telemetry(options.telemetry_period_ms)?;
+    let telemetry = link.next_telemetry(Duration::from_secs(1))?;
+    link.stream_telemetry(0)?;
+    let details = json!({
+        "attempts": attempts,
+        "reopen_ms": reopen_ms,
+        "ping_after_reopen_ms": ping_ms,
+        "telemetry_after_reopen": telemetry.is_some(),
+        "wire_errors_after_reopen": link.counters(),
+    });
+    if telemetry.is_none() {
+        return Ok((
+            Verdict::Fail,
+            "reopened and handshaken, but no telemetry after reopening".into(),
+            details,
+        ));
+    }
+    let summary = format!(
+        "reopened after {reopen_ms:.0} ms ({attempts} attempt{}), ping {ping_ms:.2} ms, telemetry flowing",
+        if attempts == 1 { "" } else { "s" }
+    );
+    Ok((Verdict::Pass, summary, details))
+}
+
+/// Puts the board back as the suite found it: stream off, each string's setpoint and enable.
+fn restore(session: &mut Session) {
+    let initial = session.initial;
+    let Ok(link) = session.link() else { return };
+    let _ = link.stream_telemetry(0);
+    if let Some(status) = initial {
+        for side in Side::ALL {
+            let channel = status.channels[side.index()];
+            if let Err(error) = link.set_led(Channel::One(side), channel.setpoint_ma, channel.enabled) {
+                tracing::warn!(target: "nusense_hil", %error, %side, "cannot restore the LED channel");
+            }
+        }
+    }
+}

@@ -1,0 +1,108 @@
+//! What the suite runs against, started and kept alive for the duration of the run.
+
+use std::path::PathBuf;
+
+use crate::emulator::{EmulatorError, QemuBoard, QemuImage, QemuOptions};
+use nusense_board::virtual_board::{VirtualBoard, VirtualBoardError};
+
+use super::camera::{BrightnessProbe, CameraProbeError, SimulatedCameraProbe, V4l2CameraProbe};
+
+/// Size of the simulated camera's frames: enough for a mean brightness, cheap to render.
+const SIMULATED_CAMERA_SIZE: (u32, u32) = (160, 120);
+
+#[derive(Clone, Debug)]
+pub enum HilTarget {
+    /// A board on a serial device, with a camera (device path or USB serial) when one is attached.
+    Port { path: String, camera: Option<String> },
+    /// The firmware's core on a host thread behind a pty, with the simulated camera.
+    Virtual,
+    /// The QEMU firmware image, with the simulated camera. `elf` overrides the image; `build` builds it first.
+    Emulated {
+        elf: Option<PathBuf>,
+        build: bool,
+        qemu: QemuOptions,
+    },
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum TargetError {
+    #[error(transparent)]
+    Emulator(#[from] EmulatorError),
+    #[error(transparent)]
+    VirtualBoard(#[from] VirtualBoardError),
+    #[error("cannot open the camera: {0}")]
+    Camera(#[from] CameraProbeError),
+}
+
+/// A started target: its serial path, its camera, and whatever must stay alive while the checks run.
+pub struct RunningTarget {
+    pub description: String,
+    pub port: String,
+    pub camera: Option<Box<dyn BrightnessProbe>>,
+    // Held for their Drop: the virtual board stops and QEMU is killed when the target goes.
+    _virtual_board: Option<VirtualBoard>,
+    _qemu: Option<QemuBoard>,
+}
+
+impl HilTarget {
+    pub fn start(&self) -> Result<RunningTarget, TargetError> {
+        match self {
+            HilTarget::Port { path, camera } => {
+                let camera = match camera {
+                    Some(device) => Some(Box::new(V4l2CameraProbe::open(device)?) as Box<dyn BrightnessProbe>),
+                    None => None,
+                };
+                Ok(RunningTarget {
+                    description: format!("board on {path}"),
+                    port: path.clone(),
+                    camera,
+                    _virtual_board: None,
+                    _qemu: None,
+                })
+            }
+            HilTarget::Virtual => {
+                let board = VirtualBoard::spawn_pty()?;
+                Ok(RunningTarget {
+                    description: format!("virtual board (firmware core behind a pty) on {}", board.path()),
+                    port: board.path().to_owned(),
+                    camera: Some(simulated_camera()?),
+                    _virtual_board: Some(board),
+                    _qemu: None,
+                })
+            }
+            HilTarget::Emulated { elf, build, qemu } => {
+                let image = match elf {
+                    Some(elf) => QemuImage::at(elf.clone())?,
+                    None => {
+                        let cwd = std::env::current_dir().unwrap_or_else(|_| PathBuf::from("."));
+                        let workspace = QemuImage::find_images_workspace(&cwd)?;
+                        if *build {
+                            QemuImage::build(&workspace)?
+                        } else {
+                            QemuImage::prebuilt(&workspace)?
+                        }
+                    }
+                };
+                let board = QemuBoard::start(&image, qemu)?;
+                Ok(RunningTarget {
+                    description: format!(
+                        "QEMU {} image {} (pid {}) on {}",
+                        crate::emulator::QEMU_MACHINE,
+                        image.elf.display(),
+                        board.pid(),
+                        board.pty_path()
+                    ),
+                    port: board.pty_path().to_owned(),
+                    camera: Some(simulated_camera()?),
+                    _virtual_board: None,
+                    _qemu: Some(board),
+                })
+            }
+        }
+    }
+}
+
+fn simulated_camera() -> Result<Box<dyn BrightnessProbe>, CameraProbeError> {
+    let (width, height) = SIMULATED_CAMERA_SIZE;
+    Ok(Box::new(SimulatedCameraProbe::new(width, height)?))
+}
