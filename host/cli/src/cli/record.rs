@@ -1,6 +1,7 @@
 //! `nusense record OUT.mcap`: runs the pipeline headless and records frames, readings and board telemetry.
+//! `nusense record --recover IN.mcap OUT.mcap`: rewrites a recording that was cut short with its summary.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -8,14 +9,19 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use nusense_daemon::pipeline::{open_sources, Pipeline, PipelineOptions};
-use nusense_daemon::record::RecorderOptions;
+use nusense_daemon::record::{recover, RecorderOptions, DEFAULT_FLUSH_INTERVAL};
 
 use super::common::{board_choice, describe_start, frame_choice, init_logging, load_config, SourceArgs};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The recording to write (MCAP).
-    pub output: PathBuf,
+    #[arg(required_unless_present = "recover")]
+    pub output: Option<PathBuf>,
+    /// Rewrite IN, a recording cut short (killed recorder, power loss, full disk), as OUT: every message up to
+    /// its last whole chunk, with the summary and indexes that seeking readers (Foxglove) need. OUT must not exist.
+    #[arg(long, num_args = 2, value_names = ["IN", "OUT"], conflicts_with = "output")]
+    pub recover: Option<Vec<PathBuf>>,
     #[command(flatten)]
     pub source: SourceArgs,
     /// Stop after this many seconds (default: until Ctrl-C, or until a replay ends).
@@ -24,8 +30,8 @@ pub struct Args {
     /// Stop after this many frames have been captured.
     #[arg(long, value_name = "N")]
     pub frames: Option<u64>,
-    /// Longest time a chunk stays open: what a crash can lose at most.
-    #[arg(long, value_name = "MS", default_value_t = 500)]
+    /// Longest time a chunk stays open before it is written and fsynced: what a crash or power cut loses at most.
+    #[arg(long, value_name = "MS", default_value_t = DEFAULT_FLUSH_INTERVAL.as_millis() as u64)]
     pub flush_ms: u64,
     /// Print the summary as JSON.
     #[arg(long)]
@@ -34,11 +40,14 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     init_logging();
-    if args.output.extension().and_then(|e| e.to_str()) != Some("mcap") {
-        anyhow::bail!(
-            "the recording's file name must end in .mcap (got {})",
-            args.output.display()
-        );
+    if let Some(paths) = &args.recover {
+        return run_recover(&paths[0], &paths[1], args.json);
+    }
+    let Some(output) = args.output.clone() else {
+        anyhow::bail!("name the recording to write, or give --recover IN OUT");
+    };
+    if output.extension().and_then(|e| e.to_str()) != Some("mcap") {
+        anyhow::bail!("the recording's file name must end in .mcap (got {})", output.display());
     }
     let config = load_config(args.source.config.as_ref())?;
     let frames = frame_choice(&args.source);
@@ -59,9 +68,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         ..Default::default()
     };
     handle
-        .start_recording(&args.output, options)
-        .with_context(|| format!("creating {}", args.output.display()))?;
-    eprintln!("nusense record: writing {} (stop with Ctrl-C)", args.output.display());
+        .start_recording(&output, options)
+        .with_context(|| format!("creating {}", output.display()))?;
+    eprintln!("nusense record: writing {} (stop with Ctrl-C)", output.display());
 
     let interrupted = Arc::new(AtomicBool::new(false));
     let flag = interrupted.clone();
@@ -84,11 +93,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let done_time = deadline.is_some_and(|d| started.elapsed() >= d);
         let source_ended = status.capture_finished
             && status.frames_processed >= status.frames_captured.saturating_sub(status.frames_dropped);
-        if interrupted.load(Ordering::Relaxed) || done_frames || done_time || source_ended {
+        let failed = status.recording.as_ref().is_some_and(|r| r.failure.is_some());
+        if interrupted.load(Ordering::Relaxed) || done_frames || done_time || source_ended || failed {
             break;
         }
     }
-    let summary = handle.stop_recording()?;
+    let summary = handle
+        .stop_recording()
+        .with_context(|| format!("recording {}", output.display()))?;
     drop(pipeline);
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
@@ -101,6 +113,23 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             summary.telemetry,
             summary.dropped,
             started.elapsed().as_secs_f64()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn run_recover(input: &Path, output: &Path, json: bool) -> anyhow::Result<ExitCode> {
+    let summary = recover(input, output).with_context(|| format!("recovering {}", input.display()))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        let cut = match &summary.stopped_by {
+            Some(reason) => format!("; the input stopped early: {reason}"),
+            None => String::new(),
+        };
+        println!(
+            "recovered {} -> {}: {} messages on {} channels, {} metadata records{cut}",
+            summary.input, summary.output, summary.messages, summary.channels, summary.metadata
         );
     }
     Ok(ExitCode::SUCCESS)

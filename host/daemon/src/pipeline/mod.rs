@@ -19,7 +19,7 @@ use nusense_estimator::{Estimator, Mode, Reading, SensorConfig};
 use serde::Serialize;
 use tokio::sync::broadcast;
 
-use crate::record::{RecordError, RecordItem, RecordSummary, Recorder, RecorderOptions};
+use crate::record::{RecordError, RecordFailure, RecordItem, RecordSummary, Recorder, RecorderOptions};
 use nusense_capture::{unix_time_us, CaptureError, FrameSource, SourceInfo};
 
 pub use board::{Board, BoardError, LedCommand, LedState, LinkedBoard, NoBoard, LED_LIMIT_MA};
@@ -438,6 +438,10 @@ pub struct RecordingStatus {
     pub readings: u64,
     pub telemetry: u64,
     pub dropped: u64,
+    /// Bytes waiting for the disk (bounded by the recorder's queue).
+    pub queued_bytes: u64,
+    /// The recording stopped on its own (disk full, write error): why, for the status and the dashboard.
+    pub failure: Option<RecordFailure>,
 }
 
 impl PipelineHandle {
@@ -509,6 +513,8 @@ impl PipelineHandle {
                     readings: stats.readings.load(Ordering::Relaxed),
                     telemetry: stats.telemetry.load(Ordering::Relaxed),
                     dropped: stats.dropped.load(Ordering::Relaxed),
+                    queued_bytes: stats.queued_bytes.load(Ordering::Relaxed),
+                    failure: r.failure(),
                 }
             });
         PipelineStatus {

@@ -1,18 +1,33 @@
-//! Recordings: frames (JPEG), readings and board telemetry as MCAP channels with JSON schemas.
+//! Recordings: frames (the camera's JPEG), readings and board telemetry as MCAP channels.
 //!
-//! Written in chunks that are closed at least every [`RecorderOptions::flush_interval`], so that a recorder
-//! killed without warning (SIGKILL, power loss) leaves a file whose every closed chunk a linear MCAP reader
-//! recovers: at most the last chunk is lost. [`read_recording`] is that tolerant reader.
+//! Crash safety: each chunk is built in memory and written whole (no placeholder length ever reaches the disk),
+//! then fsynced, at least every [`RecorderOptions::flush_interval`] (500 ms by default). A recorder killed
+//! without warning (SIGKILL) or a machine that loses power leaves a file that is a prefix of a valid MCAP file:
+//! every MCAP reader reads it up to its last whole chunk, so at most the last interval is lost.
+//! [`recover`] rewrites such a file with its summary and indexes.
+//!
+//! Memory: the queue between producers and the writer thread is bounded in bytes
+//! ([`RecorderOptions::queue_bytes`]), the open chunk by [`RecorderOptions::chunk_bytes`]; replay streams from
+//! disk a chunk at a time.
 
+mod messages;
 mod reader;
+mod recover;
 mod replay;
 mod writer;
 
-pub use reader::{read_recording, RecordedFrame, RecordedMessage, Recording};
+pub use reader::{
+    ends_finished, read_recording, ChannelInfo, RecordedFrame, RecordedMessage, RecordedMetadata, Recording,
+    RecordingReader, SchemaInfo,
+};
+pub use recover::{recover, RecoverSummary};
 pub use replay::McapReplay;
-pub use writer::{encode_jpeg, RecordItem, RecordStats, RecordSummary, Recorder, RecorderOptions};
+pub use writer::{
+    encode_jpeg, RecordItem, RecordStats, RecordSummary, Recorder, RecorderOptions, DEFAULT_CHUNK_BYTES,
+    DEFAULT_FLUSH_INTERVAL, DEFAULT_QUEUE_BYTES,
+};
 
-/// Frames, as `foxglove.CompressedImage` so that Foxglove and other MCAP viewers show them.
+/// Camera frames, as `foxglove.CompressedImage` so that Foxglove and other MCAP viewers show them.
 pub const FRAME_TOPIC: &str = "/camera/image";
 /// One [`crate::pipeline::DaemonReading`] per processed frame.
 pub const READING_TOPIC: &str = "/nusense/reading";
@@ -27,68 +42,98 @@ pub enum RecordError {
     Open { path: String, source: std::io::Error },
     #[error("MCAP error in {path}: {source}")]
     Mcap { path: String, source: mcap::McapError },
+    #[error("{path} is not an MCAP recording (it does not start with the MCAP magic)")]
+    NotMcap { path: String },
+    #[error("recover writes a new file; {path} is the recording being recovered")]
+    RecoverInPlace { path: String },
     #[error("the recorder's writer thread stopped unexpectedly")]
     WriterGone,
-    #[error("recording {path} holds no messages (not an MCAP file, or nothing was written before it ended)")]
-    Empty { path: String },
+    #[error(transparent)]
+    Stopped(RecordFailure),
 }
 
-const FRAME_SCHEMA: &str = r#"{
-  "title": "foxglove.CompressedImage",
-  "type": "object",
-  "properties": {
-    "timestamp": {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}},
-    "frame_id": {"type": "string"},
-    "data": {"type": "string", "contentEncoding": "base64"},
-    "format": {"type": "string"}
-  }
-}"#;
+impl RecordError {
+    fn from_mcap(path: &str, source: mcap::McapError) -> Self {
+        match source {
+            mcap::McapError::Io(source) => RecordError::Create {
+                path: path.to_string(),
+                source,
+            },
+            source => RecordError::Mcap {
+                path: path.to_string(),
+                source,
+            },
+        }
+    }
+}
 
-const READING_SCHEMA: &str = r#"{
-  "title": "nusense.Reading",
-  "description": "One processed frame: timestamps in microseconds since the Unix epoch, estimator outputs (force N, contact in raw px, undistorted px and pad mm, edge angle in degrees, shear field per lattice corner) and the LED state",
-  "type": "object",
-  "properties": {
-    "frame_id": {"type": "integer"},
-    "capture_time_us": {"type": "integer"},
-    "processed_time_us": {"type": "integer"},
-    "latency_ms": {"type": "number"},
-    "estimate": {"type": ["object", "null"]},
-    "error": {"type": ["string", "null"]},
-    "led": {"type": ["object", "null"]}
-  }
-}"#;
+/// Why a recording stopped on its own while running, as the daemon shows it.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, thiserror::Error)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum RecordFailure {
+    #[error(
+        "the disk holding {path} is full: the recording stopped; the file keeps its first {kept_bytes} bytes \
+         (every chunk written before), and `nusense record --recover` gives it a summary"
+    )]
+    DiskFull { path: String, kept_bytes: u64 },
+    #[error(
+        "cannot write {path} ({message}): the recording stopped; the file keeps its first {kept_bytes} bytes, and \
+         `nusense record --recover` gives it a summary"
+    )]
+    Write {
+        path: String,
+        kept_bytes: u64,
+        message: String,
+    },
+}
 
-const TELEMETRY_SCHEMA: &str = r#"{
-  "title": "nusense.BoardTelemetry",
-  "description": "LED board telemetry: per channel (Top, Right, Bottom, Left) setpoint and measured current in mA, duty, enable and fault flags; temperature in degrees C, supply in mV",
-  "type": "object",
-  "properties": {
-    "time_us": {"type": "integer"},
-    "telemetry": {"type": "object"}
-  }
-}"#;
+impl RecordFailure {
+    fn from_io(path: &str, kept_bytes: u64, error: &std::io::Error) -> Self {
+        let path = path.to_string();
+        // ENOSPC and EDQUOT, as std names them.
+        let disk_full = matches!(
+            error.kind(),
+            std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded
+        );
+        if disk_full {
+            RecordFailure::DiskFull { path, kept_bytes }
+        } else {
+            RecordFailure::Write {
+                path,
+                kept_bytes,
+                message: error.to_string(),
+            }
+        }
+    }
+}
 
 #[cfg(test)]
 mod tests {
-    use std::sync::Arc;
+    use std::io::Write;
+    use std::sync::{Arc, Mutex};
+    use std::time::Duration;
 
+    use super::writer::Destination;
     use super::*;
 
-    #[test]
-    fn frames_readings_and_telemetry_round_trip_with_their_schemas() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("roundtrip.mcap");
-        let recorder = Recorder::create(&path, RecorderOptions::default()).unwrap();
-        let image = Arc::new(image::RgbImage::from_fn(32, 24, |x, y| {
-            image::Rgb([(x * 8) as u8, (y * 10) as u8, 128])
-        }));
-        for frame_id in 0..3u64 {
+    /// Noise, so that the chunks' compression cannot shrink it away.
+    fn image() -> Arc<image::RgbImage> {
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        Arc::new(image::RgbImage::from_fn(32, 24, |_, _| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            image::Rgb([state as u8, (state >> 8) as u8, (state >> 16) as u8])
+        }))
+    }
+
+    fn record_frames(recorder: &Recorder, frames: u64) {
+        for frame_id in 0..frames {
             let time_us = 1_700_000_000_000_000 + frame_id * 33_333;
             recorder.record(RecordItem::Frame {
                 frame_id,
                 capture_time_us: time_us,
-                image: image.clone(),
+                image: image(),
                 jpeg: None,
             });
             recorder.record(RecordItem::Reading {
@@ -97,6 +142,14 @@ mod tests {
                 json: format!("{{\"frame_id\":{frame_id}}}").into(),
             });
         }
+    }
+
+    #[test]
+    fn frames_readings_and_telemetry_round_trip_with_their_schemas() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("roundtrip.mcap");
+        let recorder = Recorder::create(&path, RecorderOptions::default()).unwrap();
+        record_frames(&recorder, 3);
         recorder.record(RecordItem::Telemetry {
             time_us: 1_700_000_000_000_000,
             json: "{\"telemetry\":{}}".into(),
@@ -115,7 +168,7 @@ mod tests {
         let decoded = image::load_from_memory(&frames[0].jpeg).unwrap();
         assert_eq!((decoded.width(), decoded.height()), (32, 24));
         let first_frame = recording.on_topic(FRAME_TOPIC).next().unwrap();
-        assert_eq!(first_frame.schema_name.as_deref(), Some("foxglove.CompressedImage"));
+        assert_eq!(first_frame.schema_name(), Some("foxglove.CompressedImage"));
         assert_eq!(recording.on_topic(READING_TOPIC).count(), 3);
         assert_eq!(recording.on_topic(TELEMETRY_TOPIC).count(), 1);
     }
@@ -125,10 +178,124 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("not.mcap");
         std::fs::write(&path, b"hello, not an mcap file").unwrap();
-        assert!(matches!(read_recording(&path), Err(RecordError::Empty { .. })));
+        assert!(matches!(read_recording(&path), Err(RecordError::NotMcap { .. })));
         assert!(matches!(
             read_recording(&dir.path().join("missing.mcap")),
             Err(RecordError::Open { .. })
         ));
+    }
+
+    /// A writer that takes `capacity` bytes, then fails as a full disk does.
+    struct SmallDisk {
+        written: Arc<Mutex<Vec<u8>>>,
+        capacity: usize,
+    }
+
+    impl Write for SmallDisk {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            let mut written = self.written.lock().unwrap();
+            let room = self.capacity - written.len();
+            if room == 0 {
+                return Err(std::io::Error::from(std::io::ErrorKind::StorageFull));
+            }
+            let n = buf.len().min(room);
+            written.extend_from_slice(&buf[..n]);
+            Ok(n)
+        }
+
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_full_disk_stops_the_recording_with_a_typed_error_and_producers_never_block() {
+        let written = Arc::new(Mutex::new(Vec::new()));
+        let destination = Destination {
+            writer: Box::new(SmallDisk {
+                written: written.clone(),
+                capacity: 16 * 1024,
+            }),
+            file: None,
+        };
+        let options = RecorderOptions {
+            chunk_bytes: 4 * 1024,
+            ..Default::default()
+        };
+        let recorder = Recorder::start(std::path::Path::new("small.mcap"), destination, options).unwrap();
+        record_frames(&recorder, 200);
+        let deadline = std::time::Instant::now() + Duration::from_secs(30);
+        while recorder.failure().is_none() && std::time::Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        assert!(
+            matches!(recorder.failure(), Some(RecordFailure::DiskFull { ref path, .. }) if path == "small.mcap"),
+            "{:?}",
+            recorder.failure()
+        );
+        // Recording on after the failure neither blocks nor grows memory: items are dropped and counted.
+        let dropped_before = recorder.stats().dropped.load(std::sync::atomic::Ordering::Relaxed);
+        record_frames(&recorder, 10);
+        let stats = recorder.stats();
+        assert_eq!(
+            stats.dropped.load(std::sync::atomic::Ordering::Relaxed),
+            dropped_before + 20
+        );
+        assert_eq!(stats.queued_bytes.load(std::sync::atomic::Ordering::Relaxed), 0);
+        match recorder.finish() {
+            Err(RecordError::Stopped(RecordFailure::DiskFull { .. })) => {}
+            other => panic!("finish reports the full disk: {other:?}"),
+        }
+        assert_eq!(written.lock().unwrap().len(), 16 * 1024);
+    }
+
+    #[test]
+    fn the_queue_is_bounded_in_bytes() {
+        // A writer that never returns until released: everything queues.
+        struct Stalled(Arc<(Mutex<bool>, std::sync::Condvar)>);
+        impl Write for Stalled {
+            fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+                let (lock, released) = &*self.0;
+                let mut go = lock.lock().unwrap();
+                while !*go {
+                    go = released.wait(go).unwrap();
+                }
+                Ok(buf.len())
+            }
+            fn flush(&mut self) -> std::io::Result<()> {
+                Ok(())
+            }
+        }
+        let gate = Arc::new((Mutex::new(true), std::sync::Condvar::new()));
+        let destination = Destination {
+            writer: Box::new(Stalled(gate.clone())),
+            file: None,
+        };
+        let jpeg = Arc::new(vec![0xAB; 100_000]);
+        let options = RecorderOptions {
+            chunk_bytes: 1,
+            queue_bytes: 1_000_000,
+            flush_interval: Duration::from_secs(3600),
+        };
+        let recorder = Recorder::start(std::path::Path::new("stalled.mcap"), destination, options).unwrap();
+        *gate.0.lock().unwrap() = false;
+        for frame_id in 0..40 {
+            recorder.record(RecordItem::Frame {
+                frame_id,
+                capture_time_us: frame_id,
+                image: Arc::new(image::RgbImage::new(1, 1)),
+                jpeg: Some(jpeg.clone()),
+            });
+        }
+        let stats = recorder.stats();
+        let queued = stats.queued_bytes.load(std::sync::atomic::Ordering::Relaxed);
+        let dropped = stats.dropped.load(std::sync::atomic::Ordering::Relaxed);
+        assert!(queued <= 1_000_000, "{queued} bytes queued");
+        // At most one frame is inside the stalled writer, at most nine wait (ten would pass the bound).
+        assert!((30..=31).contains(&dropped), "{dropped} dropped");
+        *gate.0.lock().unwrap() = true;
+        gate.1.notify_all();
+        let summary = recorder.finish().unwrap();
+        assert_eq!(summary.frames + summary.dropped, 40);
     }
 }

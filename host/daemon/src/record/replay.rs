@@ -1,18 +1,23 @@
-//! Replay of the frames of an MCAP recording, paced by their recorded capture times.
+//! Replay of the frames of an MCAP recording, paced by their recorded capture times, streamed from disk.
 
+use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use super::{read_recording, RecordedFrame};
+use super::{ends_finished, RecordedFrame, RecordingReader};
 
 use nusense_capture::{decode_jpeg, CaptureError, CapturedImage, FrameSource, SourceInfo};
 
+/// Frames read ahead to learn the frame rate before the first is handed out.
+const LOOKAHEAD_FRAMES: usize = 8;
+
 pub struct McapReplay {
     path: PathBuf,
-    frames: Vec<RecordedFrame>,
-    next: usize,
+    reader: RecordingReader,
+    lookahead: VecDeque<RecordedFrame>,
     looping: bool,
-    /// Wall-clock instant that corresponds to the first frame's capture time in this pass.
+    /// Capture time of the first frame of the recording, and the wall-clock instant it maps to in this pass.
+    first_us: u64,
     pass_start: Option<Instant>,
     size: (u32, u32),
     fps: f64,
@@ -24,33 +29,45 @@ pub struct McapReplay {
 impl McapReplay {
     pub fn open(path: &Path, looping: bool) -> Result<Self, CaptureError> {
         let path_text = path.display().to_string();
-        let recording = read_recording(path).map_err(|e| CaptureError::Recording {
+        let recording_error = |error: super::RecordError| CaptureError::Recording {
             path: path_text.clone(),
-            message: e.to_string(),
-        })?;
-        let frames = recording.frames();
-        let first = frames.first().ok_or_else(|| CaptureError::Empty(path_text.clone()))?;
+            message: error.to_string(),
+        };
+        let truncated = !ends_finished(path).map_err(recording_error)?;
+        let mut reader = RecordingReader::open(path).map_err(recording_error)?;
+        let mut lookahead = VecDeque::new();
+        while lookahead.len() < LOOKAHEAD_FRAMES {
+            match next_recorded_frame(&mut reader) {
+                Some(frame) => lookahead.push_back(frame),
+                None => break,
+            }
+        }
+        let first = lookahead
+            .front()
+            .ok_or_else(|| CaptureError::Empty(path_text.clone()))?;
         let image = decode_jpeg(&first.jpeg, &path_text)?;
-        let span_s = frames
-            .last()
-            .map(|l| l.capture_time_us.saturating_sub(first.capture_time_us))
+        let first_us = first.capture_time_us;
+        let span_s = lookahead
+            .back()
+            .map(|last| last.capture_time_us.saturating_sub(first_us))
             .unwrap_or(0) as f64
             / 1e6;
-        let fps = if frames.len() > 1 && span_s > 0.0 {
-            (frames.len() - 1) as f64 / span_s
+        let fps = if lookahead.len() > 1 && span_s > 0.0 {
+            (lookahead.len() - 1) as f64 / span_s
         } else {
             30.0
         };
         Ok(Self {
             path: path.to_path_buf(),
             size: image.dimensions(),
-            frames,
-            next: 0,
+            reader,
+            lookahead,
             looping,
+            first_us,
             pass_start: None,
             fps,
             paced: true,
-            truncated: recording.truncated,
+            truncated,
         })
     }
 
@@ -60,13 +77,27 @@ impl McapReplay {
         self
     }
 
-    pub fn len(&self) -> usize {
-        self.frames.len()
+    fn next_recorded(&mut self) -> Result<Option<RecordedFrame>, CaptureError> {
+        if let Some(frame) = self.lookahead.pop_front() {
+            return Ok(Some(frame));
+        }
+        if let Some(frame) = next_recorded_frame(&mut self.reader) {
+            return Ok(Some(frame));
+        }
+        if !self.looping {
+            return Ok(None);
+        }
+        self.reader = RecordingReader::open(&self.path).map_err(|error| CaptureError::Recording {
+            path: self.path.display().to_string(),
+            message: error.to_string(),
+        })?;
+        self.pass_start = None;
+        Ok(next_recorded_frame(&mut self.reader))
     }
+}
 
-    pub fn is_empty(&self) -> bool {
-        self.frames.is_empty()
-    }
+fn next_recorded_frame(reader: &mut RecordingReader) -> Option<RecordedFrame> {
+    reader.by_ref().find_map(|message| message.frame())
 }
 
 impl FrameSource for McapReplay {
@@ -81,23 +112,16 @@ impl FrameSource for McapReplay {
     }
 
     fn next_frame(&mut self) -> Result<CapturedImage, CaptureError> {
-        if self.next >= self.frames.len() {
-            if !self.looping {
-                return Err(CaptureError::EndOfStream);
-            }
-            self.next = 0;
-            self.pass_start = None;
-        }
-        let first_us = self.frames[0].capture_time_us;
-        let frame = &self.frames[self.next];
-        self.next += 1;
+        let Some(frame) = self.next_recorded()? else {
+            return Err(CaptureError::EndOfStream);
+        };
         let pass_start = *self.pass_start.get_or_insert_with(Instant::now);
-        let due = pass_start + Duration::from_micros(frame.capture_time_us.saturating_sub(first_us));
+        let due = pass_start + Duration::from_micros(frame.capture_time_us.saturating_sub(self.first_us));
         let now = Instant::now();
         if self.paced && due > now {
             std::thread::sleep(due - now);
         }
         let image = decode_jpeg(&frame.jpeg, &self.path.display().to_string())?;
-        Ok(CapturedImage::now(image, Some(frame.jpeg.clone())))
+        Ok(CapturedImage::now(image, Some(frame.jpeg)))
     }
 }

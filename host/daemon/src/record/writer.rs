@@ -1,43 +1,65 @@
-use std::collections::BTreeMap;
+//! The recorder: a writer thread fed by a queue bounded in bytes, writing whole chunks and fsyncing them.
+
 use std::fs::File;
-use std::io::BufWriter;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender, TrySendError};
-use std::sync::Arc;
+use std::sync::mpsc::{channel, Receiver, RecvTimeoutError, Sender};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use base64::Engine;
 use mcap::records::MessageHeader;
+use mcap::write::NoSeek;
 use serde::Serialize;
 
-use super::{RecordError, FRAME_SCHEMA, FRAME_TOPIC, READING_SCHEMA, READING_TOPIC, TELEMETRY_SCHEMA, TELEMETRY_TOPIC};
+use super::messages::{ChannelSet, Encoded};
+use super::{RecordError, RecordFailure};
+
+/// How long a chunk may stay open by default: a power cut loses at most this much (plus the time the disk takes
+/// to complete the fsync), a SIGKILL at most the same (the kernel keeps what was written).
+pub const DEFAULT_FLUSH_INTERVAL: Duration = Duration::from_millis(500);
+/// Chunks close at this size even before the interval: bounds the in-memory chunk.
+pub const DEFAULT_CHUNK_BYTES: u64 = 1024 * 1024;
+/// Items waiting for the writer thread, in bytes (JPEG bytes for frames that came compressed, raw RGB bytes for
+/// frames the writer must still compress); beyond it items are dropped and counted, never blocking capture.
+pub const DEFAULT_QUEUE_BYTES: u64 = 32 * 1024 * 1024;
 
 #[derive(Clone, Debug)]
 pub struct RecorderOptions {
     /// A chunk is closed when it grows past this many bytes...
     pub chunk_bytes: u64,
-    /// ...or when it has been open this long, whichever comes first: the most a crash can lose.
+    /// ...or when it has been open this long, whichever comes first. Each close is followed by an fsync.
     pub flush_interval: Duration,
-    /// Items waiting for the disk; beyond this they are dropped and counted rather than stalling the pipeline.
-    pub queue_len: usize,
+    /// Bytes waiting for the writer thread before new items are dropped.
+    pub queue_bytes: u64,
 }
 
 impl Default for RecorderOptions {
     fn default() -> Self {
         Self {
-            chunk_bytes: 512 * 1024,
-            flush_interval: Duration::from_millis(500),
-            queue_len: 256,
+            chunk_bytes: DEFAULT_CHUNK_BYTES,
+            flush_interval: DEFAULT_FLUSH_INTERVAL,
+            queue_bytes: DEFAULT_QUEUE_BYTES,
         }
     }
 }
 
+impl RecorderOptions {
+    /// The most memory the recorder holds: the queue, the open chunk (it closes once it passes `chunk_bytes`,
+    /// so it can exceed it by one message) and the file buffer.
+    pub fn memory_bound_bytes(&self, largest_message_bytes: u64) -> u64 {
+        self.queue_bytes + self.chunk_bytes + largest_message_bytes + FILE_BUFFER_BYTES as u64
+    }
+}
+
+const FILE_BUFFER_BYTES: usize = 64 * 1024;
+
 /// What goes into a recording. JSON payloads are serialised once by the producer and shared.
 #[derive(Clone, Debug)]
 pub enum RecordItem {
-    /// The writer thread encodes `image` when the source gave no JPEG, keeping that cost off the capture path.
+    /// `jpeg` is the camera's own compressed frame, recorded as it is; only when a source gave none does the
+    /// writer thread compress `image`, keeping that cost off the capture path.
     Frame {
         frame_id: u64,
         capture_time_us: u64,
@@ -55,13 +77,29 @@ pub enum RecordItem {
     },
 }
 
+impl RecordItem {
+    /// What the item holds in memory while it waits: what the queue bound counts.
+    fn queued_bytes(&self) -> u64 {
+        let bytes = match self {
+            RecordItem::Frame { jpeg: Some(jpeg), .. } => jpeg.len(),
+            RecordItem::Frame { image, .. } => image.as_raw().len(),
+            RecordItem::Reading { json, .. } | RecordItem::Telemetry { json, .. } => json.len(),
+        };
+        bytes as u64 + std::mem::size_of::<RecordItem>() as u64
+    }
+}
+
 #[derive(Debug, Default)]
 pub struct RecordStats {
     pub frames: AtomicU64,
     pub readings: AtomicU64,
     pub telemetry: AtomicU64,
-    /// Items dropped because the disk could not keep up.
+    /// Items dropped because the disk could not keep up (the queue was full).
     pub dropped: AtomicU64,
+    /// Bytes waiting for the writer thread now.
+    pub queued_bytes: AtomicU64,
+    /// Bytes known to be on the disk (written and fsynced).
+    pub synced_bytes: AtomicU64,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -76,50 +114,83 @@ pub struct RecordSummary {
 /// Writes a recording on its own thread; producers never block on the disk.
 pub struct Recorder {
     path: PathBuf,
-    sender: Option<SyncSender<RecordItem>>,
+    sender: Option<Sender<RecordItem>>,
     stats: Arc<RecordStats>,
-    thread: Option<JoinHandle<Result<(), RecordError>>>,
+    failure: Arc<Mutex<Option<RecordFailure>>>,
+    queue_bytes: u64,
+    thread: Option<JoinHandle<()>>,
+}
+
+/// Where the chunks go: a file (fsynced, and cut back to its last whole chunk when a write fails) or, in tests,
+/// any writer.
+pub(crate) struct Destination {
+    pub(crate) writer: Box<dyn Write + Send>,
+    pub(crate) file: Option<File>,
+}
+
+impl Destination {
+    fn create(path: &Path) -> Result<Self, RecordError> {
+        let create_error = |source| RecordError::Create {
+            path: path.display().to_string(),
+            source,
+        };
+        let file = File::create(path).map_err(create_error)?;
+        // The file's name must survive a power cut too, not only its bytes.
+        if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            if let Ok(dir) = File::open(parent) {
+                let _ = dir.sync_all();
+            }
+        }
+        let handle = file.try_clone().map_err(create_error)?;
+        Ok(Self {
+            writer: Box::new(file),
+            file: Some(handle),
+        })
+    }
 }
 
 impl Recorder {
     pub fn create(path: &Path, options: RecorderOptions) -> Result<Self, RecordError> {
+        let destination = Destination::create(path)?;
+        Self::start(path, destination, options)
+    }
+
+    pub(crate) fn start(path: &Path, destination: Destination, options: RecorderOptions) -> Result<Self, RecordError> {
         let path_text = path.display().to_string();
-        let file = File::create(path).map_err(|source| RecordError::Create {
+        let Destination { writer, file } = destination;
+        let mut writer = write_options(options.chunk_bytes)
+            .create(NoSeek::new(BufWriter::with_capacity(FILE_BUFFER_BYTES, writer)))
+            .map_err(|source| RecordError::from_mcap(&path_text, source))?;
+        let channels =
+            ChannelSet::register(&mut writer).map_err(|source| RecordError::from_mcap(&path_text, source))?;
+        // Schemas and channels reach the disk before any message, so even a file killed in its first chunk
+        // tells a reader what it holds.
+        writer
+            .flush()
+            .map_err(|source| RecordError::from_mcap(&path_text, source))?;
+        let mut durable = Durable { file, synced_len: 0 };
+        durable.sync().map_err(|source| RecordError::Create {
             path: path_text.clone(),
             source,
         })?;
-        let mcap_error = |source| RecordError::Mcap {
-            path: path_text.clone(),
-            source,
-        };
-        let mut writer = mcap::WriteOptions::new()
-            .profile("nusense")
-            .chunk_size(Some(options.chunk_bytes))
-            .create(BufWriter::new(file))
-            .map_err(mcap_error)?;
-        let mut channel = |topic: &str, schema_name: &str, schema: &str| -> Result<u16, RecordError> {
-            let schema_id = writer
-                .add_schema(schema_name, "jsonschema", schema.as_bytes())
-                .map_err(mcap_error)?;
-            writer
-                .add_channel(schema_id, topic, "json", &BTreeMap::new())
-                .map_err(mcap_error)
-        };
-        let channels = Channels {
-            frame: channel(FRAME_TOPIC, "foxglove.CompressedImage", FRAME_SCHEMA)?,
-            reading: channel(READING_TOPIC, "nusense.Reading", READING_SCHEMA)?,
-            telemetry: channel(TELEMETRY_TOPIC, "nusense.BoardTelemetry", TELEMETRY_SCHEMA)?,
-        };
-        // Schemas and channels reach the disk before any message, so even a file killed in its first chunk
-        // tells a reader what it holds.
-        writer.flush().map_err(mcap_error)?;
-        let (sender, receiver) = sync_channel(options.queue_len.max(1));
+        let (sender, receiver) = channel();
         let stats = Arc::new(RecordStats::default());
-        let thread_stats = stats.clone();
-        let thread_path = path_text.clone();
+        stats.synced_bytes.store(durable.synced_len, Ordering::Relaxed);
+        let failure = Arc::new(Mutex::new(None));
+        let state = WriterThread {
+            writer: Some(writer),
+            channels,
+            durable,
+            options: options.clone(),
+            stats: stats.clone(),
+            failure: failure.clone(),
+            path: path_text.clone(),
+            sequences: [0; 3],
+            unsynced: false,
+        };
         let thread = std::thread::Builder::new()
             .name("recorder".into())
-            .spawn(move || write_loop(writer, channels, receiver, options, thread_stats, thread_path))
+            .spawn(move || state.run(receiver))
             .map_err(|source| RecordError::Create {
                 path: path_text,
                 source,
@@ -128,6 +199,8 @@ impl Recorder {
             path: path.to_path_buf(),
             sender: Some(sender),
             stats,
+            failure,
+            queue_bytes: options.queue_bytes,
             thread: Some(thread),
         })
     }
@@ -140,18 +213,23 @@ impl Recorder {
         &self.stats
     }
 
-    /// Queues an item; when the writer is behind, the item is dropped and counted.
+    /// Why the recording stopped on its own (the disk filled up, a write failed), if it did.
+    pub fn failure(&self) -> Option<RecordFailure> {
+        self.failure.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    /// Queues an item; when the queue already holds its bound in bytes, the item is dropped and counted.
     pub fn record(&self, item: RecordItem) {
         let Some(sender) = &self.sender else { return };
-        match sender.try_send(item) {
-            Ok(()) => {}
-            Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
-                self.stats.dropped.fetch_add(1, Ordering::Relaxed);
-            }
+        let bytes = item.queued_bytes();
+        let queued = self.stats.queued_bytes.fetch_add(bytes, Ordering::AcqRel);
+        if queued + bytes > self.queue_bytes || sender.send(item).is_err() {
+            self.stats.queued_bytes.fetch_sub(bytes, Ordering::AcqRel);
+            self.stats.dropped.fetch_add(1, Ordering::Relaxed);
         }
     }
 
-    /// Writes what is queued, the summary and the footer.
+    /// Writes what is queued, the summary and the footer. A recording that stopped on its own returns why.
     pub fn finish(mut self) -> Result<RecordSummary, RecordError> {
         self.stop()
     }
@@ -159,7 +237,10 @@ impl Recorder {
     fn stop(&mut self) -> Result<RecordSummary, RecordError> {
         self.sender = None;
         if let Some(thread) = self.thread.take() {
-            thread.join().map_err(|_| RecordError::WriterGone)??;
+            thread.join().map_err(|_| RecordError::WriterGone)?;
+        }
+        if let Some(failure) = self.failure() {
+            return Err(RecordError::Stopped(failure));
         }
         Ok(RecordSummary {
             path: self.path.display().to_string(),
@@ -181,111 +262,183 @@ impl Drop for Recorder {
     }
 }
 
-struct Channels {
-    frame: u16,
-    reading: u16,
-    telemetry: u16,
+/// The options every writer of recordings uses. Seeking disabled makes the mcap crate build each chunk in
+/// memory and write it whole (header, length and CRC final), so no placeholder length ever reaches the disk and
+/// a file cut at any byte is a prefix of a valid MCAP file.
+pub(crate) fn write_options(chunk_bytes: u64) -> mcap::WriteOptions {
+    mcap::WriteOptions::new()
+        .profile("nusense")
+        .chunk_size(Some(chunk_bytes))
+        .disable_seeking(true)
 }
 
-#[derive(Serialize)]
-struct CompressedImage<'a> {
-    timestamp: Timestamp,
-    frame_id: &'a str,
-    data: String,
-    format: &'a str,
+pub(crate) type McapFileWriter = mcap::Writer<NoSeek<BufWriter<Box<dyn Write + Send>>>>;
+
+/// The file behind the writer, for fsync and for cutting a failed write back off.
+struct Durable {
+    file: Option<File>,
+    /// File length at the last successful fsync: a whole number of records.
+    synced_len: u64,
 }
 
-#[derive(Serialize)]
-struct Timestamp {
-    sec: u64,
-    nsec: u32,
-}
-
-fn write_loop(
-    mut writer: mcap::Writer<BufWriter<File>>,
-    channels: Channels,
-    receiver: Receiver<RecordItem>,
-    options: RecorderOptions,
-    stats: Arc<RecordStats>,
-    path: String,
-) -> Result<(), RecordError> {
-    let mcap_error = |source| RecordError::Mcap {
-        path: path.clone(),
-        source,
-    };
-    let mut last_flush = Instant::now();
-    let mut sequence = [0u32; 3];
-    loop {
-        let wait = options.flush_interval.saturating_sub(last_flush.elapsed());
-        let item = match receiver.recv_timeout(wait) {
-            Ok(item) => Some(item),
-            Err(RecvTimeoutError::Timeout) => None,
-            Err(RecvTimeoutError::Disconnected) => break,
-        };
-        if let Some(item) = item {
-            let (channel, slot, time_us, payload, counter) = match item {
-                RecordItem::Frame {
-                    frame_id,
-                    capture_time_us,
-                    image,
-                    jpeg,
-                } => {
-                    let jpeg = match jpeg {
-                        Some(jpeg) => jpeg,
-                        None => Arc::new(encode_jpeg(&image, FRAME_JPEG_QUALITY)),
-                    };
-                    let message = CompressedImage {
-                        timestamp: Timestamp {
-                            sec: capture_time_us / 1_000_000,
-                            nsec: (capture_time_us % 1_000_000) as u32 * 1000,
-                        },
-                        frame_id: "camera",
-                        data: base64::engine::general_purpose::STANDARD.encode(jpeg.as_slice()),
-                        format: "jpeg",
-                    };
-                    let json = serde_json::to_vec(&message).unwrap_or_default();
-                    sequence[0] = frame_id as u32;
-                    (channels.frame, 0, capture_time_us, json, &stats.frames)
-                }
-                RecordItem::Reading {
-                    frame_id,
-                    time_us,
-                    json,
-                } => {
-                    sequence[1] = frame_id as u32;
-                    (channels.reading, 1, time_us, json.as_bytes().to_vec(), &stats.readings)
-                }
-                RecordItem::Telemetry { time_us, json } => {
-                    sequence[2] = sequence[2].wrapping_add(1);
-                    (
-                        channels.telemetry,
-                        2,
-                        time_us,
-                        json.as_bytes().to_vec(),
-                        &stats.telemetry,
-                    )
-                }
-            };
-            let header = MessageHeader {
-                channel_id: channel,
-                sequence: sequence[slot],
-                log_time: time_us.saturating_mul(1000),
-                publish_time: time_us.saturating_mul(1000),
-            };
-            writer.write_to_known_channel(&header, &payload).map_err(mcap_error)?;
-            counter.fetch_add(1, Ordering::Relaxed);
+impl Durable {
+    fn sync(&mut self) -> std::io::Result<()> {
+        if let Some(file) = &self.file {
+            file.sync_data()?;
+            self.synced_len = file.metadata()?.len();
         }
-        if last_flush.elapsed() >= options.flush_interval {
-            // Closes the open chunk and pushes it to the file: the crash-safety point.
-            writer.flush().map_err(mcap_error)?;
-            last_flush = Instant::now();
+        Ok(())
+    }
+
+    /// After a failed write: drop whatever part of a record reached the file, so that it ends on a whole chunk.
+    fn cut_back(&mut self) {
+        if let Some(file) = &self.file {
+            if file.set_len(self.synced_len).and_then(|()| file.sync_data()).is_err() {
+                tracing::warn!("cannot cut the recording back to its last whole chunk; readers stop there anyway");
+            }
         }
     }
-    writer.finish().map_err(mcap_error)?;
-    Ok(())
 }
 
-/// Quality of frames the recorder compresses itself: the lattice corners must survive it.
+struct WriterThread {
+    writer: Option<McapFileWriter>,
+    channels: ChannelSet,
+    durable: Durable,
+    options: RecorderOptions,
+    stats: Arc<RecordStats>,
+    failure: Arc<Mutex<Option<RecordFailure>>>,
+    path: String,
+    sequences: [u32; 3],
+    /// Bytes were handed to the writer since the last fsync.
+    unsynced: bool,
+}
+
+impl WriterThread {
+    fn run(mut self, receiver: Receiver<RecordItem>) {
+        let mut last_flush = Instant::now();
+        loop {
+            let wait = self.options.flush_interval.saturating_sub(last_flush.elapsed());
+            match receiver.recv_timeout(wait) {
+                Ok(item) => {
+                    let bytes = item.queued_bytes();
+                    let result = self.write(item);
+                    self.stats.queued_bytes.fetch_sub(bytes, Ordering::AcqRel);
+                    if let Err(error) = result {
+                        return self.fail(error, receiver);
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => break,
+            }
+            if last_flush.elapsed() >= self.options.flush_interval {
+                if let Err(error) = self.flush() {
+                    return self.fail(error, receiver);
+                }
+                last_flush = Instant::now();
+            }
+        }
+        if let Err(error) = self.finish() {
+            self.fail(error, receiver);
+        }
+    }
+
+    fn write(&mut self, item: RecordItem) -> Result<(), std::io::Error> {
+        let (slot, time_us, encoded, counter) = match item {
+            RecordItem::Frame {
+                frame_id,
+                capture_time_us,
+                image,
+                jpeg,
+            } => {
+                let jpeg = match jpeg {
+                    Some(jpeg) => jpeg,
+                    None => Arc::new(encode_jpeg(&image, FRAME_JPEG_QUALITY)),
+                };
+                self.sequences[0] = frame_id as u32;
+                let encoded = self.channels.frame(capture_time_us, &jpeg);
+                (0, capture_time_us, encoded, &self.stats.frames)
+            }
+            RecordItem::Reading {
+                frame_id,
+                time_us,
+                json,
+            } => {
+                self.sequences[1] = frame_id as u32;
+                (1, time_us, self.channels.reading(&json), &self.stats.readings)
+            }
+            RecordItem::Telemetry { time_us, json } => {
+                self.sequences[2] = self.sequences[2].wrapping_add(1);
+                (2, time_us, self.channels.telemetry(&json), &self.stats.telemetry)
+            }
+        };
+        let Encoded { channel_id, data } = encoded;
+        let header = MessageHeader {
+            channel_id,
+            sequence: self.sequences[slot],
+            log_time: time_us.saturating_mul(1000),
+            publish_time: time_us.saturating_mul(1000),
+        };
+        let writer = self.writer.as_mut().ok_or_else(writer_gone)?;
+        writer.write_to_known_channel(&header, &data).map_err(into_io)?;
+        self.unsynced = true;
+        counter.fetch_add(1, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// Closes the open chunk, writes it whole and fsyncs: the crash-safety point.
+    fn flush(&mut self) -> Result<(), std::io::Error> {
+        if !self.unsynced {
+            return Ok(());
+        }
+        self.writer.as_mut().ok_or_else(writer_gone)?.flush().map_err(into_io)?;
+        self.durable.sync()?;
+        self.stats
+            .synced_bytes
+            .store(self.durable.synced_len, Ordering::Relaxed);
+        self.unsynced = false;
+        Ok(())
+    }
+
+    fn finish(&mut self) -> Result<(), std::io::Error> {
+        let mut writer = self.writer.take().ok_or_else(writer_gone)?;
+        writer.finish().map_err(into_io)?;
+        // The BufWriter flushes when the writer drops; only then is everything in the file.
+        let mut inner = writer.into_inner().into_inner();
+        inner.flush()?;
+        drop(inner);
+        self.durable.sync()?;
+        self.stats
+            .synced_bytes
+            .store(self.durable.synced_len, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// A write failed: stop for good, keep the file ending on its last whole chunk, and say why.
+    fn fail(mut self, error: std::io::Error, receiver: Receiver<RecordItem>) {
+        // Dropping the writer tries to finish the file; whatever of that reaches the disk is cut off below.
+        drop(self.writer.take());
+        self.durable.cut_back();
+        let failure = RecordFailure::from_io(&self.path, self.durable.synced_len, &error);
+        tracing::error!("{failure}");
+        *self.failure.lock().unwrap_or_else(|e| e.into_inner()) = Some(failure);
+        // Producers may still be queueing: release what they hold and count it as lost.
+        drop(receiver);
+        self.stats.queued_bytes.store(0, Ordering::Release);
+    }
+}
+
+fn into_io(error: mcap::McapError) -> std::io::Error {
+    match error {
+        mcap::McapError::Io(io) => io,
+        other => std::io::Error::other(other),
+    }
+}
+
+fn writer_gone() -> std::io::Error {
+    std::io::Error::other("the recording was already closed")
+}
+
+/// Quality of frames the recorder compresses itself (sources without JPEG): the lattice corners must survive it.
 const FRAME_JPEG_QUALITY: u8 = 90;
 
 /// Encodes an RGB frame as JPEG.
