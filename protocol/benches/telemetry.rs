@@ -32,6 +32,12 @@ fn telemetry(i: usize) -> BoardMessage {
             frames_ok: 10_000 + i as u32,
             ..LinkCounters::default()
         },
+        loop_timing: LoopTiming {
+            steps: 20,
+            period_mean_us: 500.1,
+            period_min_us: 497,
+            period_max_us: 504,
+        },
     })
 }
 

@@ -289,6 +289,7 @@ mod tests {
             mcu_uid: [0xFF; 12],
             channel_count: u8::MAX,
             max_current_ma: u16::MAX,
+            max_total_current_ma: u16::MAX,
         };
         let counters = LinkCounters {
             bad_cobs: u32::MAX,
@@ -296,6 +297,12 @@ mod tests {
             oversize: u32::MAX,
             unknown_tag: u32::MAX,
             frames_ok: u32::MAX,
+        };
+        let loop_timing = LoopTiming {
+            steps: u32::MAX,
+            period_mean_us: f32::MAX,
+            period_min_us: u32::MAX,
+            period_max_us: u32::MAX,
         };
         let flags = FaultFlags {
             open_string: true,
@@ -318,6 +325,9 @@ mod tests {
             ramp_ms: u16::MAX,
             telemetry_period_ms: u16::MAX,
             counters,
+            power: PowerState::Suspended,
+            current_budget_ma: u16::MAX,
+            loop_timing,
         };
         let telemetry = Telemetry {
             uptime_us: u64::MAX,
@@ -325,6 +335,7 @@ mod tests {
             temperature_c: f32::MAX,
             supply_mv: u16::MAX,
             counters,
+            loop_timing,
         };
         let mut payload = [0u8; 1024];
         let mut frame = [0u8; MAX_FRAME_LEN];

@@ -45,10 +45,13 @@ fn request_samples() -> Vec<Request> {
         RequestBody::SetRamp { ms: 250 },
         RequestBody::StreamTelemetry { period_ms: 20 },
         RequestBody::ClearFaults,
-        RequestBody::SaveConfig,
+        RequestBody::SaveConfig {
+            request_id: 0x5AFE_0001,
+        },
         RequestBody::Reset,
         RequestBody::EnterBootloader,
         RequestBody::Ping { nonce: 0xC0FF_EE42 },
+        RequestBody::SetCurrentBudget { total_ma: 360 },
     ];
     bodies
         .into_iter()
@@ -88,6 +91,15 @@ fn sample_counters() -> LinkCounters {
     }
 }
 
+fn sample_loop_timing() -> LoopTiming {
+    LoopTiming {
+        steps: 40,
+        period_mean_us: 500.25,
+        period_min_us: 488,
+        period_max_us: 517,
+    }
+}
+
 fn board_samples() -> Vec<BoardMessage> {
     let info = DeviceInfo {
         protocol_version: PROTOCOL_VERSION,
@@ -99,6 +111,7 @@ fn board_samples() -> Vec<BoardMessage> {
         ],
         channel_count: CHANNEL_COUNT as u8,
         max_current_ma: 500,
+        max_total_current_ma: 440,
     };
     let status = Status {
         uptime_us: 12_345_678_901,
@@ -108,6 +121,9 @@ fn board_samples() -> Vec<BoardMessage> {
         ramp_ms: 250,
         telemetry_period_ms: 20,
         counters: sample_counters(),
+        power: PowerState::Suspended,
+        current_budget_ma: 400,
+        loop_timing: sample_loop_timing(),
     };
     let results = [
         Ok(Reply::Ack),
@@ -116,6 +132,8 @@ fn board_samples() -> Vec<BoardMessage> {
         Ok(Reply::Pong { nonce: 0xC0FF_EE42 }),
         Ok(Reply::Hello {
             protocol_version: PROTOCOL_VERSION,
+            // A fixed value, not SCHEMA_FINGERPRINT: the vector must not follow the types it is meant to freeze.
+            schema: 0x0123_4567_89AB_CDEF,
         }),
         Err(DeviceError::UnknownRequest),
         Err(DeviceError::BadArgument(Argument::CurrentMa)),
@@ -143,6 +161,7 @@ fn board_samples() -> Vec<BoardMessage> {
         temperature_c: -5.5,
         supply_mv: 4875,
         counters: sample_counters(),
+        loop_timing: sample_loop_timing(),
     }));
     messages
 }
@@ -178,8 +197,12 @@ fn current_vectors() -> BTreeMap<&'static str, String> {
             board_variant(&message)
         );
     }
+    vectors.insert(FINGERPRINT_ENTRY, format!("{SCHEMA_FINGERPRINT:016x}"));
     vectors
 }
+
+/// The fingerprint is frozen with the frames: a type changed without a bless (and a version bump) fails here.
+const FINGERPRINT_ENTRY: &str = "schema/fingerprint";
 
 fn read_golden() -> BTreeMap<String, String> {
     let path = golden_path();
@@ -252,6 +275,36 @@ fn golden_vectors_decode_to_the_samples() {
             Ok(message)
         );
     }
+}
+
+/// The handshake's bytes as protocol v1 wrote them (its golden file): a v1 host's Hello still decodes, so this
+/// board can answer it with a `VersionMismatch` that the v1 host decodes too, and both sides name both versions.
+#[test]
+fn the_handshake_of_an_older_version_still_decodes() {
+    let mut v1_hello = from_hex("0381020501baea2201");
+    assert_eq!(
+        framing::decode_frame::<Request>(&mut v1_hello),
+        Ok(Request {
+            seq: 257,
+            body: RequestBody::Hello {
+                protocol_version: 1
+            }
+        })
+    );
+    let mut v1_mismatch = from_hex("010b8a1401040102564687ff");
+    assert_eq!(
+        framing::decode_frame::<BoardMessage>(&mut v1_mismatch),
+        Ok(BoardMessage::Response(Response {
+            seq: 2570,
+            result: Err(DeviceError::VersionMismatch { device: 1, host: 2 })
+        }))
+    );
+    // And this version's mismatch answer is byte for byte what v1 would send for the same numbers.
+    let answer = BoardMessage::Response(Response {
+        seq: 2570,
+        result: Err(DeviceError::VersionMismatch { device: 1, host: 2 }),
+    });
+    assert_eq!(to_hex(&frame(&answer)), "010b8a1401040102564687ff00");
 }
 
 /// A hand-checked vector, independent of the blessed file: Ping, seq 1, nonce 1.

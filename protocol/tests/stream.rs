@@ -293,6 +293,7 @@ fn largest_messages_pass_the_default_decoder() {
         mcu_uid: [0xFF; 12],
         channel_count: u8::MAX,
         max_current_ma: u16::MAX,
+        max_total_current_ma: u16::MAX,
     };
     let flags = FaultFlags {
         open_string: true,
@@ -314,6 +315,12 @@ fn largest_messages_pass_the_default_decoder() {
         unknown_tag: u32::MAX,
         frames_ok: u32::MAX,
     };
+    let loop_timing = LoopTiming {
+        steps: u32::MAX,
+        period_mean_us: f32::MAX,
+        period_min_us: u32::MAX,
+        period_max_us: u32::MAX,
+    };
     let status = Status {
         uptime_us: u64::MAX,
         channels: [channel; CHANNEL_COUNT],
@@ -322,6 +329,9 @@ fn largest_messages_pass_the_default_decoder() {
         ramp_ms: u16::MAX,
         telemetry_period_ms: u16::MAX,
         counters,
+        power: PowerState::Suspended,
+        current_budget_ma: u16::MAX,
+        loop_timing,
     };
     let messages = vec![
         BoardMessage::Response(Response {
@@ -338,6 +348,7 @@ fn largest_messages_pass_the_default_decoder() {
             temperature_c: f32::MAX,
             supply_mv: u16::MAX,
             counters,
+            loop_timing,
         }),
     ];
     let stream: Vec<u8> = messages.iter().flat_map(frame).collect();

@@ -1,15 +1,16 @@
-//! The board's persistent configuration and its flash representation.
+//! The board's persistent configuration and its flash record.
 //!
-//! A [`BoardConfig`] becomes a fixed-size, CRC-protected blob ([`BoardConfig::to_blob`]). Flash is kept as an
-//! append-only log of such blobs in one erased sector ([`scan_log`]): a save writes the next free slot, the newest
-//! valid slot wins at boot, and the sector is erased only when it is full, so a save rarely erases and a power cut
-//! mid-write leaves the previous configuration readable.
+//! A [`BoardConfig`] is saved as a fixed-size, CRC-protected [`ConfigRecord`] that also carries a sequence
+//! number (the newest valid record wins at boot) and the id of the `SaveConfig` request that wrote it (so a
+//! retried request is recognised and not written twice). Where the records live is [`crate::store`].
 
 use nusense_protocol::CHANNEL_COUNT;
 
-use crate::limits::{DEFAULT_RAMP_MS, MAX_CURRENT_MA, MAX_RAMP_MS, NOMINAL_CURRENT_MA};
+use crate::limits::{
+    DEFAULT_RAMP_MS, MAX_CURRENT_MA, MAX_RAMP_MS, MAX_TOTAL_CURRENT_MA, NOMINAL_CURRENT_MA,
+};
 
-/// LED setpoints and soft-start, as restored at boot.
+/// LED setpoints, soft-start and power budget, as restored at boot.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BoardConfig {
     /// Per channel (protocol `Side` order), already clamped to [`MAX_CURRENT_MA`].
@@ -17,6 +18,8 @@ pub struct BoardConfig {
     pub enabled: [bool; CHANNEL_COUNT],
     /// Soft-start time from 0 to the setpoint.
     pub ramp_ms: u16,
+    /// Cap on the sum of the string currents, at most [`MAX_TOTAL_CURRENT_MA`].
+    pub current_budget_ma: u16,
 }
 
 impl Default for BoardConfig {
@@ -26,13 +29,27 @@ impl Default for BoardConfig {
             setpoints_ma: [NOMINAL_CURRENT_MA; CHANNEL_COUNT],
             enabled: [false; CHANNEL_COUNT],
             ramp_ms: DEFAULT_RAMP_MS,
+            current_budget_ma: MAX_TOTAL_CURRENT_MA,
         }
     }
 }
 
-/// Why a stored blob was not taken.
+impl BoardConfig {
+    /// The same configuration with every value in its allowed range: what a hand-edited, foreign or corrupted
+    /// source gets turned into, never trusted as it is.
+    pub fn clamped(mut self) -> Self {
+        for setpoint in &mut self.setpoints_ma {
+            *setpoint = (*setpoint).min(MAX_CURRENT_MA);
+        }
+        self.ramp_ms = self.ramp_ms.min(MAX_RAMP_MS);
+        self.current_budget_ma = self.current_budget_ma.min(MAX_TOTAL_CURRENT_MA);
+        self
+    }
+}
+
+/// Why a stored record was not taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ConfigBlobError {
+pub enum RecordError {
     WrongLength {
         found: usize,
     },
@@ -41,118 +58,108 @@ pub enum ConfigBlobError {
     BadMagic,
     /// A layout this firmware does not know (written by a newer one).
     UnsupportedLayout(u8),
+    /// Damaged, or a write cut short by a power loss.
     BadCrc,
 }
 
-impl core::fmt::Display for ConfigBlobError {
+impl core::fmt::Display for RecordError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Self::WrongLength { found } => write!(
-                f,
-                "config blob has {found} bytes, expected {}",
-                BoardConfig::BLOB_LEN
-            ),
-            Self::Erased => f.write_str("config slot is erased"),
-            Self::BadMagic => f.write_str("config blob does not start with the NUSense magic"),
-            Self::UnsupportedLayout(v) => {
-                write!(f, "config blob layout {v} is unknown to this firmware")
+            Self::WrongLength { found } => {
+                write!(
+                    f,
+                    "config record has {found} bytes, expected {}",
+                    ConfigRecord::LEN
+                )
             }
-            Self::BadCrc => f.write_str("config blob CRC does not match"),
+            Self::Erased => f.write_str("config slot is erased"),
+            Self::BadMagic => f.write_str("config record does not start with the NUSense magic"),
+            Self::UnsupportedLayout(v) => {
+                write!(f, "config record layout {v} is unknown to this firmware")
+            }
+            Self::BadCrc => f.write_str("config record CRC does not match"),
         }
     }
 }
 
 const MAGIC: [u8; 4] = *b"NUSC";
-const LAYOUT: u8 = 1;
+/// Layout 1 was the 24-byte blob of the single-sector log; 2 adds the budget, sequence number and request id.
+const LAYOUT: u8 = 2;
 const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
-const ERASED: u8 = 0xFF;
+/// What erased NOR flash reads as.
+pub const ERASED: u8 = 0xFF;
 
-impl BoardConfig {
-    /// Size of one blob and of one slot of the flash log; a multiple of 8 so that every flash programming width
-    /// divides it.
-    pub const BLOB_LEN: usize = 24;
+/// One saved configuration, as it sits in a flash slot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ConfigRecord {
+    pub config: BoardConfig,
+    /// Incremented by every save; the valid record with the highest number is the current one.
+    pub sequence: u32,
+    /// The `SaveConfig` request that wrote this record.
+    pub request_id: u32,
+}
 
-    /// Layout: magic "NUSC", layout 1, enabled bit mask, ramp_ms (LE u16), 4 setpoints (LE u16), 4 reserved bytes
-    /// (0xFF), CRC-32 (ISO-HDLC, LE) of the 20 bytes before it.
-    pub fn to_blob(&self) -> [u8; Self::BLOB_LEN] {
-        let mut blob = [ERASED; Self::BLOB_LEN];
-        blob[0..4].copy_from_slice(&MAGIC);
-        blob[4] = LAYOUT;
-        blob[5] = self
+impl ConfigRecord {
+    /// Size of a record and of a flash slot; a multiple of 8 so that every flash programming width divides it.
+    pub const LEN: usize = 32;
+    const CRC_AT: usize = Self::LEN - 4;
+
+    /// Layout 2: magic "NUSC", layout, enabled bit mask, ramp_ms, 4 setpoints, budget (all LE u16), sequence
+    /// (LE u32), request id (LE u32), 2 reserved bytes (0xFF), CRC-32 (ISO-HDLC, LE) of the 28 bytes before it.
+    pub fn to_bytes(&self) -> [u8; Self::LEN] {
+        let config = &self.config;
+        let mut bytes = [ERASED; Self::LEN];
+        bytes[0..4].copy_from_slice(&MAGIC);
+        bytes[4] = LAYOUT;
+        bytes[5] = config
             .enabled
             .iter()
             .enumerate()
             .fold(0u8, |mask, (i, &on)| mask | (u8::from(on) << i));
-        blob[6..8].copy_from_slice(&self.ramp_ms.to_le_bytes());
-        for (i, sp) in self.setpoints_ma.iter().enumerate() {
-            blob[8 + 2 * i..10 + 2 * i].copy_from_slice(&sp.to_le_bytes());
+        bytes[6..8].copy_from_slice(&config.ramp_ms.to_le_bytes());
+        for (i, setpoint) in config.setpoints_ma.iter().enumerate() {
+            bytes[8 + 2 * i..10 + 2 * i].copy_from_slice(&setpoint.to_le_bytes());
         }
-        let crc = CRC32.checksum(&blob[..20]);
-        blob[20..24].copy_from_slice(&crc.to_le_bytes());
-        blob
+        bytes[16..18].copy_from_slice(&config.current_budget_ma.to_le_bytes());
+        bytes[18..22].copy_from_slice(&self.sequence.to_le_bytes());
+        bytes[22..26].copy_from_slice(&self.request_id.to_le_bytes());
+        let crc = CRC32.checksum(&bytes[..Self::CRC_AT]);
+        bytes[Self::CRC_AT..].copy_from_slice(&crc.to_le_bytes());
+        bytes
     }
 
-    /// Parses a blob; values out of range (a hand-edited or foreign blob) are clamped, never trusted.
-    pub fn from_blob(blob: &[u8]) -> Result<Self, ConfigBlobError> {
-        if blob.len() != Self::BLOB_LEN {
-            return Err(ConfigBlobError::WrongLength { found: blob.len() });
+    /// Parses a record; values out of range are clamped ([`BoardConfig::clamped`]).
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, RecordError> {
+        if bytes.len() != Self::LEN {
+            return Err(RecordError::WrongLength { found: bytes.len() });
         }
-        if blob.iter().all(|&b| b == ERASED) {
-            return Err(ConfigBlobError::Erased);
+        if bytes.iter().all(|&b| b == ERASED) {
+            return Err(RecordError::Erased);
         }
-        if blob[0..4] != MAGIC {
-            return Err(ConfigBlobError::BadMagic);
+        if bytes[0..4] != MAGIC {
+            return Err(RecordError::BadMagic);
         }
-        if blob[4] != LAYOUT {
-            return Err(ConfigBlobError::UnsupportedLayout(blob[4]));
+        if bytes[4] != LAYOUT {
+            return Err(RecordError::UnsupportedLayout(bytes[4]));
         }
-        let stored_crc = u32::from_le_bytes([blob[20], blob[21], blob[22], blob[23]]);
-        if CRC32.checksum(&blob[..20]) != stored_crc {
-            return Err(ConfigBlobError::BadCrc);
+        let stored_crc = u32::from_le_bytes([bytes[28], bytes[29], bytes[30], bytes[31]]);
+        if CRC32.checksum(&bytes[..Self::CRC_AT]) != stored_crc {
+            return Err(RecordError::BadCrc);
         }
-        let mut config = Self {
-            setpoints_ma: [0; CHANNEL_COUNT],
-            enabled: [false; CHANNEL_COUNT],
-            ramp_ms: u16::from_le_bytes([blob[6], blob[7]]).min(MAX_RAMP_MS),
+        let u16_at = |i: usize| u16::from_le_bytes([bytes[i], bytes[i + 1]]);
+        let u32_at =
+            |i: usize| u32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+        let config = BoardConfig {
+            setpoints_ma: core::array::from_fn(|i| u16_at(8 + 2 * i)),
+            enabled: core::array::from_fn(|i| bytes[5] & (1 << i) != 0),
+            ramp_ms: u16_at(6),
+            current_budget_ma: u16_at(16),
         };
-        for i in 0..CHANNEL_COUNT {
-            config.enabled[i] = blob[5] & (1 << i) != 0;
-            config.setpoints_ma[i] =
-                u16::from_le_bytes([blob[8 + 2 * i], blob[9 + 2 * i]]).min(MAX_CURRENT_MA);
-        }
-        Ok(config)
-    }
-}
-
-/// What [`scan_log`] found in a flash sector used as a configuration log.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct LogScan {
-    /// The newest valid configuration, if any slot holds one.
-    pub latest: Option<BoardConfig>,
-    /// Byte offset of the first erased slot, where the next save goes; `None` when the sector is full and must
-    /// be erased (then the save goes to offset 0).
-    pub next_free: Option<usize>,
-}
-
-/// Scans a sector (its bytes as read from flash) slot by slot up to the first erased one. Slots that do not
-/// parse (a write cut by a power loss) are skipped, so the newest good one wins.
-pub fn scan_log(sector: &[u8]) -> LogScan {
-    let mut latest = None;
-    for (index, slot) in sector.chunks_exact(BoardConfig::BLOB_LEN).enumerate() {
-        match BoardConfig::from_blob(slot) {
-            Ok(config) => latest = Some(config),
-            Err(ConfigBlobError::Erased) => {
-                return LogScan {
-                    latest,
-                    next_free: Some(index * BoardConfig::BLOB_LEN),
-                };
-            }
-            Err(_) => {}
-        }
-    }
-    LogScan {
-        latest,
-        next_free: None,
+        Ok(Self {
+            config: config.clamped(),
+            sequence: u32_at(18),
+            request_id: u32_at(22),
+        })
     }
 }
 
@@ -160,86 +167,58 @@ pub fn scan_log(sector: &[u8]) -> LogScan {
 mod tests {
     use super::*;
 
-    fn sample() -> BoardConfig {
-        BoardConfig {
-            setpoints_ma: [100, 90, 120, 0],
-            enabled: [true, false, true, true],
-            ramp_ms: 250,
+    fn sample() -> ConfigRecord {
+        ConfigRecord {
+            config: BoardConfig {
+                setpoints_ma: [100, 90, 120, 0],
+                enabled: [true, false, true, true],
+                ramp_ms: 250,
+                current_budget_ma: 300,
+            },
+            sequence: 0x0102_0304,
+            request_id: 0xA0B0_C0D0,
         }
     }
 
     #[test]
-    fn blob_round_trips() {
-        assert_eq!(BoardConfig::from_blob(&sample().to_blob()), Ok(sample()));
+    fn record_round_trips() {
+        assert_eq!(ConfigRecord::from_bytes(&sample().to_bytes()), Ok(sample()));
     }
 
     #[test]
-    fn corrupted_blob_is_refused() {
-        let mut blob = sample().to_blob();
-        blob[9] ^= 0x10;
-        assert_eq!(BoardConfig::from_blob(&blob), Err(ConfigBlobError::BadCrc));
+    fn corrupted_records_are_refused() {
+        let mut bytes = sample().to_bytes();
+        bytes[9] ^= 0x10;
+        assert_eq!(ConfigRecord::from_bytes(&bytes), Err(RecordError::BadCrc));
         assert_eq!(
-            BoardConfig::from_blob(&[0xFF; 24]),
-            Err(ConfigBlobError::Erased)
+            ConfigRecord::from_bytes(&[0xFF; 32]),
+            Err(RecordError::Erased)
         );
         assert_eq!(
-            BoardConfig::from_blob(&[0; 24]),
-            Err(ConfigBlobError::BadMagic)
+            ConfigRecord::from_bytes(&[0; 32]),
+            Err(RecordError::BadMagic)
         );
         assert_eq!(
-            BoardConfig::from_blob(&[0; 3]),
-            Err(ConfigBlobError::WrongLength { found: 3 })
+            ConfigRecord::from_bytes(&[0; 3]),
+            Err(RecordError::WrongLength { found: 3 })
+        );
+        let mut layout_1 = sample().to_bytes();
+        layout_1[4] = 1;
+        assert_eq!(
+            ConfigRecord::from_bytes(&layout_1),
+            Err(RecordError::UnsupportedLayout(1))
         );
     }
 
     #[test]
     fn out_of_range_values_are_clamped_on_load() {
-        let mut blob = sample().to_blob();
-        blob[8..10].copy_from_slice(&5000u16.to_le_bytes());
-        let crc = CRC32.checksum(&blob[..20]);
-        blob[20..24].copy_from_slice(&crc.to_le_bytes());
-        assert_eq!(
-            BoardConfig::from_blob(&blob).unwrap().setpoints_ma[0],
-            MAX_CURRENT_MA
-        );
-    }
-
-    #[test]
-    fn log_keeps_the_newest_good_slot_and_finds_the_next_free_one() {
-        let mut sector = [0xFFu8; 24 * 4];
-        assert_eq!(
-            scan_log(&sector),
-            LogScan {
-                latest: None,
-                next_free: Some(0)
-            }
-        );
-        let older = BoardConfig::default();
-        sector[0..24].copy_from_slice(&older.to_blob());
-        sector[24..48].copy_from_slice(&sample().to_blob());
-        assert_eq!(
-            scan_log(&sector),
-            LogScan {
-                latest: Some(sample()),
-                next_free: Some(48)
-            }
-        );
-        // A write torn by a power cut: the slot is neither erased nor valid, the previous one stays in force.
-        sector[48..52].copy_from_slice(b"NUSC");
-        assert_eq!(
-            scan_log(&sector),
-            LogScan {
-                latest: Some(sample()),
-                next_free: Some(72)
-            }
-        );
-        sector[72..96].copy_from_slice(&older.to_blob());
-        assert_eq!(
-            scan_log(&sector),
-            LogScan {
-                latest: Some(older),
-                next_free: None
-            }
-        );
+        let mut bytes = sample().to_bytes();
+        bytes[8..10].copy_from_slice(&5000u16.to_le_bytes());
+        bytes[16..18].copy_from_slice(&u16::MAX.to_le_bytes());
+        let crc = CRC32.checksum(&bytes[..28]);
+        bytes[28..32].copy_from_slice(&crc.to_le_bytes());
+        let record = ConfigRecord::from_bytes(&bytes).unwrap();
+        assert_eq!(record.config.setpoints_ma[0], MAX_CURRENT_MA);
+        assert_eq!(record.config.current_budget_ma, MAX_TOTAL_CURRENT_MA);
     }
 }

@@ -4,18 +4,26 @@
 //! - [`Controller::on_rx`] with every chunk received from the host; replies go out through `tx` as whole frames;
 //! - [`Controller::control_step`] at >= 1 kHz with fresh measurements; it returns the PWM duty per channel;
 //! - [`Controller::poll_telemetry`] often (e.g. after each control step); it sends a frame when one is due;
-//! - [`Controller::take_action`] after `on_rx`, to carry out what only the glue can do (flash, reset, DFU).
+//! - [`Controller::take_action`] after `on_rx`, to carry out what only the glue can do (flash, reset, DFU);
+//! - [`Controller::set_power_state`] when USB is configured, suspended or reset: the LEDs light only while the
+//!   port grants the current they draw;
+//! - [`Controller::set_host_present`] when the host opens or closes the port (DTR on USB CDC-ACM): telemetry
+//!   flows only to a host that listens.
+//!
+//! Replies (written by `on_rx` and `complete_save_config`) and telemetry (written by `poll_telemetry`) leave
+//! through separate `tx` callbacks, so the glue can give replies a path of their own that telemetry cannot fill.
 
 use nusense_protocol::framing::{encode, FrameDecoder, MAX_FRAME_LEN};
 use nusense_protocol::{
-    Argument, BoardMessage, Channel, ChannelState, DeviceError, DeviceInfo, LinkCounters, Reply,
-    Request, RequestBody, Response, Seq, Side, Status, Telemetry, CHANNEL_COUNT, PROTOCOL_VERSION,
+    Argument, BoardMessage, Channel, ChannelState, DeviceError, DeviceInfo, LinkCounters,
+    LoopTiming, PowerState, Reply, Request, RequestBody, Response, Seq, Side, Status, Telemetry,
+    CHANNEL_COUNT, PROTOCOL_VERSION, SCHEMA_FINGERPRINT,
 };
 
 use crate::config::BoardConfig;
 use crate::faults::FaultMonitor;
 use crate::identity::Identity;
-use crate::limits::{MAX_CURRENT_MA, MAX_RAMP_MS, MIN_TELEMETRY_PERIOD_MS};
+use crate::limits::{MAX_CURRENT_MA, MAX_RAMP_MS, MAX_TOTAL_CURRENT_MA, MIN_TELEMETRY_PERIOD_MS};
 use crate::regulator::ChannelRegulator;
 
 /// One set of readings from the board's ADC, already in physical units.
@@ -30,9 +38,12 @@ pub struct Measurements {
 /// Something only the board glue can carry out, requested by the host.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Action {
-    /// Append this blob to the configuration log in flash (see [`crate::config::scan_log`]), then report the
-    /// outcome with [`Controller::complete_save_config`]: the host's reply waits for it.
-    SaveConfig([u8; BoardConfig::BLOB_LEN]),
+    /// Store this configuration as written by `request_id` ([`crate::store::ConfigStore::save`]), then report
+    /// the outcome with [`Controller::complete_save_config`]: the host's reply waits for it.
+    SaveConfig {
+        config: BoardConfig,
+        request_id: u32,
+    },
     /// The Ack has been written to `tx`: reset once it has left the link.
     Reset,
     /// The Ack has been written to `tx`: start the MCU's built-in DFU bootloader once it has left the link.
@@ -53,22 +64,69 @@ struct BoardState {
     duty: [f32; CHANNEL_COUNT],
     last: Measurements,
     last_step_us: Option<u64>,
+    loop_stats: LoopStats,
     handshaken: bool,
+    host_present: bool,
+    power: PowerState,
     telemetry_period_ms: u16,
     next_telemetry_us: u64,
     pending_action: Option<Action>,
-    pending_save_seq: Option<Seq>,
+    pending_save: Option<PendingSave>,
+    /// The request id of the last save that reached flash (from the stored record at boot).
+    last_saved_request_id: Option<u32>,
     /// Frames that passed the CRC but hold a request this firmware does not know (answered `UnknownRequest`).
     unknown_requests: u32,
 }
 
-impl Controller {
-    pub fn new(identity: Identity, config: BoardConfig) -> Self {
-        let mut config = config;
-        for sp in &mut config.setpoints_ma {
-            *sp = (*sp).min(MAX_CURRENT_MA);
+/// A `SaveConfig` handed to the glue and not completed yet.
+#[derive(Clone, Copy, Debug)]
+struct PendingSave {
+    /// The sequence number to answer: the latest attempt's, when the host retried meanwhile.
+    seq: Seq,
+    request_id: u32,
+}
+
+/// The control loop's period over a window of steps (see [`LoopTiming`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct LoopStats {
+    steps: u32,
+    sum_us: u64,
+    min_us: u32,
+    max_us: u32,
+}
+
+impl LoopStats {
+    fn record(&mut self, period_us: u32) {
+        if self.steps == 0 {
+            self.min_us = period_us;
+            self.max_us = period_us;
+        } else {
+            self.min_us = self.min_us.min(period_us);
+            self.max_us = self.max_us.max(period_us);
         }
-        config.ramp_ms = config.ramp_ms.min(MAX_RAMP_MS);
+        self.steps = self.steps.saturating_add(1);
+        self.sum_us = self.sum_us.saturating_add(u64::from(period_us));
+    }
+
+    fn timing(&self) -> LoopTiming {
+        LoopTiming {
+            steps: self.steps,
+            period_mean_us: if self.steps == 0 {
+                0.0
+            } else {
+                self.sum_us as f32 / self.steps as f32
+            },
+            period_min_us: self.min_us,
+            period_max_us: self.max_us,
+        }
+    }
+}
+
+impl Controller {
+    /// A board that has booted with `config` (clamped to the limits). The LEDs stay off until the glue reports
+    /// [`PowerState::Configured`].
+    pub fn new(identity: Identity, config: BoardConfig) -> Self {
+        let config = config.clamped();
         Self {
             decoder: FrameDecoder::new(),
             board: BoardState {
@@ -79,14 +137,44 @@ impl Controller {
                 duty: [0.0; CHANNEL_COUNT],
                 last: Measurements::default(),
                 last_step_us: None,
+                loop_stats: LoopStats::default(),
                 handshaken: false,
+                host_present: true,
+                power: PowerState::Unconfigured,
                 telemetry_period_ms: 0,
                 next_telemetry_us: 0,
                 pending_action: None,
-                pending_save_seq: None,
+                pending_save: None,
+                last_saved_request_id: None,
                 unknown_requests: 0,
             },
         }
+    }
+
+    /// The request id of the record the configuration was restored from, so that a host retrying the save that
+    /// wrote it (the board reset before the reply left) is answered without a second write.
+    pub fn with_saved_request_id(mut self, request_id: Option<u32>) -> Self {
+        self.board.last_saved_request_id = request_id;
+        self
+    }
+
+    /// What USB allows now. Anything but `Configured` switches every string off at the next control step (and
+    /// the soft start begins again once it is back).
+    pub fn set_power_state(&mut self, power: PowerState) {
+        self.board.power = power;
+    }
+
+    pub fn power_state(&self) -> PowerState {
+        self.board.power
+    }
+
+    /// Whether a host has the port open (DTR). Opening or closing it is a new session: a half-received frame is
+    /// dropped, the stream stops and a new handshake is expected. While nobody listens, no telemetry is made.
+    pub fn set_host_present(&mut self, present: bool) {
+        if present != self.board.host_present {
+            self.on_link_reset();
+        }
+        self.board.host_present = present;
     }
 
     /// Bytes from the host link (USB CDC or USART), any chunking; writes encoded reply frames through `tx`.
@@ -128,10 +216,11 @@ impl Controller {
         self.board.control_step(now_us, m)
     }
 
-    /// Sends a Telemetry frame through `tx` when one is due.
+    /// Sends a Telemetry frame through `tx` when one is due (and a host listens).
     pub fn poll_telemetry(&mut self, now_us: u64, tx: &mut impl FnMut(&[u8])) {
         let board = &mut self.board;
-        if board.telemetry_period_ms == 0 || now_us < board.next_telemetry_us {
+        if !board.host_present || board.telemetry_period_ms == 0 || now_us < board.next_telemetry_us
+        {
             return;
         }
         let period_us = u64::from(board.telemetry_period_ms) * 1_000;
@@ -147,7 +236,10 @@ impl Controller {
             temperature_c: finite_or_zero(board.last.temperature_c),
             supply_mv: supply_mv_u16(board.last.supply_mv),
             counters,
+            loop_timing: board.loop_stats.timing(),
         };
+        // Each frame reports the steps since the previous one.
+        board.loop_stats = LoopStats::default();
         send(&BoardMessage::Telemetry(telemetry), tx);
     }
 
@@ -158,14 +250,20 @@ impl Controller {
 
     /// Outcome of an [`Action::SaveConfig`]; sends the reply the host is waiting for.
     pub fn complete_save_config(&mut self, saved: bool, tx: &mut impl FnMut(&[u8])) {
-        if let Some(seq) = self.board.pending_save_seq.take() {
+        if let Some(PendingSave { seq, request_id }) = self.board.pending_save.take() {
             let result = if saved {
+                self.board.last_saved_request_id = Some(request_id);
                 Ok(Reply::Ack)
             } else {
                 Err(DeviceError::Storage)
             };
             send(&BoardMessage::Response(Response { seq, result }), tx);
         }
+    }
+
+    /// The loop timing since the last telemetry frame (what the next one will report).
+    pub fn loop_timing(&self) -> LoopTiming {
+        self.board.loop_stats.timing()
     }
 
     /// What `GetStatus` would answer now.
@@ -236,19 +334,40 @@ impl BoardState {
                     self.regulators = [ChannelRegulator::new(); CHANNEL_COUNT];
                     Ok(Reply::Ack)
                 }
-                RequestBody::SaveConfig => {
-                    if self.pending_action.is_some() || self.pending_save_seq.is_some() {
-                        Err(DeviceError::Busy)
-                    } else {
-                        self.pending_action = Some(Action::SaveConfig(self.config.to_blob()));
-                        self.pending_save_seq = Some(seq);
-                        return None;
-                    }
-                }
+                RequestBody::SaveConfig { request_id } => return self.save_config(seq, request_id),
                 RequestBody::Reset => self.request_action(Action::Reset),
                 RequestBody::EnterBootloader => self.request_action(Action::EnterBootloader),
                 RequestBody::Ping { nonce } => Ok(Reply::Pong { nonce }),
+                RequestBody::SetCurrentBudget { total_ma } => {
+                    self.config.current_budget_ma = total_ma.min(MAX_TOTAL_CURRENT_MA);
+                    Ok(Reply::Ack)
+                }
             }
+        };
+        Some(Response { seq, result })
+    }
+
+    /// A retry of the save that already reached flash is acknowledged without writing; a retry of the one under
+    /// way gets the answer when it completes; any other save waits its turn (`Busy`).
+    fn save_config(&mut self, seq: Seq, request_id: u32) -> Option<Response> {
+        let result = if self.last_saved_request_id == Some(request_id) {
+            Ok(Reply::Ack)
+        } else if let Some(pending) = &mut self.pending_save {
+            if pending.request_id != request_id {
+                Err(DeviceError::Busy)
+            } else {
+                pending.seq = seq;
+                return None;
+            }
+        } else if self.pending_action.is_some() {
+            Err(DeviceError::Busy)
+        } else {
+            self.pending_action = Some(Action::SaveConfig {
+                config: self.config,
+                request_id,
+            });
+            self.pending_save = Some(PendingSave { seq, request_id });
+            return None;
         };
         Some(Response { seq, result })
     }
@@ -258,6 +377,7 @@ impl BoardState {
             self.handshaken = true;
             Ok(Reply::Hello {
                 protocol_version: PROTOCOL_VERSION,
+                schema: SCHEMA_FINGERPRINT,
             })
         } else {
             Err(DeviceError::VersionMismatch {
@@ -276,6 +396,7 @@ impl BoardState {
             mcu_uid: self.identity.mcu_uid,
             channel_count: CHANNEL_COUNT as u8,
             max_current_ma: MAX_CURRENT_MA,
+            max_total_current_ma: MAX_TOTAL_CURRENT_MA,
         }
     }
 
@@ -315,7 +436,7 @@ impl BoardState {
     }
 
     fn request_action(&mut self, action: Action) -> Result<Reply, DeviceError> {
-        if self.pending_action.is_some() || self.pending_save_seq.is_some() {
+        if self.pending_action.is_some() || self.pending_save.is_some() {
             return Err(DeviceError::Busy);
         }
         self.pending_action = Some(action);
@@ -327,24 +448,50 @@ impl BoardState {
             Some(last) => u32::try_from(now_us.saturating_sub(last)).unwrap_or(u32::MAX),
             None => 0,
         };
+        if self.last_step_us.is_some() {
+            self.loop_stats.record(dt_us);
+        }
         self.last_step_us = Some(now_us);
         self.last = *m;
 
-        let driving =
-            core::array::from_fn(|ch| self.config.enabled[ch] && self.config.setpoints_ma[ch] > 0);
+        let powered = self.power == PowerState::Configured;
+        let driving = core::array::from_fn(|ch| {
+            powered && self.config.enabled[ch] && self.config.setpoints_ma[ch] > 0
+        });
         self.monitor.check(now_us, m, driving, self.duty);
-        let derate = FaultMonitor::derate_factor(m.temperature_c);
-        self.duty = core::array::from_fn(|ch| {
-            if driving[ch] && !self.monitor.is_tripped(ch) {
-                let target_ma =
-                    f32::from(self.config.setpoints_ma[ch].min(MAX_CURRENT_MA)) * derate;
+        let targets = self.targets_ma(driving, FaultMonitor::derate_factor(m.temperature_c));
+        self.duty = core::array::from_fn(|ch| match targets[ch] {
+            Some(target_ma) => {
                 self.regulators[ch].step(target_ma, self.config.ramp_ms, m.current_ma[ch], dt_us)
-            } else {
+            }
+            None => {
                 self.regulators[ch].reset();
                 0.0
             }
         });
         self.duty
+    }
+
+    /// The current each lit channel regulates to: its setpoint, derated when the board is hot, and scaled down
+    /// with the others so that together they stay within the current budget. `None`: the channel is off.
+    fn targets_ma(
+        &self,
+        driving: [bool; CHANNEL_COUNT],
+        derate: f32,
+    ) -> [Option<f32>; CHANNEL_COUNT] {
+        let mut targets: [Option<f32>; CHANNEL_COUNT] = core::array::from_fn(|ch| {
+            (driving[ch] && !self.monitor.is_tripped(ch))
+                .then(|| f32::from(self.config.setpoints_ma[ch].min(MAX_CURRENT_MA)) * derate)
+        });
+        let total: f32 = targets.iter().flatten().sum();
+        let budget = f32::from(self.config.current_budget_ma.min(MAX_TOTAL_CURRENT_MA));
+        if total > budget {
+            let scale = budget / total;
+            for target in targets.iter_mut().flatten() {
+                *target *= scale;
+            }
+        }
+        targets
     }
 
     fn channel_states(&self) -> [ChannelState; CHANNEL_COUNT] {
@@ -367,6 +514,9 @@ impl BoardState {
             ramp_ms: self.config.ramp_ms,
             telemetry_period_ms: self.telemetry_period_ms,
             counters,
+            power: self.power,
+            current_budget_ma: self.config.current_budget_ma,
+            loop_timing: self.loop_stats.timing(),
         }
     }
 }

@@ -7,7 +7,8 @@
 //! - [`regulator`]: soft-start ramp and closed current loop per channel.
 //! - [`faults`]: open string, over-current, over-temperature, under-voltage; latched until cleared.
 //! - [`controller`]: the [`Controller`] the board glue drives.
-//! - [`config`]: [`BoardConfig`] and its flash blob and log.
+//! - [`config`]: [`BoardConfig`] and its flash record.
+//! - [`store`]: the two-sector, power-cut-safe record store over any `embedded-storage` NOR flash.
 //! - [`plant`]: a simulated LED string board for tests, QEMU and the virtual board.
 #![cfg_attr(not(test), no_std)]
 
@@ -19,8 +20,10 @@ pub mod identity;
 pub mod limits;
 pub mod plant;
 pub mod regulator;
+pub mod store;
 
-pub use config::{BoardConfig, ConfigBlobError};
+pub use config::{BoardConfig, ConfigRecord, RecordError};
 pub use controller::{Action, Controller, Measurements};
 pub use identity::Identity;
-pub use nusense_protocol::CHANNEL_COUNT;
+pub use nusense_protocol::{PowerState, CHANNEL_COUNT};
+pub use store::{ConfigStore, RamFlash, StoreError};

@@ -37,3 +37,17 @@ pub const MAX_RAMP_MS: u16 = 10_000;
 /// Shortest telemetry period the host may ask for (a frame is about 130 bytes: ~11 ms at 115200 baud, far less
 /// over USB, so faster requests would only fill the link).
 pub const MIN_TELEMETRY_PERIOD_MS: u16 = 5;
+
+/// What a USB 2.0 port grants a configured high-power device, and what the board declares as bMaxPower.
+pub const USB_CONFIGURED_MA: u16 = 500;
+/// What the board itself draws from VBUS besides the LED strings: the STM32F411 at 96 MHz with USB, ADC and
+/// timers running (about 25 mA typical, 40 mA worst case over temperature), the 3.3 V regulator's own
+/// consumption and the status LED, rounded up.
+pub const MCU_RESERVE_MA: u16 = 60;
+/// The most the four strings may draw together: the port's grant less the board's own draw. Also the default
+/// budget; the host may lower it (`SetCurrentBudget`), never raise it.
+pub const MAX_TOTAL_CURRENT_MA: u16 = USB_CONFIGURED_MA - MCU_RESERVE_MA;
+
+// The default budget must keep the board within what the port grants, and must matter at the hard limit.
+const _: () = assert!(MAX_TOTAL_CURRENT_MA + MCU_RESERVE_MA <= USB_CONFIGURED_MA);
+const _: () = assert!(4 * MAX_CURRENT_MA > MAX_TOTAL_CURRENT_MA);

@@ -4,11 +4,14 @@
 mod common;
 
 use common::Bench;
-use nusense_firmware_core::limits::{MAX_CURRENT_MA, MAX_RAMP_MS, MIN_TELEMETRY_PERIOD_MS};
-use nusense_firmware_core::{Action, BoardConfig};
-use nusense_protocol::framing::{encode, MAX_FRAME_LEN};
+use nusense_firmware_core::limits::{
+    MAX_CURRENT_MA, MAX_RAMP_MS, MAX_TOTAL_CURRENT_MA, MIN_TELEMETRY_PERIOD_MS,
+};
+use nusense_firmware_core::{Action, BoardConfig, ConfigRecord, Controller};
+use nusense_protocol::framing::{encode, FrameDecoder, MAX_FRAME_LEN};
 use nusense_protocol::{
-    Argument, Channel, DeviceError, Reply, Request, RequestBody, Side, PROTOCOL_VERSION,
+    Argument, BoardMessage, Channel, DeviceError, Reply, Request, RequestBody, Response, Side,
+    PROTOCOL_VERSION, SCHEMA_FINGERPRINT,
 };
 use proptest::prelude::*;
 
@@ -62,7 +65,8 @@ fn handshake_is_required_and_checks_the_version() {
     assert_eq!(
         hello.result,
         Ok(Reply::Hello {
-            protocol_version: PROTOCOL_VERSION
+            protocol_version: PROTOCOL_VERSION,
+            schema: SCHEMA_FINGERPRINT,
         })
     );
     assert_eq!(bench.request(set.clone()).result, Ok(Reply::Ack));
@@ -231,6 +235,25 @@ fn telemetry_streams_at_the_requested_period_and_stops() {
     assert!(bench.telemetry.is_empty());
 }
 
+/// Feeds what the controller wrote for `complete_save_config` through a host decoder.
+fn complete_save(bench: &mut Bench, saved: bool) -> Vec<BoardMessage> {
+    let mut out = Vec::new();
+    bench
+        .controller
+        .complete_save_config(saved, &mut |f: &[u8]| out.extend_from_slice(f));
+    let mut decoder: FrameDecoder = FrameDecoder::new();
+    let mut got = Vec::new();
+    decoder.feed::<BoardMessage>(&out, |m| got.push(m.unwrap()));
+    got
+}
+
+fn ack(seq: u16) -> BoardMessage {
+    BoardMessage::Response(Response {
+        seq,
+        result: Ok(Reply::Ack),
+    })
+}
+
 #[test]
 fn save_config_waits_for_the_flash_and_reports_failure() {
     let mut bench = Bench::connected();
@@ -243,76 +266,115 @@ fn save_config_waits_for_the_flash_and_reports_failure() {
     let seq = bench.next_seq();
     bench.send(&Request {
         seq,
-        body: RequestBody::SaveConfig,
+        body: RequestBody::SaveConfig { request_id: 11 },
     });
     assert!(
         bench.responses.is_empty(),
         "no answer before the flash write"
     );
-    let blob = match bench.actions.pop() {
-        Some(Action::SaveConfig(blob)) => blob,
+    let saved = match bench.actions.pop() {
+        Some(Action::SaveConfig {
+            config,
+            request_id: 11,
+        }) => config,
         other => panic!("{other:?}"),
     };
-    let saved = BoardConfig::from_blob(&blob).unwrap();
     assert_eq!(saved, bench.controller.config());
     assert_eq!(saved.setpoints_ma[1], 80);
     assert!(saved.enabled[1] && !saved.enabled[0]);
     // Another save while one is in flight is refused.
     assert_eq!(
-        bench.request(RequestBody::SaveConfig).result,
+        bench
+            .request(RequestBody::SaveConfig { request_id: 12 })
+            .result,
         Err(DeviceError::Busy)
     );
-
-    let mut out = Vec::new();
-    bench
-        .controller
-        .complete_save_config(true, &mut |f: &[u8]| out.extend_from_slice(f));
-    let mut decoder: nusense_protocol::framing::FrameDecoder =
-        nusense_protocol::framing::FrameDecoder::new();
-    let mut got = Vec::new();
-    decoder.feed::<nusense_protocol::BoardMessage>(&out, |m| got.push(m.unwrap()));
-    assert_eq!(
-        got,
-        vec![nusense_protocol::BoardMessage::Response(
-            nusense_protocol::Response {
-                seq,
-                result: Ok(Reply::Ack)
-            }
-        )]
-    );
+    assert_eq!(complete_save(&mut bench, true), vec![ack(seq)]);
 
     let seq = bench.next_seq();
     bench.send(&Request {
         seq,
-        body: RequestBody::SaveConfig,
+        body: RequestBody::SaveConfig { request_id: 13 },
     });
-    assert!(matches!(bench.actions.pop(), Some(Action::SaveConfig(_))));
-    out.clear();
-    bench
-        .controller
-        .complete_save_config(false, &mut |f: &[u8]| out.extend_from_slice(f));
-    got.clear();
-    decoder.feed::<nusense_protocol::BoardMessage>(&out, |m| got.push(m.unwrap()));
+    assert!(matches!(
+        bench.actions.pop(),
+        Some(Action::SaveConfig { request_id: 13, .. })
+    ));
     assert_eq!(
-        got,
-        vec![nusense_protocol::BoardMessage::Response(
-            nusense_protocol::Response {
-                seq,
-                result: Err(DeviceError::Storage)
-            }
-        )]
+        complete_save(&mut bench, false),
+        vec![BoardMessage::Response(Response {
+            seq,
+            result: Err(DeviceError::Storage)
+        })]
     );
+}
+
+/// The host retries a save whose reply it did not get in time with a new sequence number and the same request
+/// id: the board writes once and answers the retry.
+#[test]
+fn a_retried_save_is_written_once() {
+    let mut bench = Bench::connected();
+    let first = bench.next_seq();
+    bench.send(&Request {
+        seq: first,
+        body: RequestBody::SaveConfig { request_id: 77 },
+    });
+    assert_eq!(bench.actions.len(), 1);
+    // The retry arrives while the flash is still busy with the first attempt: no second write, and the answer
+    // goes to the retry (the host has given up on the first sequence number).
+    let retry = bench.next_seq();
+    bench.send(&Request {
+        seq: retry,
+        body: RequestBody::SaveConfig { request_id: 77 },
+    });
+    assert_eq!(bench.actions.len(), 1, "{:?}", bench.actions);
+    assert!(bench.responses.is_empty());
+    assert_eq!(complete_save(&mut bench, true), vec![ack(retry)]);
+    // A retry after the write completed (its reply was lost) is answered at once, again without a write.
+    assert_eq!(
+        bench
+            .request(RequestBody::SaveConfig { request_id: 77 })
+            .result,
+        Ok(Reply::Ack)
+    );
+    assert_eq!(bench.actions.len(), 1);
+    // A new request id is a new save.
+    let seq = bench.next_seq();
+    bench.send(&Request {
+        seq,
+        body: RequestBody::SaveConfig { request_id: 78 },
+    });
+    assert_eq!(bench.actions.len(), 2);
+
+    // After a reboot the id of the stored record is remembered, so a retry that crosses a reset is not written
+    // either.
+    let controller =
+        Controller::new(common::identity(), BoardConfig::default()).with_saved_request_id(Some(78));
+    let mut bench = Bench::around(controller);
+    bench.handshake();
+    assert_eq!(
+        bench
+            .request(RequestBody::SaveConfig { request_id: 78 })
+            .result,
+        Ok(Reply::Ack)
+    );
+    assert!(bench.actions.is_empty());
 }
 
 #[test]
 fn a_saved_config_comes_back_at_boot() {
-    let config = BoardConfig {
-        setpoints_ma: [100, 100, 90, 0],
-        enabled: [true, true, true, false],
-        ramp_ms: 20,
+    let record = ConfigRecord {
+        config: BoardConfig {
+            setpoints_ma: [100, 100, 90, 0],
+            enabled: [true, true, true, false],
+            ramp_ms: 20,
+            ..BoardConfig::default()
+        },
+        sequence: 3,
+        request_id: 9,
     };
-    let restored = BoardConfig::from_blob(&config.to_blob()).unwrap();
-    let mut bench = Bench::with(restored, Default::default());
+    let restored = ConfigRecord::from_bytes(&record.to_bytes()).unwrap();
+    let mut bench = Bench::with(restored.config, Default::default());
     bench.run_ms(150);
     let i = bench.true_current_ma();
     assert!(
@@ -355,6 +417,7 @@ fn any_body() -> impl Strategy<Value = RequestBody> {
         any::<u16>().prop_map(|period_ms| RequestBody::StreamTelemetry { period_ms }),
         Just(RequestBody::ClearFaults),
         Just(RequestBody::Ping { nonce: 3 }),
+        any::<u16>().prop_map(|total_ma| RequestBody::SetCurrentBudget { total_ma }),
     ]
 }
 
@@ -378,7 +441,7 @@ proptest! {
     }
 
     /// Any sequence of well-formed requests: each is answered with its own seq, and whatever the host asks, no
-    /// setpoint and no current ever exceeds the hard limit.
+    /// setpoint and no current ever exceeds the hard limit, nor the strings together the USB budget.
     #[test]
     fn any_requests_are_answered_and_never_drive_past_the_limit(
         bodies in proptest::collection::vec(any_body(), 1..20)
@@ -389,6 +452,8 @@ proptest! {
             bench.run_ms(5);
             prop_assert!(bench.controller.config().setpoints_ma.iter().all(|&s| s <= MAX_CURRENT_MA));
             prop_assert!(bench.true_current_ma().iter().all(|&c| c <= f32::from(MAX_CURRENT_MA) * 1.02));
+            let total: f32 = bench.true_current_ma().iter().sum();
+            prop_assert!(total <= f32::from(MAX_TOTAL_CURRENT_MA) * 1.02, "{} mA in total", total);
         }
     }
 

@@ -52,7 +52,8 @@ pub fn request_body() -> impl Strategy<Value = RequestBody> {
         any::<u16>().prop_map(|ms| RequestBody::SetRamp { ms }),
         any::<u16>().prop_map(|period_ms| RequestBody::StreamTelemetry { period_ms }),
         Just(RequestBody::ClearFaults),
-        Just(RequestBody::SaveConfig),
+        any::<u32>().prop_map(|request_id| RequestBody::SaveConfig { request_id }),
+        any::<u16>().prop_map(|total_ma| RequestBody::SetCurrentBudget { total_ma }),
         Just(RequestBody::Reset),
         Just(RequestBody::EnterBootloader),
         any::<u32>().prop_map(|nonce| RequestBody::Ping { nonce }),
@@ -71,7 +72,7 @@ pub fn device_info() -> impl Strategy<Value = DeviceInfo> {
         text::<BOARD_ID_LEN>(),
         any::<[u8; 12]>(),
         any::<u8>(),
-        any::<u16>(),
+        any::<[u16; 2]>(),
     )
         .prop_map(
             |(
@@ -81,7 +82,7 @@ pub fn device_info() -> impl Strategy<Value = DeviceInfo> {
                 board_id,
                 mcu_uid,
                 channel_count,
-                max_current_ma,
+                [max_current_ma, max_total_current_ma],
             )| {
                 DeviceInfo {
                     protocol_version,
@@ -91,6 +92,7 @@ pub fn device_info() -> impl Strategy<Value = DeviceInfo> {
                     mcu_uid,
                     channel_count,
                     max_current_ma,
+                    max_total_current_ma,
                 }
             },
         )
@@ -140,21 +142,44 @@ pub fn link_counters() -> impl Strategy<Value = LinkCounters> {
     })
 }
 
+pub fn power_state() -> impl Strategy<Value = PowerState> {
+    prop_oneof![
+        Just(PowerState::Unconfigured),
+        Just(PowerState::Configured),
+        Just(PowerState::Suspended),
+    ]
+}
+
+pub fn loop_timing() -> impl Strategy<Value = LoopTiming> {
+    (any::<u32>(), float(), any::<[u32; 2]>()).prop_map(
+        |(steps, period_mean_us, [period_min_us, period_max_us])| LoopTiming {
+            steps,
+            period_mean_us,
+            period_min_us,
+            period_max_us,
+        },
+    )
+}
+
 pub fn status() -> impl Strategy<Value = Status> {
     (
         any::<u64>(),
         channels(),
         float(),
-        any::<[u16; 3]>(),
+        any::<[u16; 4]>(),
         link_counters(),
+        power_state(),
+        loop_timing(),
     )
         .prop_map(
             |(
                 uptime_us,
                 channels,
                 temperature_c,
-                [supply_mv, ramp_ms, telemetry_period_ms],
+                [supply_mv, ramp_ms, telemetry_period_ms, current_budget_ma],
                 counters,
+                power,
+                loop_timing,
             )| Status {
                 uptime_us,
                 channels,
@@ -163,6 +188,9 @@ pub fn status() -> impl Strategy<Value = Status> {
                 ramp_ms,
                 telemetry_period_ms,
                 counters,
+                power,
+                current_budget_ma,
+                loop_timing,
             },
         )
 }
@@ -174,14 +202,16 @@ pub fn telemetry() -> impl Strategy<Value = Telemetry> {
         float(),
         any::<u16>(),
         link_counters(),
+        loop_timing(),
     )
         .prop_map(
-            |(uptime_us, channels, temperature_c, supply_mv, counters)| Telemetry {
+            |(uptime_us, channels, temperature_c, supply_mv, counters, loop_timing)| Telemetry {
                 uptime_us,
                 channels,
                 temperature_c,
                 supply_mv,
                 counters,
+                loop_timing,
             },
         )
 }
@@ -214,7 +244,10 @@ pub fn reply() -> impl Strategy<Value = Reply> {
         device_info().prop_map(Reply::Info),
         status().prop_map(Reply::Status),
         any::<u32>().prop_map(|nonce| Reply::Pong { nonce }),
-        any::<u16>().prop_map(|protocol_version| Reply::Hello { protocol_version }),
+        any::<(u16, u64)>().prop_map(|(protocol_version, schema)| Reply::Hello {
+            protocol_version,
+            schema
+        }),
     ]
 }
 
@@ -251,10 +284,11 @@ pub fn request_variant(request: &Request) -> &'static str {
         RequestBody::SetRamp { .. } => "request/set_ramp",
         RequestBody::StreamTelemetry { .. } => "request/stream_telemetry",
         RequestBody::ClearFaults => "request/clear_faults",
-        RequestBody::SaveConfig => "request/save_config",
+        RequestBody::SaveConfig { .. } => "request/save_config",
         RequestBody::Reset => "request/reset",
         RequestBody::EnterBootloader => "request/enter_bootloader",
         RequestBody::Ping { .. } => "request/ping",
+        RequestBody::SetCurrentBudget { .. } => "request/set_current_budget",
     }
 }
 

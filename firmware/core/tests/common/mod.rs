@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use nusense_firmware_core::plant::{LedPlant, PlantParams};
-use nusense_firmware_core::{Action, BoardConfig, Controller, Identity, Measurements};
+use nusense_firmware_core::{Action, BoardConfig, Controller, Identity, Measurements, PowerState};
 use nusense_protocol::framing::{encode, FrameDecoder, MAX_FRAME_LEN};
 use nusense_protocol::{
     BoardMessage, Reply, Request, RequestBody, Response, Telemetry, PROTOCOL_VERSION,
@@ -33,9 +33,19 @@ impl Bench {
         Self::with(BoardConfig::default(), PlantParams::default())
     }
 
+    /// A board that booted with `config` on a configured USB port.
     pub fn with(config: BoardConfig, params: PlantParams) -> Self {
+        Self::around_with(Controller::new(identity(), config), params)
+    }
+
+    pub fn around(controller: Controller) -> Self {
+        Self::around_with(controller, PlantParams::default())
+    }
+
+    fn around_with(mut controller: Controller, params: PlantParams) -> Self {
+        controller.set_power_state(PowerState::Configured);
         Self {
-            controller: Controller::new(identity(), config),
+            controller,
             plant: LedPlant::new(params, 42),
             now_us: 0,
             last: Measurements::default(),
@@ -50,16 +60,24 @@ impl Bench {
     /// A bench that has done the handshake.
     pub fn connected() -> Self {
         let mut bench = Self::new();
-        let hello = bench.request(RequestBody::Hello {
+        bench.handshake();
+        bench
+    }
+
+    pub fn handshake(&mut self) {
+        let hello = self.request(RequestBody::Hello {
             protocol_version: PROTOCOL_VERSION,
         });
-        assert_eq!(
-            hello.result,
-            Ok(Reply::Hello {
-                protocol_version: PROTOCOL_VERSION
-            })
+        assert!(
+            matches!(
+                hello.result,
+                Ok(Reply::Hello {
+                    protocol_version: PROTOCOL_VERSION,
+                    ..
+                })
+            ),
+            "{hello:?}"
         );
-        bench
     }
 
     /// One control period: the plant runs with the duty of the previous step, then the controller sees the result.
