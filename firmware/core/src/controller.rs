@@ -68,6 +68,8 @@ struct BoardState {
     handshaken: bool,
     host_present: bool,
     power: PowerState,
+    /// The glue holds the outputs off (a flash erase is about to stall the CPU).
+    outputs_held_off: bool,
     telemetry_period_ms: u16,
     next_telemetry_us: u64,
     pending_action: Option<Action>,
@@ -141,6 +143,7 @@ impl Controller {
                 handshaken: false,
                 host_present: true,
                 power: PowerState::Unconfigured,
+                outputs_held_off: false,
                 telemetry_period_ms: 0,
                 next_telemetry_us: 0,
                 pending_action: None,
@@ -166,6 +169,12 @@ impl Controller {
 
     pub fn power_state(&self) -> PowerState {
         self.board.power
+    }
+
+    /// Every string off from the next control step until released, then a soft start: what the glue asks for
+    /// around a flash erase, during which the CPU cannot run the loop.
+    pub fn hold_outputs_off(&mut self, held: bool) {
+        self.board.outputs_held_off = held;
     }
 
     /// Whether a host has the port open (DTR). Opening or closing it is a new session: a half-received frame is
@@ -454,7 +463,7 @@ impl BoardState {
         self.last_step_us = Some(now_us);
         self.last = *m;
 
-        let powered = self.power == PowerState::Configured;
+        let powered = self.power == PowerState::Configured && !self.outputs_held_off;
         let driving = core::array::from_fn(|ch| {
             powered && self.config.enabled[ch] && self.config.setpoints_ma[ch] > 0
         });

@@ -9,6 +9,7 @@
 //! - [`controller`]: the [`Controller`] the board glue drives.
 //! - [`config`]: [`BoardConfig`] and its flash record.
 //! - [`store`]: the two-sector, power-cut-safe record store over any `embedded-storage` NOR flash.
+//! - [`link`]: host presence on links without DTR.
 //! - [`plant`]: a simulated LED string board for tests, QEMU and the virtual board.
 #![cfg_attr(not(test), no_std)]
 
@@ -18,6 +19,7 @@ pub mod controller;
 pub mod faults;
 pub mod identity;
 pub mod limits;
+pub mod link;
 pub mod plant;
 pub mod regulator;
 pub mod store;

@@ -200,3 +200,19 @@ fn telemetry_reports_the_loop_period_since_the_previous_frame() {
     bench.run_ms(10);
     assert_eq!(bench.telemetry[0].loop_timing.period_max_us, 1_000);
 }
+
+#[test]
+fn outputs_held_off_for_a_flash_erase_come_back_with_a_soft_start() {
+    let mut bench = Bench::connected();
+    all_on(&mut bench, 100);
+    bench.run_ms(200);
+    bench.controller.hold_outputs_off(true);
+    bench.run_ms(1);
+    assert_eq!(bench.controller.duty(), [0.0; 4]);
+    bench.run_ms(20);
+    assert!(bench.true_current_ma().iter().all(|&i| i == 0.0));
+    bench.controller.hold_outputs_off(false);
+    bench.run_ms(10);
+    let ramping = bench.true_current_ma();
+    assert!(ramping.iter().all(|&i| i > 0.0 && i < 40.0), "{ramping:?}");
+}

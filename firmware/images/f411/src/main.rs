@@ -1,35 +1,38 @@
 //! NUSense LED/controller board firmware (STM32F411CEU6): the hardware-free `Controller` of
 //! nusense-firmware-core behind USB CDC-ACM, with TIM4 PWM, ADC1 sensing, the independent watchdog and the
-//! configuration log in flash. The board itself is described in `board.rs`.
+//! configuration store in flash sectors 1 and 2. The board itself is described in `board.rs`.
+//!
+//! Two executors: the control loop runs alone in an interrupt executor (USART6's vector, unused otherwise) at a
+//! priority above USB, so nothing in thread mode (USB, logging, flash) delays it; the USB link runs in the
+//! thread-mode executor.
 #![no_std]
 #![no_main]
-
-mod board;
-mod config_store;
-mod dfu;
 
 use core::cell::RefCell;
 
 use defmt_rtt as _;
-use embassy_executor::Spawner;
-use embassy_futures::join::join;
+use embassy_executor::{InterruptExecutor, Spawner};
+use embassy_futures::join::join3;
+use embassy_futures::select::{select, Either};
 use embassy_stm32::gpio::Output;
+use embassy_stm32::interrupt::{self, InterruptExt, Priority};
 use embassy_stm32::peripherals::{IWDG, USB_OTG_FS};
 use embassy_stm32::usb::Driver;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::channel::Channel;
-use embassy_time::{Duration, Instant, Ticker, Timer};
-use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
+use embassy_time::{Duration, Ticker, Timer};
+use embassy_usb::class::cdc_acm::{CdcAcmClass, ControlChanged, Receiver, Sender, State};
 use embassy_usb::driver::EndpointError;
-use embassy_usb::UsbDevice;
-use nusense_firmware_core::{Action, Controller, Identity};
+use embassy_usb::{Handler, UsbDevice};
+use nusense_f411::board::{self, Board, LedDrive, Sensors, CONTROL_PERIOD_US, HEARTBEAT_STEPS};
+use nusense_f411::flash::{ConfigFlash, SECTOR_LEN};
+use nusense_f411::{clock, dfu};
+use nusense_firmware_core::limits::USB_CONFIGURED_MA;
+use nusense_firmware_core::{Action, ConfigStore, Controller, Identity, PowerState};
 use nusense_protocol::framing::MAX_FRAME_LEN;
-use panic_probe as _;
 use static_cell::StaticCell;
-
-use crate::board::{Board, LedDrive, Sensors, CONTROL_PERIOD_US};
 
 /// USB identity (pid.codes): the host finds the board by these, see nusense_board::discover.
 const USB_VID: u16 = 0x1209;
@@ -37,27 +40,32 @@ const USB_PID: u16 = 0x4E55;
 const USB_PRODUCT: &str = "NUSense LED board";
 const USB_MANUFACTURER: &str = "NUSense";
 const USB_PACKET: u16 = 64;
+/// The smallest frame (a one-byte sequence number, a one-byte request tag, CRC, COBS code, delimiter): a packet
+/// holds at most this many requests, so at most this many replies come out of one.
+const MIN_FRAME_LEN: usize = 8;
+const MAX_REPLIES_PER_PACKET: usize = USB_PACKET as usize / MIN_FRAME_LEN;
 
 type Frame = heapless::Vec<u8, MAX_FRAME_LEN>;
 
 /// The board's brain, shared by the control loop and the USB link (never held across an await).
-static CONTROLLER: Mutex<CriticalSectionRawMutex, RefCell<Option<Controller>>> =
+static CONTROLLER: Mutex<CriticalSectionRawMutex, RefCell<Option<Controller>>> = Mutex::new(RefCell::new(None));
+/// Replies on their own path: the receiving side waits for room here (and the host's next request waits in USB
+/// flow control), so a reply is never dropped, and telemetry cannot take its place.
+static REPLIES: Channel<CriticalSectionRawMutex, Frame, 4> = Channel::new();
+/// Telemetry: when the host reads too slowly, new frames are dropped whole.
+static TELEMETRY: Channel<CriticalSectionRawMutex, Frame, 2> = Channel::new();
+static WATCHDOG: Mutex<CriticalSectionRawMutex, RefCell<Option<IndependentWatchdog<'static, IWDG>>>> =
     Mutex::new(RefCell::new(None));
-/// Frames on their way to the host. When the host does not read (port closed), new frames are dropped whole.
-static TX_FRAMES: Channel<CriticalSectionRawMutex, Frame, 8> = Channel::new();
-static WATCHDOG: Mutex<
-    CriticalSectionRawMutex,
-    RefCell<Option<IndependentWatchdog<'static, IWDG>>>,
-> = Mutex::new(RefCell::new(None));
+static CONTROL_EXECUTOR: InterruptExecutor = InterruptExecutor::new();
 
 fn with_controller<R>(f: impl FnOnce(&mut Controller) -> R) -> Option<R> {
     CONTROLLER.lock(|c| c.borrow_mut().as_mut().map(f))
 }
 
-fn queue_frame(bytes: &[u8]) {
+fn queue_telemetry(bytes: &[u8]) {
     if let Ok(frame) = Frame::from_slice(bytes) {
-        if TX_FRAMES.try_send(frame).is_err() {
-            defmt::trace!("tx queue full, frame dropped");
+        if TELEMETRY.try_send(frame).is_err() {
+            defmt::trace!("telemetry queue full, frame dropped");
         }
     }
 }
@@ -70,26 +78,40 @@ fn pet_watchdog() {
     });
 }
 
+#[embassy_stm32::interrupt]
+unsafe fn USART6() {
+    // SAFETY: the executor was started on this interrupt, and this is its only handler.
+    unsafe { CONTROL_EXECUTOR.on_interrupt() }
+}
+
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     dfu::jump_if_requested();
     let p = embassy_stm32::init(board::clock_config());
+    board::freeze_watchdog_when_halted();
+    let mut core = cortex_m::Peripherals::take().expect("core peripherals, taken once");
+    clock::start(&mut core.DCB, &mut core.DWT);
     let mut board = Board::new(p);
-    let uid = embassy_stm32::uid::uid();
     let identity = Identity::new(
         env!("CARGO_PKG_VERSION"),
         env!("NUSENSE_GIT_HASH"),
         "nusense-f411",
-        uid,
+        embassy_stm32::uid::uid(),
     );
-    let config = config_store::load();
+    let mut store = ConfigStore::new(board.flash, [0, SECTOR_LEN]).expect("sectors 1 and 2 fit the flash");
+    let saved = store.load().ok().flatten();
+    let config = saved.map(|record| record.config).unwrap_or_default();
     defmt::info!(
-        "NUSense board {} up, config {:?} mA enabled {:?}",
+        "NUSense board {} up, config {:?} mA enabled {:?}, VDDA {} mV",
         embassy_stm32::uid::uid_hex(),
         config.setpoints_ma,
-        config.enabled
+        config.enabled,
+        board.sensors.vdda_mv()
     );
-    CONTROLLER.lock(|c| c.replace(Some(Controller::new(identity, config))));
+    let mut controller = Controller::new(identity, config).with_saved_request_id(saved.map(|r| r.request_id));
+    // No host until DTR says so.
+    controller.set_host_present(false);
+    CONTROLLER.lock(|c| c.replace(Some(controller)));
     board.watchdog.unleash();
     WATCHDOG.lock(|w| w.replace(Some(board.watchdog)));
 
@@ -97,13 +119,16 @@ async fn main(spawner: Spawner) {
     usb_config.manufacturer = Some(USB_MANUFACTURER);
     usb_config.product = Some(USB_PRODUCT);
     usb_config.serial_number = Some(embassy_stm32::uid::uid_hex());
-    usb_config.max_power = 500;
+    // The LEDs light only once configured and stay within the budget, so the board draws at most this.
+    usb_config.max_power = USB_CONFIGURED_MA;
+    usb_config.self_powered = false;
     usb_config.max_packet_size_0 = 64;
 
     static CONFIG_DESCRIPTOR: StaticCell<[u8; 256]> = StaticCell::new();
     static BOS_DESCRIPTOR: StaticCell<[u8; 256]> = StaticCell::new();
     static CONTROL_BUF: StaticCell<[u8; 64]> = StaticCell::new();
     static CDC_STATE: StaticCell<State> = StaticCell::new();
+    static POWER_HANDLER: StaticCell<PowerHandler> = StaticCell::new();
     let mut builder = embassy_usb::Builder::new(
         board.usb,
         usb_config,
@@ -112,19 +137,22 @@ async fn main(spawner: Spawner) {
         &mut [],
         CONTROL_BUF.init([0; 64]),
     );
+    builder.handler(POWER_HANDLER.init(PowerHandler { configured: false }));
     let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), USB_PACKET);
     let usb = builder.build();
 
+    // The control loop above USB; the time driver (TIM2) stays above both, since it wakes the loop.
+    interrupt::OTG_FS.set_priority(Priority::P3);
+    interrupt::USART6.set_priority(Priority::P2);
+    let control = CONTROL_EXECUTOR.start(interrupt::USART6);
+    control.spawn(control_task(board.leds, board.sensors, board.status_led).expect("one control task"));
     spawner.spawn(usb_task(usb).expect("one usb task"));
-    spawner.spawn(
-        control_task(board.leds, board.sensors, board.status_led).expect("one control task"),
-    );
 
-    let (sender, receiver) = class.split();
-    let mut flash = board.flash;
-    join(
-        serve_host_to_board(receiver, &mut flash),
+    let (sender, receiver, control_lines) = class.split_with_control();
+    join3(
+        serve_host_to_board(receiver, &mut store),
         serve_board_to_host(sender),
+        follow_dtr(control_lines),
     )
     .await;
 }
@@ -134,7 +162,50 @@ async fn usb_task(mut usb: UsbDevice<'static, Driver<'static, USB_OTG_FS>>) -> !
     usb.run().await
 }
 
-/// The regulator: measure, step the controller, drive the gates, at 2 kHz. The only place that pets the
+/// What USB grants, passed on to the controller: the LEDs light only while configured and not suspended.
+struct PowerHandler {
+    configured: bool,
+}
+
+impl PowerHandler {
+    fn report(&self, power: PowerState) {
+        defmt::info!("USB power state {}", defmt::Debug2Format(&power));
+        with_controller(|c| c.set_power_state(power));
+    }
+}
+
+impl Handler for PowerHandler {
+    fn enabled(&mut self, enabled: bool) {
+        if !enabled {
+            self.configured = false;
+            self.report(PowerState::Unconfigured);
+        }
+    }
+
+    fn reset(&mut self) {
+        self.configured = false;
+        self.report(PowerState::Unconfigured);
+    }
+
+    fn configured(&mut self, configured: bool) {
+        self.configured = configured;
+        self.report(if configured {
+            PowerState::Configured
+        } else {
+            PowerState::Unconfigured
+        });
+    }
+
+    fn suspended(&mut self, suspended: bool) {
+        self.report(match (suspended, self.configured) {
+            (true, _) => PowerState::Suspended,
+            (false, true) => PowerState::Configured,
+            (false, false) => PowerState::Unconfigured,
+        });
+    }
+}
+
+/// The regulator: measure, step the controller, drive the gates, at 2 kHz. The only place that feeds the
 /// watchdog, so a stalled loop resets the board (and a reset leaves the gates off).
 #[embassy_executor::task]
 async fn control_task(mut leds: LedDrive, mut sensors: Sensors, mut status_led: Output<'static>) {
@@ -142,11 +213,11 @@ async fn control_task(mut leds: LedDrive, mut sensors: Sensors, mut status_led: 
     let mut step: u32 = 0;
     loop {
         ticker.next().await;
+        let now_us = clock::now_us();
         let measurements = sensors.measure();
-        let now_us = Instant::now().as_micros();
         let duty = with_controller(|c| {
             let duty = c.control_step(now_us, &measurements);
-            c.poll_telemetry(now_us, &mut queue_frame);
+            c.poll_telemetry(now_us, &mut queue_telemetry);
             duty
         });
         match duty {
@@ -154,10 +225,22 @@ async fn control_task(mut leds: LedDrive, mut sensors: Sensors, mut status_led: 
             None => leds.all_off(),
         }
         pet_watchdog();
-        // Heartbeat: 1 Hz blink while the loop runs.
         step = step.wrapping_add(1);
-        if step % 1_000 == 0 {
+        if step.is_multiple_of(HEARTBEAT_STEPS) {
             status_led.toggle();
+        }
+    }
+}
+
+/// Opening or closing the port (DTR) starts or ends a host session.
+async fn follow_dtr(control: ControlChanged<'static>) {
+    loop {
+        control.control_changed().await;
+        let present = control.dtr();
+        defmt::info!("DTR {}", present);
+        with_controller(|c| c.set_host_present(present));
+        if !present {
+            TELEMETRY.clear();
         }
     }
 }
@@ -165,36 +248,49 @@ async fn control_task(mut leds: LedDrive, mut sensors: Sensors, mut status_led: 
 /// `loop { wait_connection; serve }`: an unplugged or closed port is a normal event.
 async fn serve_host_to_board(
     mut receiver: Receiver<'static, Driver<'static, USB_OTG_FS>>,
-    flash: &mut embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
+    store: &mut ConfigStore<ConfigFlash>,
 ) {
     loop {
         receiver.wait_connection().await;
-        defmt::info!("host connected");
-        with_controller(|c| c.on_link_reset());
-        TX_FRAMES.clear();
+        defmt::info!("USB link up");
         let _: Result<(), EndpointError> = async {
             let mut packet = [0u8; USB_PACKET as usize];
             loop {
                 let n = receiver.read_packet(&mut packet).await?;
-                let now_us = Instant::now().as_micros();
+                let now_us = clock::now_us();
+                let mut replies: heapless::Vec<Frame, MAX_REPLIES_PER_PACKET> = heapless::Vec::new();
                 let action = with_controller(|c| {
-                    c.on_rx(&packet[..n], now_us, &mut queue_frame);
+                    c.on_rx(&packet[..n], now_us, &mut |bytes: &[u8]| {
+                        if let Ok(frame) = Frame::from_slice(bytes) {
+                            let _ = replies.push(frame);
+                        }
+                    });
                     c.take_action()
                 })
                 .flatten();
+                for reply in replies {
+                    REPLIES.send(reply).await;
+                }
                 match action {
-                    Some(Action::SaveConfig(blob)) => {
-                        let saved = config_store::save(flash, &blob, pet_watchdog);
-                        defmt::info!("configuration saved: {}", saved);
-                        with_controller(|c| c.complete_save_config(saved, &mut queue_frame));
+                    Some(Action::SaveConfig { config, request_id }) => {
+                        let saved = save_config(store, &config, request_id);
+                        let mut reply = None;
+                        with_controller(|c| {
+                            c.complete_save_config(saved, &mut |bytes: &[u8]| reply = Frame::from_slice(bytes).ok())
+                        });
+                        if let Some(reply) = reply {
+                            REPLIES.send(reply).await;
+                        }
                     }
                     Some(Action::Reset) => {
                         // Let the Ack leave first.
                         Timer::after_millis(50).await;
+                        board::force_gates_low();
                         cortex_m::peripheral::SCB::sys_reset();
                     }
                     Some(Action::EnterBootloader) => {
                         Timer::after_millis(50).await;
+                        board::force_gates_low();
                         dfu::reboot_into_bootloader();
                     }
                     None => {}
@@ -202,7 +298,34 @@ async fn serve_host_to_board(
             }
         }
         .await;
-        defmt::info!("host disconnected");
+        defmt::info!("USB link down");
+    }
+}
+
+/// Writes the record; around a sector erase (the CPU stalls on every flash fetch for up to 500 ms, so the control
+/// loop cannot run) the gates are held low and the watchdog is fed right before and after.
+fn save_config(store: &mut ConfigStore<ConfigFlash>, config: &nusense_firmware_core::BoardConfig, id: u32) -> bool {
+    let mut erased = false;
+    let result = store.save(config, id, || {
+        erased = true;
+        with_controller(|c| c.hold_outputs_off(true));
+        board::force_gates_low();
+        pet_watchdog();
+    });
+    if erased {
+        pet_watchdog();
+        board::release_gates();
+        with_controller(|c| c.hold_outputs_off(false));
+    }
+    match result {
+        Ok(record) => {
+            defmt::info!("configuration saved as record {}", record.sequence);
+            true
+        }
+        Err(error) => {
+            defmt::warn!("configuration not saved: {}", defmt::Debug2Format(&error));
+            false
+        }
     }
 }
 
@@ -211,7 +334,11 @@ async fn serve_board_to_host(mut sender: Sender<'static, Driver<'static, USB_OTG
         sender.wait_connection().await;
         let _: Result<(), EndpointError> = async {
             loop {
-                let frame = TX_FRAMES.receive().await;
+                // Replies first: `select` polls its first future first.
+                let frame = match select(REPLIES.receive(), TELEMETRY.receive()).await {
+                    Either::First(reply) => reply,
+                    Either::Second(telemetry) => telemetry,
+                };
                 for packet in frame.chunks(USB_PACKET as usize) {
                     sender.write_packet(packet).await?;
                 }
