@@ -10,6 +10,10 @@ fn main() {
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed={}", memory_x.display());
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
+    // The on-target tests: defmt's symbols and embedded-test's table of tests.
+    println!("cargo:rustc-link-arg-tests=-Tdefmt.x");
+    println!("cargo:rustc-link-arg-tests=-Tembedded-test.x");
+    println!("cargo::rustc-check-cfg=cfg(rust_analyzer)");
 
     let hash = Command::new("git")
         .args(["rev-parse", "--short=12", "HEAD"])

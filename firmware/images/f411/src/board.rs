@@ -188,7 +188,7 @@ pub struct LedDrive {
 }
 
 impl LedDrive {
-    fn new(
+    pub fn new(
         tim: Peri<'static, TIM4>,
         top: Peri<'static, embassy_stm32::peripherals::PB6>,
         right: Peri<'static, embassy_stm32::peripherals::PB7>,

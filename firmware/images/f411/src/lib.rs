@@ -6,4 +6,3 @@ pub mod board;
 pub mod clock;
 pub mod dfu;
 pub mod flash;
-pub mod safety;

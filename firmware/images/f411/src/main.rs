@@ -8,6 +8,8 @@
 #![no_std]
 #![no_main]
 
+mod fault_handlers;
+
 use core::cell::RefCell;
 
 use defmt_rtt as _;

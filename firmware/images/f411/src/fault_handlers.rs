@@ -1,4 +1,5 @@
-//! What happens when the firmware goes wrong: every path drives the LED gates low first, then reports, then
+//! What happens when the firmware goes wrong (in the binary only: the on-target tests bring embedded-test's own
+//! panic handler): every path drives the LED gates low first, then reports, then
 //! resets (or, with a debugger attached, stops where it is so the probe can show why).
 //!
 //! - a panic ([`panic`]), including defmt's `unwrap!`/`panic!` (they end in `core::panic!`);
@@ -9,7 +10,7 @@
 
 use cortex_m::peripheral::{DCB, SCB};
 
-use crate::board::force_gates_low;
+use nusense_f411::board::force_gates_low;
 
 /// True when a debugger has enabled halting debug (DHCSR.C_DEBUGEN).
 fn debugger_attached() -> bool {
