@@ -55,10 +55,7 @@ fn now_ns() -> u64 {
         fn clock_gettime(clock: i32, tp: *mut Timespec) -> i32;
     }
     const CLOCK_THREAD_CPUTIME_ID: i32 = 3;
-    let mut t = Timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
+    let mut t = Timespec { tv_sec: 0, tv_nsec: 0 };
     // SAFETY: `t` is a valid, writable timespec (64-bit Linux layout) and the clock id is a constant.
     let rc = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut t) };
     assert_eq!(rc, 0, "clock_gettime(CLOCK_THREAD_CPUTIME_ID) failed");
@@ -67,10 +64,7 @@ fn now_ns() -> u64 {
 
 #[cfg(not(all(target_os = "linux", target_pointer_width = "64")))]
 fn now_ns() -> u64 {
-    std::time::UNIX_EPOCH
-        .elapsed()
-        .unwrap_or_default()
-        .as_nanos() as u64
+    std::time::UNIX_EPOCH.elapsed().unwrap_or_default().as_nanos() as u64
 }
 
 impl Measurement for ThreadCpuTime {

@@ -122,9 +122,7 @@ pub fn encode<'b, T: Serialize>(msg: &T, buf: &'b mut [u8]) -> Result<&'b [u8], 
 
     let encoded_len = cobs::try_encode(body, buf).map_err(|_| EncodeError::BufferTooSmall)?;
     let frame_len = encoded_len + 1;
-    let delimiter = buf
-        .get_mut(encoded_len)
-        .ok_or(EncodeError::BufferTooSmall)?;
+    let delimiter = buf.get_mut(encoded_len).ok_or(EncodeError::BufferTooSmall)?;
     *delimiter = DELIMITER;
     Ok(&buf[..frame_len])
 }
@@ -193,11 +191,7 @@ impl<const N: usize> FrameDecoder<N> {
     }
 
     /// Feed bytes; calls `on_message` for each complete frame: Ok(T) or the WireError it was dropped for.
-    pub fn feed<T: DeserializeOwned>(
-        &mut self,
-        bytes: &[u8],
-        mut on_message: impl FnMut(Result<T, WireError>),
-    ) {
+    pub fn feed<T: DeserializeOwned>(&mut self, bytes: &[u8], mut on_message: impl FnMut(Result<T, WireError>)) {
         let mut rest = bytes;
         while !rest.is_empty() {
             match rest.iter().position(|&b| b == DELIMITER) {
@@ -358,10 +352,7 @@ mod tests {
         );
         for message in &board_messages {
             let len = postcard::to_slice(message, &mut payload).unwrap().len();
-            assert!(
-                len <= MAX_PAYLOAD_LEN,
-                "{message:?}: {len} > {MAX_PAYLOAD_LEN}"
-            );
+            assert!(len <= MAX_PAYLOAD_LEN, "{message:?}: {len} > {MAX_PAYLOAD_LEN}");
             let framed = encode(message, &mut frame).unwrap().len();
             assert!(framed <= MAX_FRAME_LEN);
         }
@@ -406,10 +397,7 @@ mod tests {
         body[..n].copy_from_slice(frame);
         body[n] = 0x42; // bytes after the delimiter must not be ignored
         let mut whole = body;
-        assert_eq!(
-            decode_frame::<Request>(&mut whole[..n + 1]),
-            Err(WireError::BadCobs)
-        );
+        assert_eq!(decode_frame::<Request>(&mut whole[..n + 1]), Err(WireError::BadCobs));
         assert_eq!(decode_frame::<Request>(&mut body[..n - 1]), Ok(request));
     }
 

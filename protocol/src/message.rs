@@ -19,10 +19,8 @@ pub const PROTOCOL_VERSION: u16 = 2;
 /// time by postcard-schema. The board sends its own in `Reply::Hello`; the host refuses a board whose fingerprint
 /// differs from its own even when the version numbers agree (someone changed a type without bumping the version).
 pub const SCHEMA_FINGERPRINT: u64 = {
-    let host_to_board =
-        postcard_schema::key::hash::fnv1a64::hash_ty_path::<Request>("nusense/host-to-board");
-    let board_to_host =
-        postcard_schema::key::hash::fnv1a64::hash_ty_path::<BoardMessage>("nusense/board-to-host");
+    let host_to_board = postcard_schema::key::hash::fnv1a64::hash_ty_path::<Request>("nusense/host-to-board");
+    let board_to_host = postcard_schema::key::hash::fnv1a64::hash_ty_path::<BoardMessage>("nusense/board-to-host");
     u64::from_le_bytes(host_to_board) ^ u64::from_le_bytes(board_to_host).rotate_left(1)
 };
 

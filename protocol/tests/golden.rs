@@ -56,10 +56,7 @@ fn request_samples() -> Vec<Request> {
     bodies
         .into_iter()
         .zip(1u16..)
-        .map(|(body, seq)| Request {
-            seq: seq * 257,
-            body,
-        })
+        .map(|(body, seq)| Request { seq: seq * 257, body })
         .collect()
 }
 
@@ -106,9 +103,7 @@ fn board_samples() -> Vec<BoardMessage> {
         firmware_version: text("0.1.0"),
         git_hash: text("3ce39fa0a1b2"),
         board_id: text("nusense-f411"),
-        mcu_uid: [
-            0x30, 0x00, 0x45, 0x00, 0x12, 0x51, 0x33, 0x33, 0x37, 0x38, 0x39, 0x41,
-        ],
+        mcu_uid: [0x30, 0x00, 0x45, 0x00, 0x12, 0x51, 0x33, 0x33, 0x37, 0x38, 0x39, 0x41],
         channel_count: CHANNEL_COUNT as u8,
         max_current_ma: 500,
         max_total_current_ma: 440,
@@ -138,9 +133,7 @@ fn board_samples() -> Vec<BoardMessage> {
         Err(DeviceError::UnknownRequest),
         Err(DeviceError::BadArgument(Argument::CurrentMa)),
         Err(DeviceError::Busy),
-        Err(DeviceError::FaultActive {
-            channel: Side::Right,
-        }),
+        Err(DeviceError::FaultActive { channel: Side::Right }),
         Err(DeviceError::VersionMismatch { device: 1, host: 2 }),
         Err(DeviceError::Storage),
         Err(DeviceError::NotHandshaken),
@@ -148,12 +141,7 @@ fn board_samples() -> Vec<BoardMessage> {
     let mut messages: Vec<BoardMessage> = results
         .into_iter()
         .zip(1u16..)
-        .map(|(result, seq)| {
-            BoardMessage::Response(Response {
-                seq: seq * 257,
-                result,
-            })
-        })
+        .map(|(result, seq)| BoardMessage::Response(Response { seq: seq * 257, result }))
         .collect();
     messages.push(BoardMessage::Telemetry(Telemetry {
         uptime_us: 98_765_432,
@@ -183,19 +171,11 @@ fn current_vectors() -> BTreeMap<&'static str, String> {
     let mut vectors = BTreeMap::new();
     for request in request_samples() {
         let previous = vectors.insert(request_variant(&request), to_hex(&frame(&request)));
-        assert!(
-            previous.is_none(),
-            "two samples for {}",
-            request_variant(&request)
-        );
+        assert!(previous.is_none(), "two samples for {}", request_variant(&request));
     }
     for message in board_samples() {
         let previous = vectors.insert(board_variant(&message), to_hex(&frame(&message)));
-        assert!(
-            previous.is_none(),
-            "two samples for {}",
-            board_variant(&message)
-        );
+        assert!(previous.is_none(), "two samples for {}", board_variant(&message));
     }
     vectors.insert(FINGERPRINT_ENTRY, format!("{SCHEMA_FINGERPRINT:016x}"));
     vectors
@@ -234,11 +214,7 @@ fn wire_format_matches_golden_vectors() {
         }
         std::fs::create_dir_all(golden_path().parent().unwrap()).unwrap();
         std::fs::write(golden_path(), text).unwrap();
-        eprintln!(
-            "blessed {} vectors into {}",
-            current.len(),
-            golden_path().display()
-        );
+        eprintln!("blessed {} vectors into {}", current.len(), golden_path().display());
         return;
     }
     let golden = read_golden();
@@ -270,10 +246,7 @@ fn golden_vectors_decode_to_the_samples() {
     for message in board_samples() {
         let mut bytes = from_hex(&golden[board_variant(&message)]);
         assert_eq!(bytes.pop(), Some(framing::DELIMITER));
-        assert_eq!(
-            framing::decode_frame::<BoardMessage>(&mut bytes),
-            Ok(message)
-        );
+        assert_eq!(framing::decode_frame::<BoardMessage>(&mut bytes), Ok(message));
     }
 }
 
@@ -286,9 +259,7 @@ fn the_handshake_of_an_older_version_still_decodes() {
         framing::decode_frame::<Request>(&mut v1_hello),
         Ok(Request {
             seq: 257,
-            body: RequestBody::Hello {
-                protocol_version: 1
-            }
+            body: RequestBody::Hello { protocol_version: 1 }
         })
     );
     let mut v1_mismatch = from_hex("010b8a1401040102564687ff");

@@ -119,29 +119,22 @@ fn every_device_error_has_a_sentence() {
         DeviceError::UnknownRequest,
         DeviceError::BadArgument(Argument::CurrentMa),
         DeviceError::Busy,
-        DeviceError::FaultActive {
-            channel: Side::Bottom,
-        },
+        DeviceError::FaultActive { channel: Side::Bottom },
         DeviceError::VersionMismatch { device: 2, host: 1 },
         DeviceError::Storage,
         DeviceError::NotHandshaken,
     ];
     for error in errors {
         let text = error.to_string();
-        assert!(
-            text.len() > 20 && !text.contains("Debug"),
-            "{error:?}: {text}"
-        );
+        assert!(text.len() > 20 && !text.contains("Debug"), "{error:?}: {text}");
     }
     assert_eq!(
         DeviceError::VersionMismatch { device: 2, host: 1 }.to_string(),
         "board speaks protocol v2 but this host speaks v1: update the host so that both speak the same version"
     );
-    assert!(DeviceError::FaultActive {
-        channel: Side::Bottom
-    }
-    .to_string()
-    .contains("bottom"));
+    assert!(DeviceError::FaultActive { channel: Side::Bottom }
+        .to_string()
+        .contains("bottom"));
     assert!(DeviceError::BadArgument(Argument::RampMs)
         .to_string()
         .contains("ramp time"));

@@ -35,16 +35,8 @@ fn error_total(c: &LinkCounters) -> u32 {
 
 /// The counters agree one-to-one with what the callback reported.
 fn assert_counters_match<T>(counters: LinkCounters, results: &Decoded<T>) {
-    let count = |kind: WireError| {
-        results
-            .iter()
-            .filter(|r| matches!(r, Err(e) if *e == kind))
-            .count() as u32
-    };
-    assert_eq!(
-        counters.frames_ok,
-        results.iter().filter(|r| r.is_ok()).count() as u32
-    );
+    let count = |kind: WireError| results.iter().filter(|r| matches!(r, Err(e) if *e == kind)).count() as u32;
+    assert_eq!(counters.frames_ok, results.iter().filter(|r| r.is_ok()).count() as u32);
     assert_eq!(counters.bad_cobs, count(WireError::BadCobs));
     assert_eq!(counters.bad_crc, count(WireError::BadCrc));
     assert_eq!(counters.oversize, count(WireError::Oversize));
@@ -241,10 +233,7 @@ fn oversize_garbage_without_delimiter_is_dropped_across_many_chunks() {
     for _ in 0..100 {
         decoder.feed::<Request>(&[0xAA; 7], |m| results.push(m));
     }
-    assert!(
-        results.is_empty(),
-        "nothing is reported before the delimiter"
-    );
+    assert!(results.is_empty(), "nothing is reported before the delimiter");
     decoder.feed::<Request>(&[0], |m| results.push(m));
     decoder.feed::<Request>(&frame(&ping(3)), |m| results.push(m));
     assert_eq!(results, vec![Err(WireError::Oversize), Ok(ping(3))]);
@@ -353,9 +342,7 @@ fn largest_messages_pass_the_default_decoder() {
     ];
     let stream: Vec<u8> = messages.iter().flat_map(frame).collect();
     let longest = messages.iter().map(|m| frame(m).len()).max().unwrap();
-    println!(
-        "longest frame of the largest messages: {longest} bytes (MAX_FRAME_LEN = {MAX_FRAME_LEN})"
-    );
+    println!("longest frame of the largest messages: {longest} bytes (MAX_FRAME_LEN = {MAX_FRAME_LEN})");
     let mut decoder: FrameDecoder = FrameDecoder::new();
     let results: Decoded<BoardMessage> = feed_chunked(&mut decoder, &stream, &[1]);
     assert_eq!(results, messages.into_iter().map(Ok).collect::<Vec<_>>());

@@ -66,8 +66,7 @@ impl TemperatureCalibration {
     /// The calibration words when they look like a real sensor's (the datasheet's typical sensor gives about 960
     /// and 1210 counts; each may be off by the typical sensor's spread), `None` for blank or foreign values.
     pub fn checked(ts_cal1: u16, ts_cal2: u16) -> Option<Self> {
-        let plausible =
-            (700..=1_300).contains(&ts_cal1) && ts_cal2 > ts_cal1 + 100 && ts_cal2 < ts_cal1 + 500;
+        let plausible = (700..=1_300).contains(&ts_cal1) && ts_cal2 > ts_cal1 + 100 && ts_cal2 < ts_cal1 + 500;
         plausible.then_some(Self { ts_cal1, ts_cal2 })
     }
 
@@ -101,11 +100,7 @@ mod tests {
         assert!((low - 3_000.0).abs() < 1.0, "{low}");
         assert_eq!(vdda_mv(0, 1502), None);
         assert_eq!(vdda_mv(1502, 0xFFFF), None);
-        assert_eq!(
-            vdda_mv(500, 1502),
-            None,
-            "9.9 V is not a rail this MCU runs on"
-        );
+        assert_eq!(vdda_mv(500, 1502), None, "9.9 V is not a rail this MCU runs on");
         // The same pin voltage reads fewer counts at a higher VDDA, and converts back to the same current.
         let ma_at_3v0 = sense_counts_to_ma(1365, 3_000.0);
         let ma_at_3v3 = sense_counts_to_ma(1241, 3_300.0);

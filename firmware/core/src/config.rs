@@ -6,9 +6,7 @@
 
 use nusense_protocol::CHANNEL_COUNT;
 
-use crate::limits::{
-    DEFAULT_RAMP_MS, MAX_CURRENT_MA, MAX_RAMP_MS, MAX_TOTAL_CURRENT_MA, NOMINAL_CURRENT_MA,
-};
+use crate::limits::{DEFAULT_RAMP_MS, MAX_CURRENT_MA, MAX_RAMP_MS, MAX_TOTAL_CURRENT_MA, NOMINAL_CURRENT_MA};
 
 /// LED setpoints, soft-start and power budget, as restored at boot.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -66,11 +64,7 @@ impl core::fmt::Display for RecordError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Self::WrongLength { found } => {
-                write!(
-                    f,
-                    "config record has {found} bytes, expected {}",
-                    ConfigRecord::LEN
-                )
+                write!(f, "config record has {found} bytes, expected {}", ConfigRecord::LEN)
             }
             Self::Erased => f.write_str("config slot is erased"),
             Self::BadMagic => f.write_str("config record does not start with the NUSense magic"),
@@ -147,8 +141,7 @@ impl ConfigRecord {
             return Err(RecordError::BadCrc);
         }
         let u16_at = |i: usize| u16::from_le_bytes([bytes[i], bytes[i + 1]]);
-        let u32_at =
-            |i: usize| u32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+        let u32_at = |i: usize| u32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
         let config = BoardConfig {
             setpoints_ma: core::array::from_fn(|i| u16_at(8 + 2 * i)),
             enabled: core::array::from_fn(|i| bytes[5] & (1 << i) != 0),
@@ -190,14 +183,8 @@ mod tests {
         let mut bytes = sample().to_bytes();
         bytes[9] ^= 0x10;
         assert_eq!(ConfigRecord::from_bytes(&bytes), Err(RecordError::BadCrc));
-        assert_eq!(
-            ConfigRecord::from_bytes(&[0xFF; 32]),
-            Err(RecordError::Erased)
-        );
-        assert_eq!(
-            ConfigRecord::from_bytes(&[0; 32]),
-            Err(RecordError::BadMagic)
-        );
+        assert_eq!(ConfigRecord::from_bytes(&[0xFF; 32]), Err(RecordError::Erased));
+        assert_eq!(ConfigRecord::from_bytes(&[0; 32]), Err(RecordError::BadMagic));
         assert_eq!(
             ConfigRecord::from_bytes(&[0; 3]),
             Err(RecordError::WrongLength { found: 3 })

@@ -15,9 +15,9 @@
 
 use nusense_protocol::framing::{encode, FrameDecoder, MAX_FRAME_LEN};
 use nusense_protocol::{
-    Argument, BoardMessage, Channel, ChannelState, DeviceError, DeviceInfo, LinkCounters,
-    LoopTiming, PowerState, Reply, Request, RequestBody, Response, Seq, Side, Status, Telemetry,
-    CHANNEL_COUNT, PROTOCOL_VERSION, SCHEMA_FINGERPRINT,
+    Argument, BoardMessage, Channel, ChannelState, DeviceError, DeviceInfo, LinkCounters, LoopTiming, PowerState,
+    Reply, Request, RequestBody, Response, Seq, Side, Status, Telemetry, CHANNEL_COUNT, PROTOCOL_VERSION,
+    SCHEMA_FINGERPRINT,
 };
 
 use crate::config::BoardConfig;
@@ -40,10 +40,7 @@ pub struct Measurements {
 pub enum Action {
     /// Store this configuration as written by `request_id` ([`crate::store::ConfigStore::save`]), then report
     /// the outcome with [`Controller::complete_save_config`]: the host's reply waits for it.
-    SaveConfig {
-        config: BoardConfig,
-        request_id: u32,
-    },
+    SaveConfig { config: BoardConfig, request_id: u32 },
     /// The Ack has been written to `tx`: reset once it has left the link.
     Reset,
     /// The Ack has been written to `tx`: start the MCU's built-in DFU bootloader once it has left the link.
@@ -228,8 +225,7 @@ impl Controller {
     /// Sends a Telemetry frame through `tx` when one is due (and a host listens).
     pub fn poll_telemetry(&mut self, now_us: u64, tx: &mut impl FnMut(&[u8])) {
         let board = &mut self.board;
-        if !board.host_present || board.telemetry_period_ms == 0 || now_us < board.next_telemetry_us
-        {
+        if !board.host_present || board.telemetry_period_ms == 0 || now_us < board.next_telemetry_us {
             return;
         }
         let period_us = u64::from(board.telemetry_period_ms) * 1_000;
@@ -277,8 +273,7 @@ impl Controller {
 
     /// What `GetStatus` would answer now.
     pub fn status(&self, now_us: u64) -> Status {
-        self.board
-            .status(now_us, self.board.counters(self.decoder.counters()))
+        self.board.status(now_us, self.board.counters(self.decoder.counters()))
     }
 
     /// The live configuration (what `SaveConfig` would store).
@@ -305,12 +300,7 @@ impl BoardState {
     }
 
     /// `None` when the answer is deferred (SaveConfig waits for the flash).
-    fn handle(
-        &mut self,
-        request: Request,
-        now_us: u64,
-        counters: LinkCounters,
-    ) -> Option<Response> {
+    fn handle(&mut self, request: Request, now_us: u64, counters: LinkCounters) -> Option<Response> {
         let seq = request.seq;
         let allowed_before_handshake = matches!(
             request.body,
@@ -409,12 +399,7 @@ impl BoardState {
         }
     }
 
-    fn set_led(
-        &mut self,
-        channel: Channel,
-        current_ma: u16,
-        enabled: bool,
-    ) -> Result<Reply, DeviceError> {
+    fn set_led(&mut self, channel: Channel, current_ma: u16, enabled: bool) -> Result<Reply, DeviceError> {
         let sides: &[Side] = match &channel {
             Channel::One(side) => core::slice::from_ref(side),
             Channel::All => &Side::ALL,
@@ -464,15 +449,11 @@ impl BoardState {
         self.last = *m;
 
         let powered = self.power == PowerState::Configured && !self.outputs_held_off;
-        let driving = core::array::from_fn(|ch| {
-            powered && self.config.enabled[ch] && self.config.setpoints_ma[ch] > 0
-        });
+        let driving = core::array::from_fn(|ch| powered && self.config.enabled[ch] && self.config.setpoints_ma[ch] > 0);
         self.monitor.check(now_us, m, driving, self.duty);
         let targets = self.targets_ma(driving, FaultMonitor::derate_factor(m.temperature_c));
         self.duty = core::array::from_fn(|ch| match targets[ch] {
-            Some(target_ma) => {
-                self.regulators[ch].step(target_ma, self.config.ramp_ms, m.current_ma[ch], dt_us)
-            }
+            Some(target_ma) => self.regulators[ch].step(target_ma, self.config.ramp_ms, m.current_ma[ch], dt_us),
             None => {
                 self.regulators[ch].reset();
                 0.0
@@ -483,11 +464,7 @@ impl BoardState {
 
     /// The current each lit channel regulates to: its setpoint, derated when the board is hot, and scaled down
     /// with the others so that together they stay within the current budget. `None`: the channel is off.
-    fn targets_ma(
-        &self,
-        driving: [bool; CHANNEL_COUNT],
-        derate: f32,
-    ) -> [Option<f32>; CHANNEL_COUNT] {
+    fn targets_ma(&self, driving: [bool; CHANNEL_COUNT], derate: f32) -> [Option<f32>; CHANNEL_COUNT] {
         let mut targets: [Option<f32>; CHANNEL_COUNT] = core::array::from_fn(|ch| {
             (driving[ch] && !self.monitor.is_tripped(ch))
                 .then(|| f32::from(self.config.setpoints_ma[ch].min(MAX_CURRENT_MA)) * derate)

@@ -48,13 +48,7 @@ impl FaultMonitor {
 
     /// Checks one set of measurements. `driving[ch]` says whether the channel is meant to carry current,
     /// `duty[ch]` what the regulator applied during the interval that `m` measured.
-    pub fn check(
-        &mut self,
-        now_us: u64,
-        m: &Measurements,
-        driving: [bool; CHANNEL_COUNT],
-        duty: [f32; CHANNEL_COUNT],
-    ) {
+    pub fn check(&mut self, now_us: u64, m: &Measurements, driving: [bool; CHANNEL_COUNT], duty: [f32; CHANNEL_COUNT]) {
         let supply_low = m.supply_mv < UNDER_VOLTAGE_MV || m.supply_mv.is_nan();
         let under_voltage = confirmed(
             &mut self.under_voltage_since_us,
@@ -63,12 +57,7 @@ impl FaultMonitor {
             UNDER_VOLTAGE_CONFIRM_US,
         );
         let too_hot = m.temperature_c >= SHUTDOWN_C || m.temperature_c.is_nan();
-        let shutdown = confirmed(
-            &mut self.too_hot_since_us,
-            too_hot,
-            now_us,
-            SHUTDOWN_CONFIRM_US,
-        );
+        let shutdown = confirmed(&mut self.too_hot_since_us, too_hot, now_us, SHUTDOWN_CONFIRM_US);
         let derating = m.temperature_c >= DERATE_START_C || m.temperature_c.is_nan();
 
         for ch in 0..CHANNEL_COUNT {
@@ -80,14 +69,8 @@ impl FaultMonitor {
                 self.open_since_us[ch] = None;
                 continue;
             }
-            let looks_open =
-                !supply_low && duty[ch] >= OPEN_STRING_DUTY && current < OPEN_STRING_CURRENT_MA;
-            if confirmed(
-                &mut self.open_since_us[ch],
-                looks_open,
-                now_us,
-                OPEN_STRING_CONFIRM_US,
-            ) {
+            let looks_open = !supply_low && duty[ch] >= OPEN_STRING_DUTY && current < OPEN_STRING_CURRENT_MA;
+            if confirmed(&mut self.open_since_us[ch], looks_open, now_us, OPEN_STRING_CONFIRM_US) {
                 self.trip(ch, |f| f.open_string = true);
             }
             if under_voltage {

@@ -42,11 +42,7 @@ impl ChannelRegulator {
     /// The reference rises at `target / ramp` (the soft start: 0 to the setpoint in `ramp_ms`) and falls at once:
     /// a lower current is always safe.
     pub fn step(&mut self, target_ma: f32, ramp_ms: u16, measured_ma: f32, dt_us: u32) -> f32 {
-        let target_ma = if target_ma.is_finite() {
-            target_ma.max(0.0)
-        } else {
-            0.0
-        };
+        let target_ma = if target_ma.is_finite() { target_ma.max(0.0) } else { 0.0 };
         let dt_us = dt_us.min(MAX_STEP_US) as f32;
         if ramp_ms == 0 || self.reference_ma >= target_ma {
             self.reference_ma = target_ma;

@@ -10,9 +10,7 @@
 //! wins, which is always the old configuration or the new one. A slot is written only when it and every slot
 //! after it read erased, so the debris of an interrupted write or erase is never programmed over.
 
-use embedded_storage::nor_flash::{
-    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
-};
+use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash};
 
 use crate::config::{BoardConfig, ConfigRecord, ERASED};
 
@@ -222,10 +220,7 @@ impl<const ERASE_SIZE: usize> NorFlash for RamFlash<'_, ERASE_SIZE> {
     const ERASE_SIZE: usize = ERASE_SIZE;
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-        if !from.is_multiple_of(ERASE_SIZE as u32)
-            || !to.is_multiple_of(ERASE_SIZE as u32)
-            || to < from
-        {
+        if !from.is_multiple_of(ERASE_SIZE as u32) || !to.is_multiple_of(ERASE_SIZE as u32) || to < from {
             return Err(RamFlashError::NotAligned);
         }
         let range = self.range(from, (to - from) as usize)?;
@@ -234,9 +229,7 @@ impl<const ERASE_SIZE: usize> NorFlash for RamFlash<'_, ERASE_SIZE> {
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        if !(offset as usize).is_multiple_of(Self::WRITE_SIZE)
-            || !bytes.len().is_multiple_of(Self::WRITE_SIZE)
-        {
+        if !(offset as usize).is_multiple_of(Self::WRITE_SIZE) || !bytes.len().is_multiple_of(Self::WRITE_SIZE) {
             return Err(RamFlashError::NotAligned);
         }
         let range = self.range(offset, bytes.len())?;

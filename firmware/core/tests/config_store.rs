@@ -2,9 +2,7 @@
 //! word write and at any point of any erase, a fresh boot reads back the old configuration or the new one, never
 //! anything else, and the next save works.
 
-use embedded_storage::nor_flash::{
-    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
-};
+use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash};
 use nusense_firmware_core::{BoardConfig, ConfigRecord, ConfigStore, RamFlash};
 
 /// Two 16 KiB sectors, as on the STM32F411 (sectors 1 and 2).
@@ -146,8 +144,7 @@ fn load(bytes: &[u8]) -> Option<ConfigRecord> {
 
 /// Saves `count` configurations into `bytes` with no cut, returning the last.
 fn fill(bytes: &mut Vec<u8>, first: u16, count: u16) -> Option<ConfigRecord> {
-    let mut store =
-        ConfigStore::new(CuttableFlash::new(std::mem::take(bytes), None), SECTORS).unwrap();
+    let mut store = ConfigStore::new(CuttableFlash::new(std::mem::take(bytes), None), SECTORS).unwrap();
     let mut last = None;
     for n in first..first + count {
         last = Some(store.save(&config(n), u32::from(n), || {}).unwrap());
@@ -160,19 +157,16 @@ fn fill(bytes: &mut Vec<u8>, first: u16, count: u16) -> Option<ConfigRecord> {
 /// record, and a save after that boot lands. Returns the number of steps of an uncut save.
 fn cut_everywhere(start: &[u8], old: Option<ConfigRecord>, new: u16) -> usize {
     let steps_of_uncut = {
-        let mut store =
-            ConfigStore::new(CuttableFlash::new(start.to_vec(), None), SECTORS).unwrap();
+        let mut store = ConfigStore::new(CuttableFlash::new(start.to_vec(), None), SECTORS).unwrap();
         store.save(&config(new), u32::from(new), || {}).unwrap();
         store.into_flash().steps
     };
     for cut_at in 0..=steps_of_uncut {
-        let mut store =
-            ConfigStore::new(CuttableFlash::new(start.to_vec(), Some(cut_at)), SECTORS).unwrap();
+        let mut store = ConfigStore::new(CuttableFlash::new(start.to_vec(), Some(cut_at)), SECTORS).unwrap();
         let outcome = store.save(&config(new), u32::from(new), || {});
         let after_cut = store.into_flash().bytes;
         let found = load(&after_cut);
-        let is_new =
-            found.is_some_and(|r| r.config == config(new) && r.request_id == u32::from(new));
+        let is_new = found.is_some_and(|r| r.config == config(new) && r.request_id == u32::from(new));
         assert!(
             found == old || is_new,
             "cut at step {cut_at} of {steps_of_uncut}: found {found:?}, old {old:?}"
@@ -185,11 +179,7 @@ fn cut_everywhere(start: &[u8], old: Option<ConfigRecord>, new: u16) -> usize {
         // Whatever the cut left behind, the next boot can save again and that save wins.
         let mut again = after_cut;
         let saved = fill(&mut again, 900, 1).unwrap();
-        assert_eq!(
-            load(&again),
-            Some(saved),
-            "save after a cut at step {cut_at}"
-        );
+        assert_eq!(load(&again), Some(saved), "save after a cut at step {cut_at}");
         assert!(saved.sequence > old.map_or(0, |r| r.sequence));
     }
     steps_of_uncut
@@ -223,11 +213,7 @@ fn a_power_cut_while_switching_sectors_leaves_the_old_or_the_new_config() {
     let old = fill(&mut bytes, 1, 2 * slots);
     assert_eq!(old.unwrap().sequence, u32::from(2 * slots));
     let steps = cut_everywhere(&bytes, old, 5000);
-    assert_eq!(
-        steps,
-        ERASE_PIECES + 8,
-        "an erase of the stale sector, then the record"
-    );
+    assert_eq!(steps, ERASE_PIECES + 8, "an erase of the stale sector, then the record");
 }
 
 /// Noise where the store expects flash (the QEMU image's RAM at power-on, a sector some other firmware wrote):
@@ -244,8 +230,7 @@ fn garbage_in_both_sectors_reads_as_no_config_and_is_erased_before_use() {
 #[test]
 fn before_erase_runs_only_when_a_sector_is_erased() {
     let slots = ConfigStore::<CuttableFlash>::slots_per_sector();
-    let mut store =
-        ConfigStore::new(CuttableFlash::new(vec![0xFF; 2 * SECTOR], None), SECTORS).unwrap();
+    let mut store = ConfigStore::new(CuttableFlash::new(vec![0xFF; 2 * SECTOR], None), SECTORS).unwrap();
     let mut erases = 0;
     for n in 0..3 * slots {
         store.save(&config(n as u16), n, || erases += 1).unwrap();

@@ -4,14 +4,12 @@
 mod common;
 
 use common::Bench;
-use nusense_firmware_core::limits::{
-    MAX_CURRENT_MA, MAX_RAMP_MS, MAX_TOTAL_CURRENT_MA, MIN_TELEMETRY_PERIOD_MS,
-};
+use nusense_firmware_core::limits::{MAX_CURRENT_MA, MAX_RAMP_MS, MAX_TOTAL_CURRENT_MA, MIN_TELEMETRY_PERIOD_MS};
 use nusense_firmware_core::{Action, BoardConfig, ConfigRecord, Controller};
 use nusense_protocol::framing::{encode, FrameDecoder, MAX_FRAME_LEN};
 use nusense_protocol::{
-    Argument, BoardMessage, Channel, DeviceError, Reply, Request, RequestBody, Response, Side,
-    PROTOCOL_VERSION, SCHEMA_FINGERPRINT,
+    Argument, BoardMessage, Channel, DeviceError, Reply, Request, RequestBody, Response, Side, PROTOCOL_VERSION,
+    SCHEMA_FINGERPRINT,
 };
 use proptest::prelude::*;
 
@@ -27,10 +25,7 @@ fn handshake_is_required_and_checks_the_version() {
         current_ma: 100,
         enabled: true,
     };
-    assert_eq!(
-        bench.request(set.clone()).result,
-        Err(DeviceError::NotHandshaken)
-    );
+    assert_eq!(bench.request(set.clone()).result, Err(DeviceError::NotHandshaken));
     assert_eq!(
         bench.request(RequestBody::Ping { nonce: 9 }).result,
         Ok(Reply::Pong { nonce: 9 })
@@ -55,10 +50,7 @@ fn handshake_is_required_and_checks_the_version() {
             host: PROTOCOL_VERSION + 1
         })
     );
-    assert_eq!(
-        bench.request(set.clone()).result,
-        Err(DeviceError::NotHandshaken)
-    );
+    assert_eq!(bench.request(set.clone()).result, Err(DeviceError::NotHandshaken));
     let hello = bench.request(RequestBody::Hello {
         protocol_version: PROTOCOL_VERSION,
     });
@@ -84,11 +76,7 @@ fn handshake_is_required_and_checks_the_version() {
 fn arguments_out_of_range_are_refused_by_name() {
     let mut bench = Bench::connected();
     assert_eq!(
-        bench
-            .request(RequestBody::SetRamp {
-                ms: MAX_RAMP_MS + 1
-            })
-            .result,
+        bench.request(RequestBody::SetRamp { ms: MAX_RAMP_MS + 1 }).result,
         Err(DeviceError::BadArgument(Argument::RampMs))
     );
     assert_eq!(
@@ -99,10 +87,7 @@ fn arguments_out_of_range_are_refused_by_name() {
             .result,
         Err(DeviceError::BadArgument(Argument::PeriodMs))
     );
-    assert_eq!(
-        bench.request(RequestBody::SetRamp { ms: 300 }).result,
-        Ok(Reply::Ack)
-    );
+    assert_eq!(bench.request(RequestBody::SetRamp { ms: 300 }).result, Ok(Reply::Ack));
     match bench.request(RequestBody::GetStatus).result {
         Ok(Reply::Status(s)) => assert_eq!(s.ramp_ms, 300),
         other => panic!("{other:?}"),
@@ -209,9 +194,7 @@ fn damaged_frames_are_counted_and_the_link_recovers() {
 fn telemetry_streams_at_the_requested_period_and_stops() {
     let mut bench = Bench::connected();
     assert_eq!(
-        bench
-            .request(RequestBody::StreamTelemetry { period_ms: 20 })
-            .result,
+        bench.request(RequestBody::StreamTelemetry { period_ms: 20 }).result,
         Ok(Reply::Ack)
     );
     bench.run_ms(1_000);
@@ -225,9 +208,7 @@ fn telemetry_streams_at_the_requested_period_and_stops() {
     // The first frame goes out at the first poll after the request, then the cadence is exact.
     assert!(gaps[1..].iter().all(|&g| g == 20_000), "{gaps:?}");
     assert_eq!(
-        bench
-            .request(RequestBody::StreamTelemetry { period_ms: 0 })
-            .result,
+        bench.request(RequestBody::StreamTelemetry { period_ms: 0 }).result,
         Ok(Reply::Ack)
     );
     bench.telemetry.clear();
@@ -268,15 +249,9 @@ fn save_config_waits_for_the_flash_and_reports_failure() {
         seq,
         body: RequestBody::SaveConfig { request_id: 11 },
     });
-    assert!(
-        bench.responses.is_empty(),
-        "no answer before the flash write"
-    );
+    assert!(bench.responses.is_empty(), "no answer before the flash write");
     let saved = match bench.actions.pop() {
-        Some(Action::SaveConfig {
-            config,
-            request_id: 11,
-        }) => config,
+        Some(Action::SaveConfig { config, request_id: 11 }) => config,
         other => panic!("{other:?}"),
     };
     assert_eq!(saved, bench.controller.config());
@@ -284,9 +259,7 @@ fn save_config_waits_for_the_flash_and_reports_failure() {
     assert!(saved.enabled[1] && !saved.enabled[0]);
     // Another save while one is in flight is refused.
     assert_eq!(
-        bench
-            .request(RequestBody::SaveConfig { request_id: 12 })
-            .result,
+        bench.request(RequestBody::SaveConfig { request_id: 12 }).result,
         Err(DeviceError::Busy)
     );
     assert_eq!(complete_save(&mut bench, true), vec![ack(seq)]);
@@ -332,9 +305,7 @@ fn a_retried_save_is_written_once() {
     assert_eq!(complete_save(&mut bench, true), vec![ack(retry)]);
     // A retry after the write completed (its reply was lost) is answered at once, again without a write.
     assert_eq!(
-        bench
-            .request(RequestBody::SaveConfig { request_id: 77 })
-            .result,
+        bench.request(RequestBody::SaveConfig { request_id: 77 }).result,
         Ok(Reply::Ack)
     );
     assert_eq!(bench.actions.len(), 1);
@@ -348,14 +319,11 @@ fn a_retried_save_is_written_once() {
 
     // After a reboot the id of the stored record is remembered, so a retry that crosses a reset is not written
     // either.
-    let controller =
-        Controller::new(common::identity(), BoardConfig::default()).with_saved_request_id(Some(78));
+    let controller = Controller::new(common::identity(), BoardConfig::default()).with_saved_request_id(Some(78));
     let mut bench = Bench::around(controller);
     bench.handshake();
     assert_eq!(
-        bench
-            .request(RequestBody::SaveConfig { request_id: 78 })
-            .result,
+        bench.request(RequestBody::SaveConfig { request_id: 78 }).result,
         Ok(Reply::Ack)
     );
     assert!(bench.actions.is_empty());
@@ -388,22 +356,14 @@ fn reset_and_bootloader_are_acked_then_handed_to_the_glue() {
     let mut bench = Bench::connected();
     assert_eq!(bench.request(RequestBody::Reset).result, Ok(Reply::Ack));
     assert_eq!(bench.actions.pop(), Some(Action::Reset));
-    assert_eq!(
-        bench.request(RequestBody::EnterBootloader).result,
-        Ok(Reply::Ack)
-    );
+    assert_eq!(bench.request(RequestBody::EnterBootloader).result, Ok(Reply::Ack));
     assert_eq!(bench.actions.pop(), Some(Action::EnterBootloader));
 }
 
 fn any_body() -> impl Strategy<Value = RequestBody> {
-    let channel = prop_oneof![
-        Just(Channel::All),
-        (0usize..4).prop_map(|i| Channel::One(Side::ALL[i])),
-    ];
+    let channel = prop_oneof![Just(Channel::All), (0usize..4).prop_map(|i| Channel::One(Side::ALL[i])),];
     prop_oneof![
-        any::<u16>().prop_map(|v| RequestBody::Hello {
-            protocol_version: v
-        }),
+        any::<u16>().prop_map(|v| RequestBody::Hello { protocol_version: v }),
         Just(RequestBody::GetInfo),
         Just(RequestBody::GetStatus),
         (channel, any::<u16>(), any::<bool>()).prop_map(|(channel, current_ma, enabled)| {

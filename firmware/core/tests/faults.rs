@@ -34,9 +34,7 @@ fn flags(bench: &mut Bench) -> [FaultFlags; 4] {
 #[test]
 fn shorted_string_is_switched_off_within_1_ms() {
     let mut bench = lit_bench();
-    bench
-        .plant
-        .set_fault(Side::Right.index(), StringFault::Shorted);
+    bench.plant.set_fault(Side::Right.index(), StringFault::Shorted);
     let mut off_after_us = None;
     for step in 1..=10u64 {
         let duty = bench.step();
@@ -64,16 +62,11 @@ fn shorted_string_is_switched_off_within_1_ms() {
 #[test]
 fn open_string_is_detected_and_the_channel_stops() {
     let mut bench = lit_bench();
-    bench
-        .plant
-        .set_fault(Side::Bottom.index(), StringFault::Open);
+    bench.plant.set_fault(Side::Bottom.index(), StringFault::Open);
     let mut detected_ms = None;
     for ms in 1..=200u64 {
         bench.step();
-        if bench.controller.status(bench.now_us).channels[2]
-            .faults
-            .open_string
-        {
+        if bench.controller.status(bench.now_us).channels[2].faults.open_string {
             detected_ms = Some(ms);
             break;
         }
@@ -102,19 +95,13 @@ fn faults_are_latched_until_cleared_and_come_back_if_still_present() {
         current_ma: 90,
         enabled: true,
     });
-    assert_eq!(
-        refused.result,
-        Err(DeviceError::FaultActive { channel: Side::Top })
-    );
+    assert_eq!(refused.result, Err(DeviceError::FaultActive { channel: Side::Top }));
     let refused_all = bench.request(RequestBody::SetLed {
         channel: Channel::All,
         current_ma: 90,
         enabled: true,
     });
-    assert_eq!(
-        refused_all.result,
-        Err(DeviceError::FaultActive { channel: Side::Top })
-    );
+    assert_eq!(refused_all.result, Err(DeviceError::FaultActive { channel: Side::Top }));
     // Switching a faulted channel off is always allowed.
     let off = bench.request(RequestBody::SetLed {
         channel: Channel::One(Side::Top),
@@ -129,10 +116,7 @@ fn faults_are_latched_until_cleared_and_come_back_if_still_present() {
     });
     assert!(on.result.is_err());
 
-    assert_eq!(
-        bench.request(RequestBody::ClearFaults).result,
-        Ok(Reply::Ack)
-    );
+    assert_eq!(bench.request(RequestBody::ClearFaults).result, Ok(Reply::Ack));
     let on = bench.request(RequestBody::SetLed {
         channel: Channel::One(Side::Top),
         current_ma: 100,
@@ -146,10 +130,7 @@ fn faults_are_latched_until_cleared_and_come_back_if_still_present() {
     // Still broken after clearing: found again.
     bench.plant.set_fault(0, StringFault::Open);
     bench.run_ms(100);
-    assert_eq!(
-        bench.request(RequestBody::ClearFaults).result,
-        Ok(Reply::Ack)
-    );
+    assert_eq!(bench.request(RequestBody::ClearFaults).result, Ok(Reply::Ack));
     bench.run_ms(100);
     assert!(flags(&mut bench)[0].open_string);
 }
@@ -184,10 +165,7 @@ fn over_temperature_derates_then_switches_off() {
     bench.run_ms(100);
     assert_eq!(bench.true_current_ma(), [0.0; 4]);
     assert!(flags(&mut bench).iter().all(|f| f.over_temperature));
-    assert_eq!(
-        bench.request(RequestBody::ClearFaults).result,
-        Ok(Reply::Ack)
-    );
+    assert_eq!(bench.request(RequestBody::ClearFaults).result, Ok(Reply::Ack));
     bench.run_ms(200);
     assert!((bench.true_current_ma()[3] - 100.0).abs() < 2.0);
     assert!(!flags(&mut bench)[3].any());
@@ -232,9 +210,5 @@ fn a_healthy_board_raises_no_fault_in_a_long_run() {
     });
     assert_eq!(r.result, Ok(Reply::Ack));
     bench.run_ms(5_000);
-    assert!(
-        flags(&mut bench).iter().all(|f| !f.any()),
-        "{:?}",
-        flags(&mut bench)
-    );
+    assert!(flags(&mut bench).iter().all(|f| !f.any()), "{:?}", flags(&mut bench));
 }

@@ -30,10 +30,7 @@ fn the_default_budget_keeps_the_board_within_what_usb_grants() {
     let currents = bench.true_current_ma();
     let share = f32::from(MAX_TOTAL_CURRENT_MA) / 4.0;
     for current in currents {
-        assert!(
-            (current - share).abs() < 0.02 * share,
-            "{currents:?}, share {share} mA"
-        );
+        assert!((current - share).abs() < 0.02 * share, "{currents:?}, share {share} mA");
     }
     assert!(
         total(currents) <= f32::from(MAX_TOTAL_CURRENT_MA) * 1.01,
@@ -42,10 +39,7 @@ fn the_default_budget_keeps_the_board_within_what_usb_grants() {
     // The setpoints stay what the host asked for (clamped per channel); only the regulation target is scaled.
     match bench.request(RequestBody::GetStatus).result {
         Ok(Reply::Status(status)) => {
-            assert!(status
-                .channels
-                .iter()
-                .all(|c| c.setpoint_ma == MAX_CURRENT_MA));
+            assert!(status.channels.iter().all(|c| c.setpoint_ma == MAX_CURRENT_MA));
             assert_eq!(status.current_budget_ma, MAX_TOTAL_CURRENT_MA);
             assert_eq!(status.power, PowerState::Configured);
         }
@@ -67,30 +61,19 @@ fn a_lower_budget_scales_every_lit_string_in_proportion() {
         enabled: true,
     });
     assert_eq!(
-        bench
-            .request(RequestBody::SetCurrentBudget { total_ma: 90 })
-            .result,
+        bench.request(RequestBody::SetCurrentBudget { total_ma: 90 }).result,
         Ok(Reply::Ack)
     );
     bench.run_ms(300);
     let i = bench.true_current_ma();
-    assert!(
-        (i[0] - 60.0).abs() < 1.5 && (i[2] - 30.0).abs() < 1.0,
-        "{i:?}"
-    );
+    assert!((i[0] - 60.0).abs() < 1.5 && (i[2] - 30.0).abs() < 1.0, "{i:?}");
     assert_eq!(i[1], 0.0);
     // Within budget nothing is scaled; a budget above the maximum is clamped to it.
     bench.request(RequestBody::SetCurrentBudget { total_ma: u16::MAX });
-    assert_eq!(
-        bench.controller.config().current_budget_ma,
-        MAX_TOTAL_CURRENT_MA
-    );
+    assert_eq!(bench.controller.config().current_budget_ma, MAX_TOTAL_CURRENT_MA);
     bench.run_ms(300);
     let i = bench.true_current_ma();
-    assert!(
-        (i[0] - 120.0).abs() < 2.4 && (i[2] - 60.0).abs() < 1.2,
-        "{i:?}"
-    );
+    assert!((i[0] - 120.0).abs() < 2.4 && (i[2] - 60.0).abs() < 1.2, "{i:?}");
     // The budget is part of what SaveConfig stores.
     bench.request(RequestBody::SetCurrentBudget { total_ma: 200 });
     assert_eq!(bench.controller.config().current_budget_ma, 200);
@@ -127,19 +110,14 @@ fn leds_stay_off_until_usb_is_configured_and_while_it_is_suspended() {
     let ramping = bench.true_current_ma();
     assert!(ramping.iter().all(|&i| i > 0.0 && i < 40.0), "{ramping:?}");
     bench.run_ms(200);
-    assert!(bench
-        .true_current_ma()
-        .iter()
-        .all(|&i| (i - 100.0).abs() < 2.0));
+    assert!(bench.true_current_ma().iter().all(|&i| (i - 100.0).abs() < 2.0));
 }
 
 #[test]
 fn telemetry_flows_only_while_a_host_has_the_port_open() {
     let mut bench = Bench::connected();
     assert_eq!(
-        bench
-            .request(RequestBody::StreamTelemetry { period_ms: 10 })
-            .result,
+        bench.request(RequestBody::StreamTelemetry { period_ms: 10 }).result,
         Ok(Reply::Ack)
     );
     // The first frame goes out at the next step, then one every 10 ms.
@@ -153,22 +131,15 @@ fn telemetry_flows_only_while_a_host_has_the_port_open() {
     assert!(bench.telemetry.is_empty());
     bench.controller.set_host_present(true);
     bench.run_ms(100);
-    assert!(
-        bench.telemetry.is_empty(),
-        "a new session asks for its own stream"
-    );
+    assert!(bench.telemetry.is_empty(), "a new session asks for its own stream");
     // ... and must shake hands first.
     assert_eq!(
-        bench
-            .request(RequestBody::StreamTelemetry { period_ms: 10 })
-            .result,
+        bench.request(RequestBody::StreamTelemetry { period_ms: 10 }).result,
         Err(nusense_protocol::DeviceError::NotHandshaken)
     );
     bench.handshake();
     assert_eq!(
-        bench
-            .request(RequestBody::StreamTelemetry { period_ms: 10 })
-            .result,
+        bench.request(RequestBody::StreamTelemetry { period_ms: 10 }).result,
         Ok(Reply::Ack)
     );
     bench.run_ms(50);

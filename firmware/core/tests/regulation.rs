@@ -75,10 +75,7 @@ fn converges_from_cold_to_100_ma_within_2_percent_without_overshoot() {
     let (settled_ms, peak) = settle(&mut bench, 100.0, 0.02, 1_000);
     let settled_ms = settled_ms.expect("regulator settles within 2 %");
     println!("settled to 100 mA +/- 2 % after {settled_ms} ms (budget {SETTLE_BUDGET_MS} ms), peak {peak:.2} mA");
-    assert!(
-        settled_ms <= SETTLE_BUDGET_MS,
-        "settled after {settled_ms} ms"
-    );
+    assert!(settled_ms <= SETTLE_BUDGET_MS, "settled after {settled_ms} ms");
     assert!(peak <= 102.0, "overshoot to {peak} mA");
     // The firmware's own view agrees with the plant.
     let status = match bench.request(RequestBody::GetStatus).result {
@@ -100,12 +97,7 @@ fn never_exceeds_the_limit_during_the_ramp_even_without_soft_start() {
             Ok(Reply::Ack)
         );
         enable_two(&mut bench, MAX_CURRENT_MA);
-        let (settled, peak) = settle(
-            &mut bench,
-            f32::from(MAX_CURRENT_MA),
-            0.02,
-            u64::from(ramp_ms) + 200,
-        );
+        let (settled, peak) = settle(&mut bench, f32::from(MAX_CURRENT_MA), 0.02, u64::from(ramp_ms) + 200);
         println!("ramp {ramp_ms} ms to 120 mA: settled at {settled:?} ms, peak {peak:.2} mA");
         assert!(
             peak <= f32::from(MAX_CURRENT_MA) * 1.01,
@@ -118,10 +110,7 @@ fn never_exceeds_the_limit_during_the_ramp_even_without_soft_start() {
 #[test]
 fn soft_start_takes_the_ramp_time() {
     let mut bench = Bench::connected();
-    assert_eq!(
-        bench.request(RequestBody::SetRamp { ms: 200 }).result,
-        Ok(Reply::Ack)
-    );
+    assert_eq!(bench.request(RequestBody::SetRamp { ms: 200 }).result, Ok(Reply::Ack));
     enable_all(&mut bench, 100);
     bench.run_ms(100);
     let half_way = bench.true_current_ma()[0];

@@ -25,12 +25,7 @@ pub fn text<const N: usize>() -> impl Strategy<Value = heapless::String<N>> {
 }
 
 pub fn side() -> impl Strategy<Value = Side> {
-    prop_oneof![
-        Just(Side::Top),
-        Just(Side::Right),
-        Just(Side::Bottom),
-        Just(Side::Left)
-    ]
+    prop_oneof![Just(Side::Top), Just(Side::Right), Just(Side::Bottom), Just(Side::Left)]
 }
 
 pub fn channel() -> impl Strategy<Value = Channel> {
@@ -122,23 +117,16 @@ pub fn channel_state() -> impl Strategy<Value = ChannelState> {
 }
 
 pub fn channels() -> impl Strategy<Value = [ChannelState; CHANNEL_COUNT]> {
-    [
-        channel_state(),
-        channel_state(),
-        channel_state(),
-        channel_state(),
-    ]
+    [channel_state(), channel_state(), channel_state(), channel_state()]
 }
 
 pub fn link_counters() -> impl Strategy<Value = LinkCounters> {
-    any::<[u32; 5]>().prop_map(|[bad_cobs, bad_crc, oversize, unknown_tag, frames_ok]| {
-        LinkCounters {
-            bad_cobs,
-            bad_crc,
-            oversize,
-            unknown_tag,
-            frames_ok,
-        }
+    any::<[u32; 5]>().prop_map(|[bad_cobs, bad_crc, oversize, unknown_tag, frames_ok]| LinkCounters {
+        bad_cobs,
+        bad_crc,
+        oversize,
+        unknown_tag,
+        frames_ok,
     })
 }
 
@@ -151,14 +139,14 @@ pub fn power_state() -> impl Strategy<Value = PowerState> {
 }
 
 pub fn loop_timing() -> impl Strategy<Value = LoopTiming> {
-    (any::<u32>(), float(), any::<[u32; 2]>()).prop_map(
-        |(steps, period_mean_us, [period_min_us, period_max_us])| LoopTiming {
+    (any::<u32>(), float(), any::<[u32; 2]>()).prop_map(|(steps, period_mean_us, [period_min_us, period_max_us])| {
+        LoopTiming {
             steps,
             period_mean_us,
             period_min_us,
             period_max_us,
-        },
-    )
+        }
+    })
 }
 
 pub fn status() -> impl Strategy<Value = Status> {
@@ -231,8 +219,7 @@ pub fn device_error() -> impl Strategy<Value = DeviceError> {
         argument().prop_map(DeviceError::BadArgument),
         Just(DeviceError::Busy),
         side().prop_map(|channel| DeviceError::FaultActive { channel }),
-        any::<(u16, u16)>()
-            .prop_map(|(device, host)| DeviceError::VersionMismatch { device, host }),
+        any::<(u16, u16)>().prop_map(|(device, host)| DeviceError::VersionMismatch { device, host }),
         Just(DeviceError::Storage),
         Just(DeviceError::NotHandshaken),
     ]
@@ -278,8 +265,7 @@ pub fn request_variant(request: &Request) -> &'static str {
             ..
         } => "request/set_led/one",
         RequestBody::SetLed {
-            channel: Channel::All,
-            ..
+            channel: Channel::All, ..
         } => "request/set_led/all",
         RequestBody::SetRamp { .. } => "request/set_ramp",
         RequestBody::StreamTelemetry { .. } => "request/stream_telemetry",
@@ -325,9 +311,9 @@ pub fn frame<T: serde::Serialize>(message: &T) -> Vec<u8> {
 pub fn proptest_config(cases: u32) -> proptest::test_runner::Config {
     proptest::test_runner::Config {
         cases,
-        failure_persistence: Some(Box::new(
-            proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"),
-        )),
+        failure_persistence: Some(Box::new(proptest::test_runner::FileFailurePersistence::WithSource(
+            "proptest-regressions",
+        ))),
         ..proptest::test_runner::Config::default()
     }
 }

@@ -5,9 +5,7 @@
 use nusense_firmware_core::plant::{LedPlant, PlantParams};
 use nusense_firmware_core::{Action, BoardConfig, Controller, Identity, Measurements, PowerState};
 use nusense_protocol::framing::{encode, FrameDecoder, MAX_FRAME_LEN};
-use nusense_protocol::{
-    BoardMessage, Reply, Request, RequestBody, Response, Telemetry, PROTOCOL_VERSION,
-};
+use nusense_protocol::{BoardMessage, Reply, Request, RequestBody, Response, Telemetry, PROTOCOL_VERSION};
 
 /// Control period of the bench: the slowest rate the firmware is allowed to run its loop at (1 kHz).
 pub const STEP_US: u64 = 1_000;
@@ -88,9 +86,7 @@ impl Bench {
         let duty = self.controller.control_step(self.now_us, &self.last);
         let mut out = Vec::new();
         self.controller
-            .poll_telemetry(self.now_us, &mut |frame: &[u8]| {
-                out.extend_from_slice(frame)
-            });
+            .poll_telemetry(self.now_us, &mut |frame: &[u8]| out.extend_from_slice(frame));
         self.receive(&out);
         duty
     }
@@ -105,9 +101,7 @@ impl Bench {
     pub fn send_bytes(&mut self, bytes: &[u8]) {
         let mut out = Vec::new();
         self.controller
-            .on_rx(bytes, self.now_us, &mut |frame: &[u8]| {
-                out.extend_from_slice(frame)
-            });
+            .on_rx(bytes, self.now_us, &mut |frame: &[u8]| out.extend_from_slice(frame));
         self.receive(&out);
         while let Some(action) = self.controller.take_action() {
             self.actions.push(action);
@@ -116,9 +110,8 @@ impl Bench {
 
     fn receive(&mut self, bytes: &[u8]) {
         let mut messages = Vec::new();
-        self.host.feed::<BoardMessage>(bytes, |m| {
-            messages.push(m.expect("the board sends only valid frames"))
-        });
+        self.host
+            .feed::<BoardMessage>(bytes, |m| messages.push(m.expect("the board sends only valid frames")));
         for m in messages {
             match m {
                 BoardMessage::Response(r) => self.responses.push(r),
@@ -138,10 +131,7 @@ impl Bench {
         let seq = self.next_seq();
         self.send(&Request { seq, body });
         let response = self.responses.pop().expect("an answer to every request");
-        assert_eq!(
-            response.seq, seq,
-            "the answer carries the request's sequence number"
-        );
+        assert_eq!(response.seq, seq, "the answer carries the request's sequence number");
         response
     }
 
