@@ -19,6 +19,12 @@ pub enum LinkError {
         older_side(*.device, *.host)
     )]
     VersionMismatch { device: u16, host: u16 },
+    #[error(
+        "protocol schema mismatch: the board and this host both say protocol version {version}, but the board's \
+         message types have fingerprint {device:016x} and this host's {host:016x}: one of them was built from \
+         changed message types without a version bump; rebuild the firmware and the host from the same source"
+    )]
+    SchemaMismatch { version: u16, device: u64, host: u64 },
     #[error("the board refused the request: {0}")]
     Device(DeviceError),
     #[error("the board answered {request} with an unexpected reply: {reply}")]

@@ -5,9 +5,10 @@ use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use nusense_protocol::framing::{self, FrameDecoder, MAX_FRAME_LEN};
+use nusense_firmware_core::link::HOST_KEEPALIVE_MS;
 use nusense_protocol::{
     BoardMessage, Channel, DeviceError, DeviceInfo, LinkCounters, Reply, Request, RequestBody, Seq, Status, Telemetry,
-    PROTOCOL_VERSION,
+    PROTOCOL_VERSION, SAVE_CONFIG_REPLY_WITHIN_MS, SCHEMA_FINGERPRINT,
 };
 
 use super::error::LinkError;
@@ -34,13 +35,16 @@ impl Default for LinkOptions {
     }
 }
 
-/// What the host side of the link saw, beyond the decoder's framing counters.
+/// Everything that went wrong on the host's side of the link, by kind, and what arrived.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct LinkStats {
-    /// Frames the host's decoder dropped, by reason, and frames it accepted.
+    /// Frames the host's decoder dropped, by reason (bad COBS, bad CRC, oversize, undecodable), and frames it
+    /// accepted.
     pub wire: LinkCounters,
     /// Replies whose sequence number matched no outstanding request (late answers to a retried request).
     pub stale_replies: u64,
+    /// Replies to the right request but of the wrong kind (a `Pong` to `GetStatus`, a `Pong` with another nonce).
+    pub unexpected_replies: u64,
     /// Attempts that got no reply in time.
     pub timeouts: u64,
     /// Requests sent again after a timeout.
@@ -53,6 +57,11 @@ pub struct LinkStats {
 
 /// Telemetry kept while the caller waits for replies; at the fastest stream (1 ms) this is a second's worth.
 const TELEMETRY_QUEUE_LEN: usize = 1024;
+/// How long a `SaveConfig` attempt waits: the board's promise plus the same margin an ordinary request gets.
+/// Retries carry the same request id, so a slow save that did complete is not written again.
+fn save_timeout(options: &LinkOptions) -> Duration {
+    Duration::from_millis(u64::from(SAVE_CONFIG_REPLY_WITHIN_MS)) + options.timeout
+}
 
 /// A handshaken connection to one board. Blocking; one caller at a time (the daemon wraps it in a thread,
 /// see [`super::SupervisedLink`]).
@@ -65,6 +74,8 @@ pub struct BoardLink {
     next_seq: Seq,
     stats: LinkStats,
     device_protocol_version: u16,
+    /// When the host last wrote anything (for the keepalive).
+    last_sent: Instant,
 }
 
 impl BoardLink {
@@ -93,6 +104,7 @@ impl BoardLink {
             next_seq: start_seq(),
             stats: LinkStats::default(),
             device_protocol_version: 0,
+            last_sent: Instant::now(),
         };
         link.handshake()?;
         Ok(link)
@@ -103,15 +115,25 @@ impl BoardLink {
             protocol_version: PROTOCOL_VERSION,
         };
         match self.request(hello) {
-            Ok(Reply::Hello { protocol_version }) if protocol_version == PROTOCOL_VERSION => {
+            Ok(Reply::Hello {
+                protocol_version,
+                schema,
+            }) if protocol_version == PROTOCOL_VERSION => {
+                if schema != SCHEMA_FINGERPRINT {
+                    return Err(LinkError::SchemaMismatch {
+                        version: protocol_version,
+                        device: schema,
+                        host: SCHEMA_FINGERPRINT,
+                    });
+                }
                 self.device_protocol_version = protocol_version;
                 Ok(())
             }
-            Ok(Reply::Hello { protocol_version }) => Err(LinkError::VersionMismatch {
+            Ok(Reply::Hello { protocol_version, .. }) => Err(LinkError::VersionMismatch {
                 device: protocol_version,
                 host: PROTOCOL_VERSION,
             }),
-            Ok(other) => Err(unexpected("Hello", &other)),
+            Ok(other) => Err(self.unexpected("Hello", &other)),
             Err(LinkError::Device(DeviceError::VersionMismatch { device, host })) => {
                 Err(LinkError::VersionMismatch { device, host })
             }
@@ -139,14 +161,14 @@ impl BoardLink {
     pub fn info(&mut self) -> Result<DeviceInfo, LinkError> {
         match self.request(RequestBody::GetInfo)? {
             Reply::Info(info) => Ok(info),
-            other => Err(unexpected("GetInfo", &other)),
+            other => Err(self.unexpected("GetInfo", &other)),
         }
     }
 
     pub fn status(&mut self) -> Result<Status, LinkError> {
         match self.request(RequestBody::GetStatus)? {
             Reply::Status(status) => Ok(status),
-            other => Err(unexpected("GetStatus", &other)),
+            other => Err(self.unexpected("GetStatus", &other)),
         }
     }
 
@@ -176,8 +198,22 @@ impl BoardLink {
         self.expect_ack("ClearFaults", RequestBody::ClearFaults)
     }
 
+    /// Stores the board's live configuration in its flash. Each attempt waits as long as the board may take
+    /// (a sector erase); a retry repeats the same request id, which the board answers without writing twice.
     pub fn save_config(&mut self) -> Result<(), LinkError> {
-        self.expect_ack("SaveConfig", RequestBody::SaveConfig)
+        let body = RequestBody::SaveConfig {
+            request_id: new_request_id(),
+        };
+        let timeout = save_timeout(&self.options);
+        match self.request_waiting(body, timeout)? {
+            Reply::Ack => Ok(()),
+            other => Err(self.unexpected("SaveConfig", &other)),
+        }
+    }
+
+    /// Caps the sum of the string currents (the board clamps it to its USB budget).
+    pub fn set_current_budget(&mut self, total_ma: u16) -> Result<(), LinkError> {
+        self.expect_ack("SetCurrentBudget", RequestBody::SetCurrentBudget { total_ma })
     }
 
     /// Restarts the board; the link is gone afterwards (USB re-enumerates) and must be reopened.
@@ -190,12 +226,13 @@ impl BoardLink {
         let started = Instant::now();
         match self.request(RequestBody::Ping { nonce })? {
             Reply::Pong { nonce: echoed } if echoed == nonce => Ok(started.elapsed()),
-            other => Err(unexpected("Ping", &other)),
+            other => Err(self.unexpected("Ping", &other)),
         }
     }
 
     /// The oldest queued telemetry, or the next one to arrive within `timeout`; `None` if none came.
     pub fn next_telemetry(&mut self, timeout: Duration) -> Result<Option<Telemetry>, LinkError> {
+        self.keep_alive()?;
         if let Some(telemetry) = self.telemetry.pop_front() {
             return Ok(Some(telemetry));
         }
@@ -234,13 +271,26 @@ impl BoardLink {
     fn expect_ack(&mut self, name: &'static str, body: RequestBody) -> Result<(), LinkError> {
         match self.request(body)? {
             Reply::Ack => Ok(()),
-            other => Err(unexpected(name, &other)),
+            other => Err(self.unexpected(name, &other)),
         }
     }
 
     /// Sends `body` with a fresh sequence number and waits for its reply, retrying on timeout. Each attempt gets
     /// its own number, so a late reply to an earlier attempt is recognised as stale and dropped.
     pub fn request(&mut self, body: RequestBody) -> Result<Reply, LinkError> {
+        self.request_waiting(body, self.options.timeout)
+    }
+
+    /// Tells a board on a link without DTR (a plain UART: the QEMU image) that the host is still there, when
+    /// nothing else was sent for a while: a lone 0x00, an empty frame the board's decoder skips. Harmless on USB.
+    fn keep_alive(&mut self) -> Result<(), LinkError> {
+        if self.last_sent.elapsed() >= Duration::from_millis(HOST_KEEPALIVE_MS) {
+            self.write(&[framing::DELIMITER])?;
+        }
+        Ok(())
+    }
+
+    fn request_waiting(&mut self, body: RequestBody, timeout: Duration) -> Result<Reply, LinkError> {
         for attempt in 0..=self.options.retries {
             if attempt > 0 {
                 self.stats.retries += 1;
@@ -250,7 +300,7 @@ impl BoardLink {
                 seq,
                 body: body.clone(),
             })?;
-            let deadline = Instant::now() + self.options.timeout;
+            let deadline = Instant::now() + timeout;
             while let Some(message) = self.receive(deadline)? {
                 match message {
                     BoardMessage::Response(response) if response.seq == seq => {
@@ -275,9 +325,22 @@ impl BoardLink {
     fn send(&mut self, request: &Request) -> Result<(), LinkError> {
         let mut buf = [0u8; MAX_FRAME_LEN];
         let frame = framing::encode(request, &mut buf).map_err(LinkError::Encode)?;
+        self.write(frame)
+    }
+
+    fn write(&mut self, bytes: &[u8]) -> Result<(), LinkError> {
+        self.last_sent = Instant::now();
         self.transport
-            .write_all_bytes(frame)
+            .write_all_bytes(bytes)
             .map_err(|error| disconnected(&*self.transport, &error))
+    }
+
+    fn unexpected(&mut self, request: &'static str, reply: &Reply) -> LinkError {
+        self.stats.unexpected_replies += 1;
+        LinkError::UnexpectedReply {
+            request,
+            reply: format!("{reply:?}"),
+        }
     }
 
     fn queue_telemetry(&mut self, telemetry: Telemetry) {
@@ -322,11 +385,14 @@ fn disconnected(transport: &dyn Transport, error: &std::io::Error) -> LinkError 
     LinkError::Disconnected
 }
 
-fn unexpected(request: &'static str, reply: &Reply) -> LinkError {
-    LinkError::UnexpectedReply {
-        request,
-        reply: format!("{reply:?}"),
-    }
+/// A save's request id: new for every save of every session (clock and a counter), repeated by its retries.
+fn new_request_id() -> u32 {
+    static COUNTER: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|elapsed| elapsed.as_nanos() as u32)
+        .unwrap_or(0);
+    nanos ^ COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed).rotate_left(16)
 }
 
 /// A sequence number that differs between sessions (low bits of the clock), so a reply meant for a previous

@@ -43,6 +43,7 @@ fn info() -> DeviceInfo {
         mcu_uid: [7; 12],
         channel_count: CHANNEL_COUNT as u8,
         max_current_ma: 120,
+        max_total_current_ma: 440,
     }
 }
 
@@ -51,6 +52,7 @@ fn healthy_answer(request: &Request) -> Vec<u8> {
     let answer = match request.body {
         RequestBody::Hello { .. } => Reply::Hello {
             protocol_version: PROTOCOL_VERSION,
+            schema: SCHEMA_FINGERPRINT,
         },
         RequestBody::GetInfo => Reply::Info(info()),
         RequestBody::GetStatus => Reply::Status(Status::default()),
@@ -65,6 +67,8 @@ type Handler = Box<dyn FnMut(&Request, &mut dyn FnMut(&[u8])) + Send>;
 /// A board scripted by `handler`, on the far end of a pipe; optionally streams telemetry on its own.
 struct FakeBoard {
     requests: Arc<Mutex<Vec<Request>>>,
+    /// Every byte the host sent, frames and keepalives alike.
+    raw: Arc<Mutex<Vec<u8>>>,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
 }
@@ -77,8 +81,9 @@ impl FakeBoard {
 
     fn start_on(mut board: PipeEnd, mut handler: Handler, telemetry_every: Option<Duration>) -> Self {
         let requests = Arc::new(Mutex::new(Vec::new()));
+        let raw = Arc::new(Mutex::new(Vec::new()));
         let stop = Arc::new(AtomicBool::new(false));
-        let (seen, stopping) = (requests.clone(), stop.clone());
+        let (seen, seen_raw, stopping) = (requests.clone(), raw.clone(), stop.clone());
         let thread = std::thread::spawn(move || {
             let mut decoder: FrameDecoder = FrameDecoder::new();
             let mut buf = [0u8; 256];
@@ -89,6 +94,7 @@ impl FakeBoard {
                     Ok(n) => n,
                     Err(_) => return,
                 };
+                seen_raw.lock().unwrap().extend_from_slice(&buf[..n]);
                 let mut received = Vec::new();
                 decoder.feed::<Request>(&buf[..n], |request| received.extend(request.ok()));
                 for request in received {
@@ -115,6 +121,7 @@ impl FakeBoard {
         });
         Self {
             requests,
+            raw,
             stop,
             thread: Some(thread),
         }
@@ -183,6 +190,7 @@ fn a_newer_board_is_refused_in_plain_words() {
                 request.seq,
                 Reply::Hello {
                     protocol_version: PROTOCOL_VERSION + 1,
+                    schema: 0,
                 },
             ))
         }),
@@ -586,4 +594,160 @@ mod supervised {
         wait_for(&events, |event| matches!(event, BoardEvent::Connected { .. }));
         assert_eq!(link.state().connects, 2);
     }
+}
+
+#[test]
+fn a_board_of_the_same_version_with_other_message_types_is_refused_naming_both() {
+    let (_board, host) = FakeBoard::start(
+        Box::new(|request, send| {
+            send(&reply(
+                request.seq,
+                Reply::Hello {
+                    protocol_version: PROTOCOL_VERSION,
+                    schema: SCHEMA_FINGERPRINT ^ 1,
+                },
+            ))
+        }),
+        None,
+    );
+    let error = BoardLink::over(Box::new(host), quick()).err().expect("a schema mismatch fails the open");
+    assert!(
+        matches!(error, LinkError::SchemaMismatch { version, device, host }
+            if version == PROTOCOL_VERSION && device == SCHEMA_FINGERPRINT ^ 1 && host == SCHEMA_FINGERPRINT),
+        "{error:?}"
+    );
+    let text = error.to_string();
+    assert!(text.contains(&format!("protocol version {PROTOCOL_VERSION}")), "{text}");
+    assert!(text.contains(&format!("{:016x}", SCHEMA_FINGERPRINT ^ 1)), "{text}");
+    assert!(text.contains(&format!("{SCHEMA_FINGERPRINT:016x}")), "{text}");
+}
+
+/// One of each thing that can go wrong on the line, each in its own counter.
+#[test]
+fn every_kind_of_wire_error_is_counted_in_its_own_counter() {
+    let (_board, host) = FakeBoard::start(
+        Box::new(|request, send| match request.body {
+            RequestBody::GetInfo => {
+                // COBS whose code byte points past the end of the frame.
+                send(&[0x05, 0x01, 0x00]);
+                let mut damaged = healthy_answer(request);
+                damaged[2] ^= 0x40;
+                send(&damaged);
+                let mut not_a_message = [0u8; MAX_FRAME_LEN];
+                send(framing::encode(&[0xFFu8; 32], &mut not_a_message).unwrap());
+                send(&[0x55; 3 * MAX_FRAME_LEN]);
+                send(&[0x00]);
+                // A reply to nobody, then the real one.
+                send(&reply(request.seq.wrapping_sub(100), Reply::Ack));
+                send(&healthy_answer(request));
+            }
+            // The right request, the wrong answer.
+            RequestBody::GetStatus => send(&reply(request.seq, Reply::Pong { nonce: 1 })),
+            // Silence: a timeout (no retries in this test).
+            RequestBody::Ping { .. } => {}
+            _ => send(&healthy_answer(request)),
+        }),
+        None,
+    );
+    let options = LinkOptions {
+        retries: 0,
+        ..quick()
+    };
+    let mut link = BoardLink::over(Box::new(host), options).unwrap();
+    assert_eq!(link.info().unwrap(), info());
+    assert!(matches!(link.status(), Err(LinkError::UnexpectedReply { .. })));
+    assert!(matches!(link.ping(5), Err(LinkError::Timeout)));
+    let stats = link.stats();
+    let wire = stats.wire;
+    assert_eq!(
+        (wire.bad_cobs, wire.bad_crc, wire.unknown_tag, wire.oversize),
+        (1, 1, 1, 1),
+        "{stats:?}"
+    );
+    assert_eq!(
+        (stats.stale_replies, stats.unexpected_replies, stats.timeouts, stats.retries),
+        (1, 1, 1, 0),
+        "{stats:?}"
+    );
+    // Hello, the stale reply, Info, the wrong-kind reply.
+    assert_eq!(wire.frames_ok, 4, "{stats:?}");
+}
+
+/// A save may take as long as a flash erase: longer than an ordinary request may. Its retry carries the same
+/// request id, so the board can tell it from a new save.
+#[test]
+fn a_save_waits_for_the_erase_and_its_retry_repeats_the_request_id() {
+    let slow = quick().timeout * 3;
+    let (board, host) = FakeBoard::start(
+        Box::new(move |request, send| {
+            if matches!(request.body, RequestBody::SaveConfig { .. }) {
+                std::thread::sleep(slow);
+            }
+            send(&healthy_answer(request));
+        }),
+        None,
+    );
+    let mut link = BoardLink::over(Box::new(host), quick()).unwrap();
+    link.save_config().expect("a save slower than the ordinary timeout still succeeds");
+    assert_eq!(link.stats().retries, 0);
+
+    // A board that misses the first attempt: the retry comes with the same id, after the long timeout.
+    let attempts = Arc::new(Mutex::new(0));
+    let counted = attempts.clone();
+    let (board2, host) = FakeBoard::start(
+        Box::new(move |request, send| {
+            if matches!(request.body, RequestBody::SaveConfig { .. }) {
+                let mut n = counted.lock().unwrap();
+                *n += 1;
+                if *n == 1 {
+                    return;
+                }
+            }
+            send(&healthy_answer(request));
+        }),
+        None,
+    );
+    let mut link = BoardLink::over(Box::new(host), quick()).unwrap();
+    let started = Instant::now();
+    link.save_config().unwrap();
+    assert!(started.elapsed() >= Duration::from_millis(u64::from(SAVE_CONFIG_REPLY_WITHIN_MS)));
+    let ids: Vec<u32> = board2
+        .requests()
+        .iter()
+        .filter_map(|r| match r.body {
+            RequestBody::SaveConfig { request_id } => Some(request_id),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(ids.len(), 2);
+    assert_eq!(ids[0], ids[1]);
+    // A new save is a new id.
+    let first_id = board
+        .requests()
+        .iter()
+        .find_map(|r| match r.body {
+            RequestBody::SaveConfig { request_id } => Some(request_id),
+            _ => None,
+        })
+        .unwrap();
+    assert_ne!(first_id, ids[0]);
+}
+
+/// On a link without DTR the board takes a long silence as a closed port: a host that only reads telemetry
+/// still sends a lone 0x00 every second.
+#[test]
+fn a_host_that_only_reads_keeps_the_link_alive() {
+    let (board, host) = FakeBoard::start(Box::new(|request, send| send(&healthy_answer(request))), Some(Duration::from_millis(20)));
+    let mut link = BoardLink::over(Box::new(host), quick()).unwrap();
+    let sent_after_open = board.raw.lock().unwrap().len();
+    let started = Instant::now();
+    while started.elapsed() < Duration::from_millis(2_300) {
+        link.next_telemetry(Duration::from_millis(50)).unwrap();
+    }
+    let raw = board.raw.lock().unwrap();
+    let keepalives = &raw[sent_after_open..];
+    assert!(
+        (2..=3).contains(&keepalives.len()) && keepalives.iter().all(|&b| b == 0),
+        "{keepalives:?}"
+    );
 }

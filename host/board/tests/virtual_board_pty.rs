@@ -242,3 +242,47 @@ fn wait_for(events: &std::sync::mpsc::Receiver<BoardEvent>, what: impl Fn(&Board
         }
     }
 }
+
+/// A host that stops reading while the board streams at its fastest: the pty and the board's telemetry queue
+/// fill, telemetry is dropped, and a request sent afterwards is still answered at the first attempt, because
+/// replies leave on their own queue ahead of telemetry.
+#[test]
+fn a_reply_survives_a_telemetry_flood() {
+    let board = VirtualBoard::spawn_pty().unwrap();
+    let mut link = BoardLink::open(board.path(), options()).unwrap();
+    link.stream_telemetry(nusense_firmware_core::limits::MIN_TELEMETRY_PERIOD_MS).unwrap();
+    let flood = Duration::from_secs(4);
+    std::thread::sleep(flood);
+    let dropped = board.telemetry_dropped();
+    let nonce = 0xF100D;
+    let rtt = link.ping(nonce).expect("the reply gets through the flood");
+    let stats = link.stats();
+    let backlog = link.drain_telemetry().count();
+    println!(
+        "after {flood:?} unread at {} ms: board dropped {dropped} telemetry frames; the pong came after {backlog} \
+         queued frames, {rtt:?}, {} retries",
+        nusense_firmware_core::limits::MIN_TELEMETRY_PERIOD_MS,
+        stats.retries
+    );
+    assert!(dropped > 0, "the flood must overflow the board's telemetry queue to test anything");
+    assert_eq!((stats.retries, stats.timeouts), (0, 0));
+    // What was buffered reached the host in order and undamaged; the board's backlog was bounded.
+    assert_eq!(stats.wire.bad_crc + stats.wire.bad_cobs + stats.wire.oversize + stats.wire.unknown_tag, 0);
+    assert!(backlog < 4 * 1000 / nusense_firmware_core::limits::MIN_TELEMETRY_PERIOD_MS as usize);
+}
+
+/// DTR: closing the port stops the stream; a new session gets telemetry only when it asks for it.
+#[test]
+fn closing_the_port_stops_telemetry_until_the_next_session_asks() {
+    let board = VirtualBoard::spawn_pty().unwrap();
+    let mut link = BoardLink::open(board.path(), options()).unwrap();
+    link.stream_telemetry(10).unwrap();
+    assert!(link.next_telemetry(Duration::from_millis(500)).unwrap().is_some());
+    drop(link);
+    std::thread::sleep(Duration::from_millis(100));
+    let mut link = BoardLink::open(board.path(), options()).unwrap();
+    assert_eq!(link.status().unwrap().telemetry_period_ms, 0);
+    assert!(link.next_telemetry(Duration::from_millis(300)).unwrap().is_none());
+    link.stream_telemetry(10).unwrap();
+    assert!(link.next_telemetry(Duration::from_millis(500)).unwrap().is_some());
+}

@@ -117,7 +117,7 @@ impl VirtualBoard {
     }
 
     fn spawn(options: VirtualBoardOptions, in_process: bool) -> Result<Self, VirtualBoardError> {
-        let shared = Arc::new(Shared::new(None));
+        let shared = Arc::new(Shared::new());
         let mut board = Self {
             options,
             in_process,
@@ -228,9 +228,14 @@ impl VirtualBoard {
         self.shared.host_sessions.load(Ordering::Relaxed)
     }
 
-    /// Bytes dropped because the host did not read them.
-    pub fn tx_dropped_bytes(&self) -> u64 {
-        self.shared.tx_dropped_bytes.load(Ordering::Relaxed)
+    /// Telemetry frames dropped because the host did not read them (replies are never dropped).
+    pub fn telemetry_dropped(&self) -> u64 {
+        self.shared.telemetry_dropped.load(Ordering::Relaxed)
+    }
+
+    /// Times a SaveConfig wrote the virtual flash (a retried save writes once).
+    pub fn flash_writes(&self) -> u64 {
+        self.shared.flash_writes.load(Ordering::Relaxed)
     }
 
     /// Breaks (or repairs) an LED string, for fault-handling demos and tests.
