@@ -35,6 +35,11 @@ pub struct PlantParams {
     pub current_noise_ma: f32,
     pub supply_noise_mv: f32,
     pub temperature_noise_c: f32,
+    /// What each string's sense path reads per mA that really flows: 1 for a correct sense resistor and ADC, 0.8
+    /// for one that reads 20 % low (a wrong resistor fitted, a drifted reference). The regulator trusts the
+    /// reading, so such a string carries more than it reports: what an outside measurement (the hil camera
+    /// check) must catch.
+    pub sense_gain: [f32; CHANNEL_COUNT],
 }
 
 impl Default for PlantParams {
@@ -54,6 +59,7 @@ impl Default for PlantParams {
             current_noise_ma: 0.4,
             supply_noise_mv: 5.0,
             temperature_noise_c: 0.3,
+            sense_gain: [1.0; CHANNEL_COUNT],
         }
     }
 }
@@ -125,7 +131,7 @@ impl LedPlant {
 
         let mut current_ma = [0.0; CHANNEL_COUNT];
         for (ch, out) in current_ma.iter_mut().enumerate() {
-            *out = (self.filtered_ma[ch] + self.rng.gaussian() * p.current_noise_ma).max(0.0);
+            *out = (self.filtered_ma[ch] * p.sense_gain[ch] + self.rng.gaussian() * p.current_noise_ma).max(0.0);
         }
         Measurements {
             current_ma,

@@ -2,6 +2,7 @@
 //! simulated sensor fed with the currents the board reports it is driving.
 
 use image::RgbImage;
+use nusense_protocol::Side;
 use nusense_sim::{Renderer, Scene, SensorModel};
 
 use nusense_capture::{CameraSelector, FrameSource, V4l2Camera, V4l2Options};
@@ -16,15 +17,28 @@ pub enum CameraProbeError {
     Render(#[from] nusense_sim::RenderError),
     #[error("the frame is empty")]
     EmptyFrame,
+    #[error("the simulated camera has no light reading yet (the emulator's light channel is silent)")]
+    NoLight,
 }
 
-/// Mean image brightness for the LEDs as they are now.
+/// Mean image brightness for the LEDs as they are now, seen from outside the board: never from what the board
+/// reports.
 pub trait BrightnessProbe {
     fn describe(&self) -> String;
-    /// Mean luma (0..=255) of what the camera sees now. `measured_ma` is what the board's telemetry says the
-    /// strings carry (Top, Right, Bottom, Left); a real camera sees the light itself and ignores it.
-    fn brightness(&mut self, measured_ma: [f32; 4]) -> Result<f64, CameraProbeError>;
+    /// Mean luma (0..=255) of what the camera sees now.
+    fn brightness(&mut self) -> Result<f64, CameraProbeError>;
+    /// The string current that gives `luma` with only `side` lit, when this camera is calibrated in milliamps
+    /// (the simulated one is: it knows its renderer); `None` for an uncalibrated camera, which can only compare
+    /// the sides with each other.
+    fn current_ma(&mut self, side: Side, luma: f64) -> Result<Option<f64>, CameraProbeError>;
 }
+
+/// Where the simulated camera's light comes from: the strings' true currents (Top, Right, Bottom, Left), from
+/// the simulated plant itself, not from the board's telemetry; `None` until known.
+pub type LightSource = Box<dyn Fn() -> Option<[f32; 4]> + Send>;
+
+/// Currents at which the simulated camera calibrates each side (piecewise linear between them).
+const CALIBRATION_MA: [f32; 6] = [0.0, 25.0, 50.0, 75.0, 100.0, 130.0];
 
 /// Mean Rec. 601 luma of a frame.
 pub fn mean_luma(frame: &RgbImage) -> Option<f64> {
@@ -39,19 +53,47 @@ pub fn mean_luma(frame: &RgbImage) -> Option<f64> {
     Some(sum / pixels as f64)
 }
 
-/// The simulated sensor at rest (no contact), lit with the measured currents.
+/// The simulated sensor at rest (no contact), lit with the strings' true currents from its [`LightSource`].
 pub struct SimulatedCameraProbe {
     renderer: Renderer,
     frames: u64,
+    light: LightSource,
+    /// Per side: mean luma at each of [`CALIBRATION_MA`] with only that side lit (rendered once, on first use).
+    calibration: Option<[[f64; CALIBRATION_MA.len()]; 4]>,
 }
 
 impl SimulatedCameraProbe {
     /// A small frame is enough for a mean brightness.
-    pub fn new(width: u32, height: u32) -> Result<Self, CameraProbeError> {
+    pub fn new(width: u32, height: u32, light: LightSource) -> Result<Self, CameraProbeError> {
         Ok(Self {
             renderer: Renderer::new(SensorModel::real(width, height))?,
             frames: 0,
+            light,
+            calibration: None,
         })
+    }
+
+    fn render_luma(&mut self, currents_ma: [f32; 4]) -> Result<f64, CameraProbeError> {
+        // A new noise seed per frame, like a real camera's sensor noise.
+        self.frames += 1;
+        let (frame, _) = self.renderer.render(&Scene::rest(), currents_ma, self.frames)?;
+        mean_luma(&frame).ok_or(CameraProbeError::EmptyFrame)
+    }
+
+    fn calibrated(&mut self) -> Result<[[f64; CALIBRATION_MA.len()]; 4], CameraProbeError> {
+        if let Some(calibration) = self.calibration {
+            return Ok(calibration);
+        }
+        let mut calibration = [[0.0; CALIBRATION_MA.len()]; 4];
+        for side in Side::ALL {
+            for (point, &ma) in calibration[side.index()].iter_mut().zip(&CALIBRATION_MA) {
+                let mut currents = [0.0; 4];
+                currents[side.index()] = ma;
+                *point = self.render_luma(currents)?;
+            }
+        }
+        self.calibration = Some(calibration);
+        Ok(calibration)
     }
 }
 
@@ -61,11 +103,23 @@ impl BrightnessProbe for SimulatedCameraProbe {
         format!("simulated sensor camera {}x{} (nusense-sim)", model.width, model.height)
     }
 
-    fn brightness(&mut self, measured_ma: [f32; 4]) -> Result<f64, CameraProbeError> {
-        // A new noise seed per frame, like a real camera's sensor noise.
-        self.frames += 1;
-        let (frame, _) = self.renderer.render(&Scene::rest(), measured_ma, self.frames)?;
-        mean_luma(&frame).ok_or(CameraProbeError::EmptyFrame)
+    fn brightness(&mut self) -> Result<f64, CameraProbeError> {
+        let currents = (self.light)().ok_or(CameraProbeError::NoLight)?;
+        self.render_luma(currents)
+    }
+
+    fn current_ma(&mut self, side: Side, luma: f64) -> Result<Option<f64>, CameraProbeError> {
+        let curve = self.calibrated()?[side.index()];
+        // Piecewise linear between the calibration points; beyond the last, the last segment extended.
+        let segment = (1..curve.len())
+            .find(|&i| luma <= curve[i])
+            .unwrap_or(curve.len() - 1);
+        let (l0, l1) = (curve[segment - 1], curve[segment]);
+        let (m0, m1) = (f64::from(CALIBRATION_MA[segment - 1]), f64::from(CALIBRATION_MA[segment]));
+        if l1 <= l0 {
+            return Ok(None);
+        }
+        Ok(Some(m0 + (luma - l0) * (m1 - m0) / (l1 - l0)))
     }
 }
 
@@ -96,7 +150,11 @@ impl BrightnessProbe for V4l2CameraProbe {
         format!("camera {}", self.name)
     }
 
-    fn brightness(&mut self, _measured_ma: [f32; 4]) -> Result<f64, CameraProbeError> {
+    fn current_ma(&mut self, _side: Side, _luma: f64) -> Result<Option<f64>, CameraProbeError> {
+        Ok(None)
+    }
+
+    fn brightness(&mut self) -> Result<f64, CameraProbeError> {
         for _ in 0..STALE_FRAMES {
             self.camera.next_frame()?;
         }
@@ -123,10 +181,21 @@ mod tests {
     }
 
     #[test]
-    fn the_simulated_camera_gets_brighter_with_more_current() {
-        let mut probe = SimulatedCameraProbe::new(80, 60).unwrap();
-        let dim = probe.brightness([20.0; 4]).unwrap();
-        let bright = probe.brightness([100.0; 4]).unwrap();
+    fn the_simulated_camera_sees_the_true_light_and_reads_it_back_in_milliamps() {
+        let light = std::sync::Arc::new(std::sync::Mutex::new([20.0f32; 4]));
+        let source = light.clone();
+        let mut probe = SimulatedCameraProbe::new(80, 60, Box::new(move || Some(*source.lock().unwrap()))).unwrap();
+        let dim = probe.brightness().unwrap();
+        *light.lock().unwrap() = [100.0; 4];
+        let bright = probe.brightness().unwrap();
         assert!(bright > dim * 1.2, "dim {dim}, bright {bright}");
+        for (side, ma) in [(Side::Top, 100.0f32), (Side::Left, 60.0), (Side::Bottom, 110.0)] {
+            let mut currents = [0.0; 4];
+            currents[side.index()] = ma;
+            *light.lock().unwrap() = currents;
+            let luma = probe.brightness().unwrap();
+            let estimate = probe.current_ma(side, luma).unwrap().unwrap();
+            assert!((estimate - f64::from(ma)).abs() < 0.05 * f64::from(ma), "{side}: {ma} mA read back as {estimate}");
+        }
     }
 }

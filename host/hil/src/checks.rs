@@ -7,7 +7,7 @@ use nusense_protocol::{Channel, DeviceError, Side, Status, Telemetry, CHANNEL_CO
 use serde_json::{json, Value};
 
 use super::camera::BrightnessProbe;
-use super::{CheckResult, HilOptions, HilReport, RunningTarget, Verdict};
+use super::{BoardClock, CheckResult, HilOptions, HilReport, RunningTarget, Verdict};
 use nusense_board::{BoardLink, LinkError};
 use nusense_estimator::stats::{mean, pearson, quantile, std_dev};
 
@@ -37,8 +37,13 @@ struct Session<'a> {
     /// The board's state before the suite touched it, restored at the end.
     initial: Option<Status>,
     max_current_ma: Option<u16>,
+    /// The board's total current budget (`DeviceInfo::max_total_current_ma`).
+    max_total_current_ma: Option<u16>,
     /// Attempts the last (re)open of the link took.
     open_attempts: u32,
+    clock: BoardClock,
+    /// Board time over wall time, measured by the telemetry check (1 for a board on a crystal).
+    board_clock_ratio: Option<f64>,
 }
 
 /// Opens `port` with the handshake, retrying until `options.connect_timeout`; returns the link and the number
@@ -86,7 +91,10 @@ pub fn run_suite(
         link: None,
         initial: None,
         max_current_ma: None,
+        max_total_current_ma: None,
         open_attempts: 0,
+        clock: target.clock,
+        board_clock_ratio: None,
     };
     let camera_name = target.camera.as_ref().map(|c| c.describe());
     let camera = target.camera.as_deref_mut();
@@ -120,16 +128,27 @@ pub fn run_suite(
     let outcome = led_ramp(&mut session);
     record("led_ramp", started, outcome, &mut session);
 
-    let started = Instant::now();
-    let outcome = match camera {
-        Some(camera) => brightness_follows_current(&mut session, camera),
-        None => Ok((
+    let mut camera = camera;
+    let no_camera = || {
+        Ok((
             Verdict::Skip,
             "no camera attached (pass --camera DEV)".into(),
             Value::Null,
-        )),
+        ))
+    };
+    let started = Instant::now();
+    let outcome = match camera.as_deref_mut() {
+        Some(camera) => brightness_follows_current(&mut session, camera),
+        None => no_camera(),
     };
     record("camera_brightness", started, outcome, &mut session);
+
+    let started = Instant::now();
+    let outcome = match camera.as_deref_mut() {
+        Some(camera) => camera_confirms_each_current(&mut session, camera),
+        None => no_camera(),
+    };
+    record("camera_current", started, outcome, &mut session);
 
     let started = Instant::now();
     let outcome = telemetry_rate_and_jitter(&mut session);
@@ -193,6 +212,7 @@ fn handshake_and_versions(session: &mut Session) -> Outcome {
         .collect();
     session.initial = Some(status);
     session.max_current_ma = Some(info.max_current_ma);
+    session.max_total_current_ma = Some(info.max_total_current_ma);
     let details = json!({
         "handshake_ms": handshake_ms,
         "open_attempts": attempts,
@@ -239,10 +259,6 @@ impl Settled {
             .iter()
             .map(|m| (m - f64::from(self.target_ma)).abs() / f64::from(self.target_ma.max(1)))
             .fold(0.0, f64::max)
-    }
-
-    fn mean_f32(&self) -> [f32; CHANNEL_COUNT] {
-        self.mean_ma.map(|m| m as f32)
     }
 
     fn to_json(&self) -> Value {
@@ -369,7 +385,7 @@ fn brightness_follows_current(session: &mut Session, camera: &mut dyn Brightness
     let mut steps = Vec::new();
     for &setpoint in &session.options.setpoints_ma.clone() {
         let settled = set_and_settle(session, setpoint, setpoint)?;
-        let level = camera.brightness(settled.mean_f32())?;
+        let level = camera.brightness()?;
         let mean_current = settled.mean_ma.iter().sum::<f64>() / CHANNEL_COUNT as f64;
         currents.push(mean_current);
         brightness.push(level);
@@ -395,6 +411,104 @@ fn brightness_follows_current(session: &mut Session, camera: &mut dyn Brightness
     Ok((if passed { Verdict::Pass } else { Verdict::Fail }, summary, details))
 }
 
+/// How far the camera's reading of one string may be from what the board reports (a calibrated camera), or one
+/// side's brightness per reported mA from the others' (an uncalibrated one).
+const CAMERA_CURRENT_TOLERANCE: f64 = 0.10;
+
+/// Lights one string alone at `ma` and returns the current the board reports for it once settled.
+fn light_one_side(session: &mut Session, side: Side, ma: u16) -> Result<f64, CheckError> {
+    let options = session.options;
+    let deadline_after = Duration::from_millis(session.ramp_ms()) + options.settle_timeout;
+    let link = session.link()?;
+    for other in Side::ALL {
+        link.set_led(Channel::One(other), ma, other == side)?;
+    }
+    link.stream_telemetry(options.telemetry_period_ms)?;
+    link.drain_telemetry().for_each(drop);
+    let requested_at = Instant::now();
+    let mut settled: Vec<f64> = Vec::new();
+    let mut run = 0;
+    while requested_at.elapsed() < deadline_after && settled.len() < options.settled_frames {
+        let Some(telemetry) = link.next_telemetry(TELEMETRY_POLL)? else {
+            continue;
+        };
+        let reported = f64::from(telemetry.channels[side.index()].measured_ma);
+        let others_dark = Side::ALL
+            .iter()
+            .filter(|&&s| s != side)
+            .all(|s| telemetry.channels[s.index()].measured_ma < 1.0);
+        if run >= SETTLED_RUN {
+            settled.push(reported);
+        } else if others_dark && (reported - f64::from(ma)).abs() <= options.current_tolerance * f64::from(ma) {
+            run += 1;
+        } else {
+            run = 0;
+        }
+    }
+    mean(&settled).ok_or(CheckError::NoTelemetry(deadline_after))
+}
+
+/// Each string alone, measured from outside the board: the camera's brightness turned into milliamps by its
+/// calibration (or, for an uncalibrated camera, compared across the sides) must agree with the current the board
+/// reports. A board whose sense path or telemetry is wrong regulates the wrong current and says it is right;
+/// here it fails.
+fn camera_confirms_each_current(session: &mut Session, camera: &mut dyn BrightnessProbe) -> Outcome {
+    let setpoint = NOMINAL_MA;
+    let link = session.link()?;
+    link.set_led(Channel::All, setpoint, false)?;
+    std::thread::sleep(Duration::from_millis(session.ramp_ms().max(50)));
+    let dark = camera.brightness()?;
+    let mut steps = Vec::new();
+    let mut problems = Vec::new();
+    let mut per_ma = Vec::new();
+    for side in Side::ALL {
+        let reported = light_one_side(session, side, setpoint)?;
+        let luma = camera.brightness()?;
+        let seen = camera.current_ma(side, luma)?;
+        if let Some(seen) = seen {
+            if (seen - reported).abs() > CAMERA_CURRENT_TOLERANCE * reported.max(1.0) {
+                problems.push(format!("{side}: the board reports {reported:.1} mA, the camera sees {seen:.1} mA"));
+            }
+        }
+        per_ma.push((luma - dark) / reported.max(1.0));
+        steps.push(json!({ "side": side.to_string(), "reported_ma": reported, "mean_luma": luma, "camera_ma": seen }));
+    }
+    let calibrated = steps.iter().all(|s| !s["camera_ma"].is_null());
+    if !calibrated {
+        // Without a calibration in mA, each side's light per reported mA must match the others'.
+        let mut sorted = per_ma.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = (sorted[1] + sorted[2]) / 2.0;
+        for (side, k) in Side::ALL.iter().zip(&per_ma) {
+            if median <= 0.0 || (k - median).abs() > CAMERA_CURRENT_TOLERANCE * median {
+                problems.push(format!("{side}: {k:.3} luma per reported mA, the sides' median {median:.3}"));
+            }
+        }
+    }
+    let details = json!({
+        "camera": camera.describe(),
+        "setpoint_ma": setpoint,
+        "dark_luma": dark,
+        "calibrated_in_ma": calibrated,
+        "tolerance_percent": CAMERA_CURRENT_TOLERANCE * 100.0,
+        "sides": steps,
+    });
+    if problems.is_empty() {
+        let summary = if calibrated {
+            let readings: Vec<String> = steps
+                .iter()
+                .map(|s| format!("{} {:.1}/{:.1}", s["side"].as_str().unwrap_or("?"), s["reported_ma"].as_f64().unwrap_or(0.0), s["camera_ma"].as_f64().unwrap_or(0.0)))
+                .collect();
+            format!("each string alone, reported/camera mA: {} (within {:.0} %)", readings.join(", "), CAMERA_CURRENT_TOLERANCE * 100.0)
+        } else {
+            "each string alone gives the same light per reported mA as the others (uncalibrated camera)".into()
+        };
+        Ok((Verdict::Pass, summary, details))
+    } else {
+        Ok((Verdict::Fail, problems.join("; "), details))
+    }
+}
+
 fn telemetry_rate_and_jitter(session: &mut Session) -> Outcome {
     let options = session.options;
     let period_ms = f64::from(options.telemetry_period_ms);
@@ -406,10 +520,12 @@ fn telemetry_rate_and_jitter(session: &mut Session) -> Outcome {
     let started = Instant::now();
     let mut arrivals = Vec::new();
     let mut uptimes = Vec::new();
+    let mut loop_timings = Vec::new();
     while started.elapsed() < options.telemetry_window {
         if let Some(telemetry) = link.next_telemetry(TELEMETRY_POLL)? {
             arrivals.push(started.elapsed().as_secs_f64() * 1e3);
             uptimes.push(telemetry.uptime_us);
+            loop_timings.push(telemetry.loop_timing);
         }
     }
     let window_ms = started.elapsed().as_secs_f64() * 1e3;
@@ -435,12 +551,28 @@ fn telemetry_rate_and_jitter(session: &mut Session) -> Outcome {
     let host_span_ms = arrivals[arrivals.len() - 1] - arrivals[0];
     let board_clock_ratio = (host_span_ms > 0.0).then(|| board_span_ms / host_span_ms);
     let missed = board_intervals.iter().filter(|&&i| i > 1.5 * period_ms).count();
+    session.board_clock_ratio = board_clock_ratio;
+    // The control loop's own period over the window, as the board measured it (board clock).
+    let steps: u64 = loop_timings.iter().map(|t| u64::from(t.steps)).sum();
+    let loop_summary = if steps == 0 {
+        Value::Null
+    } else {
+        let mean = loop_timings.iter().map(|t| f64::from(t.period_mean_us) * f64::from(t.steps)).sum::<f64>() / steps as f64;
+        json!({
+            "steps": steps,
+            "period_mean_us": mean,
+            "period_min_us": loop_timings.iter().filter(|t| t.steps > 0).map(|t| t.period_min_us).min(),
+            "period_max_us": loop_timings.iter().map(|t| t.period_max_us).max(),
+        })
+    };
     let rate_ok = |rate: f64| (rate - requested_hz).abs() <= options.rate_tolerance * requested_hz;
     let mut problems = Vec::new();
     if !rate_ok(board_rate_hz) {
         problems.push(format!("board sends at {board_rate_hz:.1} Hz"));
     }
-    if !rate_ok(host_rate_hz) {
+    // An emulator's clock runs as fast as the host lets it: its rate is judged on its own clock (above) and the
+    // slowdown reported; a real board must also deliver in wall time.
+    if session.clock == BoardClock::WallClock && !rate_ok(host_rate_hz) {
         let clock = match board_clock_ratio {
             Some(ratio) if (ratio - 1.0).abs() > options.rate_tolerance => {
                 format!(" (the board's clock ran at {ratio:.2}x wall time)")
@@ -466,12 +598,25 @@ fn telemetry_rate_and_jitter(session: &mut Session) -> Outcome {
         "host_interval_max_ms": host_intervals.iter().copied().fold(0.0, f64::max),
         "missed_intervals": missed,
         "board_clock_ratio": board_clock_ratio,
+        "judged_on": match session.clock {
+            BoardClock::WallClock => "wall clock",
+            BoardClock::Emulated => "board clock (emulated)",
+        },
         "rate_tolerance_percent": options.rate_tolerance * 100.0,
         "max_jitter_ms": options.max_jitter_fraction * period_ms,
+        "control_loop": loop_summary,
     });
+    let clock = match (session.clock, board_clock_ratio) {
+        (BoardClock::Emulated, Some(ratio)) => format!(" (judged on the board's clock, which ran at {ratio:.2}x wall time)"),
+        _ => String::new(),
+    };
+    let loop_text = match (loop_summary["period_mean_us"].as_f64(), loop_summary["period_min_us"].as_u64(), loop_summary["period_max_us"].as_u64()) {
+        (Some(mean), Some(min), Some(max)) => format!("; control loop {mean:.1} us ({min}-{max} us)"),
+        _ => String::new(),
+    };
     let summary = format!(
-        "{requested_hz:.0} Hz requested: board {board_rate_hz:.1} Hz, host {host_rate_hz:.1} Hz; jitter board \
-         std {board_jitter_std:.3} ms p99 {board_p99_dev:.3} ms, host std {host_jitter_std:.2} ms p99 {host_p99_dev:.2} ms"
+        "{requested_hz:.0} Hz requested: board {board_rate_hz:.1} Hz, host {host_rate_hz:.1} Hz{clock}; jitter board \
+         std {board_jitter_std:.3} ms p99 {board_p99_dev:.3} ms, host std {host_jitter_std:.2} ms p99 {host_p99_dev:.2} ms{loop_text}"
     );
     if problems.is_empty() {
         Ok((Verdict::Pass, summary, details))
@@ -512,25 +657,42 @@ fn round_trip_latency(session: &mut Session) -> Outcome {
         "max_p99_ms": options.max_p99_latency_ms,
         "link_retries": stats.retries,
         "link_timeouts": stats.timeouts,
+        "board_clock_ratio": session.board_clock_ratio,
     });
     let fmt = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.3}"));
+    // Under emulation the round trip is judged in the board's time: wall time scaled by how fast its clock ran
+    // (measured by the telemetry check), so a starved emulator is not mistaken for a slow firmware.
+    let scale = match (session.clock, session.board_clock_ratio) {
+        (BoardClock::Emulated, Some(ratio)) if ratio > 0.0 => ratio.min(1.0),
+        _ => 1.0,
+    };
+    let judged_p99 = p99.map(|p| p * scale);
+    let clock = if scale < 1.0 {
+        format!(" (p99 {} ms in board time, clock at {scale:.2}x wall time)", fmt(judged_p99))
+    } else {
+        String::new()
+    };
     let summary = format!(
-        "{} pings: p50 {} ms, p90 {} ms, p99 {} ms, max {} ms, {errors} unanswered",
+        "{} pings: p50 {} ms, p90 {} ms, p99 {} ms, max {} ms, {errors} unanswered{clock}",
         options.pings,
         fmt(p50),
         fmt(p90),
         fmt(p99),
         fmt(max)
     );
-    let passed = errors == 0 && p99.is_some_and(|p| p <= options.max_p99_latency_ms);
+    let passed = errors == 0 && judged_p99.is_some_and(|p| p <= options.max_p99_latency_ms);
     Ok((if passed { Verdict::Pass } else { Verdict::Fail }, summary, details))
 }
 
 fn over_limit_is_clamped(session: &mut Session) -> Outcome {
     let options = session.options;
-    let limit = options
+    let per_string_limit = options
         .hard_limit_ma
         .min(session.max_current_ma.unwrap_or(options.hard_limit_ma));
+    // Four strings at their limit would exceed the board's USB budget, which scales them down together.
+    let budget_share = session.max_total_current_ma.map_or(u16::MAX, |total| total / CHANNEL_COUNT as u16);
+    let limit = per_string_limit;
+    let settles_at = per_string_limit.min(budget_share);
     let request = options.over_limit_request_ma;
     let link = session.link()?;
     match link.set_led(Channel::All, request, true) {
@@ -547,7 +709,7 @@ fn over_limit_is_clamped(session: &mut Session) -> Outcome {
     }
     let status = link.status()?;
     let reported: Vec<u16> = status.channels.iter().map(|c| c.setpoint_ma).collect();
-    let settled = set_and_settle(session, request, limit)?;
+    let settled = set_and_settle(session, request, settles_at)?;
     let peak = settled.mean_ma.iter().copied().fold(0.0, f64::max);
     let mut problems = Vec::new();
     if reported.iter().any(|&s| s > limit) {
@@ -562,6 +724,7 @@ fn over_limit_is_clamped(session: &mut Session) -> Outcome {
     let details = json!({
         "request_ma": request,
         "limit_ma": limit,
+        "budget_share_ma": budget_share,
         "reported_setpoint_ma": reported,
         "settled": settled.to_json(),
     });
@@ -569,7 +732,8 @@ fn over_limit_is_clamped(session: &mut Session) -> Outcome {
     session.link()?.set_led(Channel::All, NOMINAL_MA, true)?;
     if problems.is_empty() {
         let summary = format!(
-            "{request} mA requested: setpoints {reported:?} mA, strings settle at {peak:.1} mA (limit {limit} mA)"
+            "{request} mA requested: setpoints {reported:?} mA, strings settle at {peak:.1} mA (limit {limit} mA, \
+             {settles_at} mA each within the board's total budget)"
         );
         Ok((Verdict::Pass, summary, details))
     } else {

@@ -44,7 +44,7 @@ pub enum EmulatorError {
         #[source]
         source: std::io::Error,
     },
-    #[error("QEMU did not report its serial pty within {waited:?}; it said:\n{output}")]
+    #[error("QEMU did not report the ptys of both serial ports (board link, true currents) within {waited:?}; it said:\n{output}")]
     NoPty { waited: Duration, output: String },
 }
 
@@ -156,10 +156,13 @@ impl Default for QemuOptions {
     }
 }
 
-/// A running emulated board. Its USART1 is the pty at [`Self::pty_path`]; dropping it stops QEMU.
+/// A running emulated board. Its USART1 (the board's link) is the pty at [`Self::pty_path`], its USART2 (the
+/// simulated strings' true currents, see [`crate::light::LightMeter`]) the one at [`Self::light_pty_path`];
+/// dropping it stops QEMU.
 pub struct QemuBoard {
     child: Child,
     pty_path: String,
+    light_pty_path: String,
     output: Arc<Mutex<Vec<String>>>,
 }
 
@@ -177,6 +180,8 @@ impl QemuBoard {
                 "none",
                 "-serial",
                 "pty",
+                "-serial",
+                "pty",
                 "-kernel",
             ])
             .arg(&image.elf)
@@ -192,7 +197,7 @@ impl QemuBoard {
         // QEMU announces the pty on stderr (some versions on stdout); both are drained for the emulator's whole
         // life so that it never blocks on a full pipe.
         let output = Arc::new(Mutex::new(Vec::new()));
-        let (found_tx, found_rx) = mpsc::channel::<String>();
+        let (found_tx, found_rx) = mpsc::channel::<(String, String)>();
         if let Some(stderr) = child.stderr.take() {
             drain(stderr, output.clone(), found_tx.clone());
         }
@@ -203,14 +208,22 @@ impl QemuBoard {
         let mut board = Self {
             child,
             pty_path: String::new(),
+            light_pty_path: String::new(),
             output,
         };
-        match found_rx.recv_timeout(options.start_timeout) {
-            Ok(path) => {
-                board.pty_path = path;
-                Ok(board)
+        let deadline = std::time::Instant::now() + options.start_timeout;
+        while board.pty_path.is_empty() || board.light_pty_path.is_empty() {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match found_rx.recv_timeout(left) {
+                Ok((path, label)) if label == "serial0" => board.pty_path = path,
+                Ok((path, label)) if label == "serial1" => board.light_pty_path = path,
+                Ok(_) => {}
+                Err(_) => break,
             }
-            Err(_) => {
+        }
+        match (board.pty_path.is_empty(), board.light_pty_path.is_empty()) {
+            (false, false) => Ok(board),
+            _ => {
                 // QEMU may have exited with an error message; give the drain threads a moment to collect it.
                 let _ = board.child.kill();
                 let _ = board.child.wait();
@@ -227,6 +240,11 @@ impl QemuBoard {
     /// The pty slave QEMU connected to the board's USART1; open it like any serial device.
     pub fn pty_path(&self) -> &str {
         &self.pty_path
+    }
+
+    /// The pty of USART2, where the image reports its simulated strings' true currents.
+    pub fn light_pty_path(&self) -> &str {
+        &self.light_pty_path
     }
 
     /// QEMU's process id.
@@ -259,12 +277,22 @@ pub fn parse_pty_line(line: &str) -> Option<String> {
     path.starts_with("/dev/").then(|| path.to_owned())
 }
 
-fn drain(stream: impl std::io::Read + Send + 'static, output: Arc<Mutex<Vec<String>>>, found: mpsc::Sender<String>) {
+/// The label of such a line (`serial0`, `serial1`, ...).
+fn parse_pty_label(line: &str) -> Option<String> {
+    let rest = &line[line.find("(label ")? + "(label ".len()..];
+    Some(rest.trim_end_matches(')').trim().to_owned())
+}
+
+fn drain(
+    stream: impl std::io::Read + Send + 'static,
+    output: Arc<Mutex<Vec<String>>>,
+    found: mpsc::Sender<(String, String)>,
+) {
     let spawned = std::thread::Builder::new().name("qemu output".into()).spawn(move || {
         for line in BufReader::new(stream).lines() {
             let Ok(line) = line else { break };
-            if let Some(path) = parse_pty_line(&line) {
-                let _ = found.send(path);
+            if let (Some(path), Some(label)) = (parse_pty_line(&line), parse_pty_label(&line)) {
+                let _ = found.send((path, label));
             }
             let mut kept = output.lock().unwrap_or_else(|p| p.into_inner());
             if kept.len() == KEPT_OUTPUT_LINES {
@@ -287,6 +315,10 @@ mod tests {
         assert_eq!(
             parse_pty_line("char device redirected to /dev/pts/7 (label serial0)").as_deref(),
             Some("/dev/pts/7")
+        );
+        assert_eq!(
+            parse_pty_label("char device redirected to /dev/pts/8 (label serial1)").as_deref(),
+            Some("serial1")
         );
         assert_eq!(parse_pty_line("qemu-system-arm: warning: nothing"), None);
         assert_eq!(parse_pty_line("redirected to nowhere"), None);

@@ -1,6 +1,7 @@
 //! Hardware-in-the-loop checks: a board (real, emulated under QEMU, or virtual) is put through the things the
 //! host relies on — handshake and versions, the LED current regulation, camera brightness following the LED
-//! current, telemetry rate and jitter, command round-trip latency, clamping of over-limit requests, and
+//! current, each string's current as the camera sees it (not as the board reports it), telemetry rate and jitter
+//! (on the board's own clock under emulation), command round-trip latency, clamping of over-limit requests, and
 //! recovery after the port is closed and reopened. Each check reports PASS, FAIL or SKIP with its numbers.
 //!
 //! [`target`] starts what is under test (nothing for a real port, a [`nusense_board::virtual_board::VirtualBoard`],
@@ -9,6 +10,7 @@
 pub mod camera;
 mod checks;
 pub mod emulator;
+pub mod light;
 pub mod target;
 
 use std::time::Duration;
@@ -17,7 +19,7 @@ use serde::Serialize;
 
 pub use camera::{BrightnessProbe, CameraProbeError, SimulatedCameraProbe, V4l2CameraProbe};
 pub use checks::run_suite;
-pub use target::{HilTarget, RunningTarget, TargetError};
+pub use target::{BoardClock, HilTarget, RunningTarget, TargetError};
 
 use nusense_board::LinkOptions;
 
@@ -178,10 +180,32 @@ mod tests {
         for check in &report.checks {
             assert_eq!(check.verdict, Verdict::Pass, "{}: {}", check.name, check.summary);
         }
-        assert_eq!(report.checks.len(), 7);
-        assert_eq!(report.summary_line(), "hil: 7 passed, 0 failed");
+        assert_eq!(report.checks.len(), 8);
+        assert_eq!(report.summary_line(), "hil: 8 passed, 0 failed");
         let latency = report.check("latency").unwrap();
         assert!(latency.details["p50_ms"].as_f64().unwrap() > 0.0);
+        let camera = report.check("camera_current").unwrap();
+        assert_eq!(camera.details["calibrated_in_ma"], true);
+        for side in camera.details["sides"].as_array().unwrap() {
+            let (reported, seen) = (side["reported_ma"].as_f64().unwrap(), side["camera_ma"].as_f64().unwrap());
+            assert!((reported - 100.0).abs() < 5.0 && (seen - 100.0).abs() < 5.0, "{side}");
+        }
+    }
+
+    /// A board whose right string's sense path reads 20 % low regulates that string to 125 mA while reporting
+    /// 100 mA: every check that trusts the board passes, the camera does not.
+    #[test]
+    fn a_board_that_misreports_its_current_fails_the_camera_check() {
+        let mut options = nusense_board::virtual_board::VirtualBoardOptions::default();
+        options.plant.sense_gain[nusense_protocol::Side::Right.index()] = 0.8;
+        let mut target = HilTarget::VirtualWith(Box::new(options)).start().unwrap();
+        let report = run_suite(&mut target, &HilOptions::quick(), &mut |_| {});
+        let camera = report.check("camera_current").unwrap();
+        assert_eq!(camera.verdict, Verdict::Fail, "{}", camera.summary);
+        assert!(camera.summary.starts_with("right: the board reports"), "{}", camera.summary);
+        assert_eq!(report.check("led_ramp").unwrap().verdict, Verdict::Pass, "the board's own word is fine");
+        let right = &camera.details["sides"][1];
+        assert!((right["camera_ma"].as_f64().unwrap() - 125.0).abs() < 6.0, "{right}");
     }
 
     #[test]
@@ -194,7 +218,7 @@ mod tests {
         .unwrap();
         let report = run_suite(&mut target, &HilOptions::quick(), &mut |_| {});
         assert_eq!(report.failed, 6, "{report:#?}");
-        assert_eq!(report.skipped, 1);
+        assert_eq!(report.skipped, 2);
         assert!(!report.all_passed());
         assert_eq!(report.summary_line(), "hil: 0 passed, 6 failed");
         assert!(report

@@ -34,7 +34,7 @@ fn every_functional_hil_check_passes_against_the_qemu_firmware_image() {
         .map(|c| format!("{} {}: {}", c.verdict.label(), c.name, c.summary))
         .collect();
     assert!(failed.is_empty(), "{}\n{}", report.summary_line(), failed.join("\n"));
-    assert_eq!(report.checks.len(), 7);
+    assert_eq!(report.checks.len(), 8);
     let telemetry = report.check("telemetry_rate").expect("telemetry check");
     assert!(
         telemetry.details["frames"].as_u64().is_some_and(|n| n > 2),

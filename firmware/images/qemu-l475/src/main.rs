@@ -10,7 +10,9 @@
 //!   when the host goes away, as it does on USB when DTR drops;
 //! - replies and telemetry both leave through blocking writes to USART1 (which QEMU makes immediate): a reply is
 //!   written as soon as its request is handled, never queued behind telemetry, so telemetry cannot crowd it out;
-//! - the regulator runs at 1 kHz (the real board: 2 kHz) on the simulated plant, from SysTick time.
+//! - the regulator runs at 1 kHz (the real board: 2 kHz) on the simulated plant, from SysTick time;
+//! - the plant's true string currents go out on USART2 every 20 ms: what a camera looking at the pad would see,
+//!   independent of what the firmware measures and reports (the host's hil check compares the two).
 #![no_std]
 #![no_main]
 
@@ -34,6 +36,8 @@ const BAUD: u32 = 115_200;
 const CONTROL_PERIOD: Duration = Duration::from_micros(1_000);
 /// Host silence after which the port counts as closed (the host's keepalive comes every second).
 const HOST_SILENCE_LIMIT_US: u64 = 3_000_000;
+/// How often the true string currents go out on USART2 (the "camera's view", see `usart::light`).
+const LIGHT_REPORT_EVERY_STEPS: u32 = 20;
 
 /// There is no factory unique id to read under QEMU (the system memory is not modelled): a fixed one, "QEMU-L475-VG".
 const QEMU_UID: [u8; 12] = *b"QEMU-L475-VG";
@@ -43,6 +47,7 @@ async fn main(_spawner: Spawner) {
     let core = cortex_m::Peripherals::take().unwrap();
     time_driver::start(core.SYST, CORE_CLOCK_HZ);
     usart::init(CORE_CLOCK_HZ, BAUD);
+    usart::light::init(CORE_CLOCK_HZ, BAUD);
 
     let identity = Identity::new(
         env!("CARGO_PKG_VERSION"),
@@ -62,6 +67,7 @@ async fn main(_spawner: Spawner) {
     let mut ticker = Ticker::every(CONTROL_PERIOD);
     let mut last_step = Instant::now();
     let mut rx = [0u8; 64];
+    let mut step: u32 = 0;
     let tx = &mut |frame: &[u8]| usart::write(frame);
     loop {
         match select(ticker.next(), usart::read(&mut rx)).await {
@@ -76,6 +82,10 @@ async fn main(_spawner: Spawner) {
                 let measurements = plant.step(controller.duty(), dt_us);
                 controller.control_step(now_us, &measurements);
                 controller.poll_telemetry(now_us, tx);
+                step = step.wrapping_add(1);
+                if step.is_multiple_of(LIGHT_REPORT_EVERY_STEPS) {
+                    usart::light::report(plant.true_current_ma());
+                }
             }
             Either::Second(n) => {
                 let now_us = Instant::now().as_micros();

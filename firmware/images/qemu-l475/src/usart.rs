@@ -85,3 +85,33 @@ fn USART1() {
         RX_WAKER.wake();
     }
 }
+
+/// USART2 (QEMU's second `-serial`), transmit only: the simulated strings' true currents, the light a camera
+/// would see. The firmware's Controller never reads it; the host's hardware-in-the-loop check compares it with
+/// what the board reports, so an image whose measurements or telemetry went wrong cannot pass on its own word.
+pub mod light {
+    use stm32_metapac::{RCC, USART2};
+
+    pub fn init(kernel_clock_hz: u32, baud: u32) {
+        RCC.apb1enr1().modify(|w| w.set_usart2en(true));
+        USART2.brr().write(|w| w.set_brr((kernel_clock_hz / baud) as u16));
+        USART2.cr1().write(|w| {
+            w.set_te(true);
+            w.set_ue(true);
+        });
+    }
+
+    /// One line: `L` and the four currents in microamps, Top Right Bottom Left.
+    pub fn report(currents_ma: [f32; 4]) {
+        let mut line: heapless::String<64> = heapless::String::new();
+        let _ = line.push('L');
+        for current in currents_ma {
+            let _ = core::fmt::Write::write_fmt(&mut line, format_args!(" {}", (current.max(0.0) * 1000.0) as u32));
+        }
+        let _ = line.push('\n');
+        for &b in line.as_bytes() {
+            while !USART2.isr().read().txe() {}
+            USART2.tdr().write(|w| w.set_dr(u16::from(b)));
+        }
+    }
+}
