@@ -69,6 +69,15 @@ fn print_report(report: &Report) {
     println!("  temperature       {:.1} °C", status.temperature_c);
     println!("  supply            {} mV", status.supply_mv);
     println!("  ramp              {} ms", status.ramp_ms);
+    println!(
+        "  USB power         {:?}, LED budget {} mA in total (at most {} mA)",
+        status.power, status.current_budget_ma, info.max_total_current_ma
+    );
+    let timing = status.loop_timing;
+    println!(
+        "  control loop      {:.1} us mean, {}-{} us over the last {} steps",
+        timing.period_mean_us, timing.period_min_us, timing.period_max_us, timing.steps
+    );
     let period = status.telemetry_period_ms;
     println!(
         "  telemetry         {}",
@@ -106,9 +115,17 @@ fn print_report(report: &Report) {
         board.frames_ok, board.bad_cobs, board.bad_crc, board.oversize, board.unknown_tag
     );
     println!(
-        "  host received     {} frames ok; dropped {} bad COBS, {} bad CRC, {} oversize, {} undecodable; {} stale replies, {} retries",
-        host.wire.frames_ok, host.wire.bad_cobs, host.wire.bad_crc, host.wire.oversize, host.wire.unknown_tag,
-        host.stale_replies, host.retries
+        "  host received     {} frames ok; dropped {} bad COBS, {} bad CRC, {} oversize, {} undecodable; {} stale \
+         replies, {} unexpected replies, {} timeouts, {} retries",
+        host.wire.frames_ok,
+        host.wire.bad_cobs,
+        host.wire.bad_crc,
+        host.wire.oversize,
+        host.wire.unknown_tag,
+        host.stale_replies,
+        host.unexpected_replies,
+        host.timeouts,
+        host.retries
     );
 }
 
