@@ -4,8 +4,8 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use nusense_protocol::framing::{self, FrameDecoder, MAX_FRAME_LEN};
 use nusense_firmware_core::link::HOST_KEEPALIVE_MS;
+use nusense_protocol::framing::{self, FrameDecoder, MAX_FRAME_LEN};
 use nusense_protocol::{
     BoardMessage, Channel, DeviceError, DeviceInfo, LinkCounters, Reply, Request, RequestBody, Seq, Status, Telemetry,
     PROTOCOL_VERSION, SAVE_CONFIG_REPLY_WITHIN_MS, SCHEMA_FINGERPRINT,
@@ -392,7 +392,10 @@ fn new_request_id() -> u32 {
         .duration_since(std::time::UNIX_EPOCH)
         .map(|elapsed| elapsed.as_nanos() as u32)
         .unwrap_or(0);
-    nanos ^ COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed).rotate_left(16)
+    nanos
+        ^ COUNTER
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+            .rotate_left(16)
 }
 
 /// A sequence number that differs between sessions (low bits of the clock), so a reply meant for a previous

@@ -610,7 +610,9 @@ fn a_board_of_the_same_version_with_other_message_types_is_refused_naming_both()
         }),
         None,
     );
-    let error = BoardLink::over(Box::new(host), quick()).err().expect("a schema mismatch fails the open");
+    let error = BoardLink::over(Box::new(host), quick())
+        .err()
+        .expect("a schema mismatch fails the open");
     assert!(
         matches!(error, LinkError::SchemaMismatch { version, device, host }
             if version == PROTOCOL_VERSION && device == SCHEMA_FINGERPRINT ^ 1 && host == SCHEMA_FINGERPRINT),
@@ -649,10 +651,7 @@ fn every_kind_of_wire_error_is_counted_in_its_own_counter() {
         }),
         None,
     );
-    let options = LinkOptions {
-        retries: 0,
-        ..quick()
-    };
+    let options = LinkOptions { retries: 0, ..quick() };
     let mut link = BoardLink::over(Box::new(host), options).unwrap();
     assert_eq!(link.info().unwrap(), info());
     assert!(matches!(link.status(), Err(LinkError::UnexpectedReply { .. })));
@@ -665,7 +664,12 @@ fn every_kind_of_wire_error_is_counted_in_its_own_counter() {
         "{stats:?}"
     );
     assert_eq!(
-        (stats.stale_replies, stats.unexpected_replies, stats.timeouts, stats.retries),
+        (
+            stats.stale_replies,
+            stats.unexpected_replies,
+            stats.timeouts,
+            stats.retries
+        ),
         (1, 1, 1, 0),
         "{stats:?}"
     );
@@ -688,7 +692,8 @@ fn a_save_waits_for_the_erase_and_its_retry_repeats_the_request_id() {
         None,
     );
     let mut link = BoardLink::over(Box::new(host), quick()).unwrap();
-    link.save_config().expect("a save slower than the ordinary timeout still succeeds");
+    link.save_config()
+        .expect("a save slower than the ordinary timeout still succeeds");
     assert_eq!(link.stats().retries, 0);
 
     // A board that misses the first attempt: the retry comes with the same id, after the long timeout.
@@ -737,7 +742,10 @@ fn a_save_waits_for_the_erase_and_its_retry_repeats_the_request_id() {
 /// still sends a lone 0x00 every second.
 #[test]
 fn a_host_that_only_reads_keeps_the_link_alive() {
-    let (board, host) = FakeBoard::start(Box::new(|request, send| send(&healthy_answer(request))), Some(Duration::from_millis(20)));
+    let (board, host) = FakeBoard::start(
+        Box::new(|request, send| send(&healthy_answer(request))),
+        Some(Duration::from_millis(20)),
+    );
     let mut link = BoardLink::over(Box::new(host), quick()).unwrap();
     let sent_after_open = board.raw.lock().unwrap().len();
     let started = Instant::now();

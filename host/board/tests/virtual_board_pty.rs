@@ -250,7 +250,8 @@ fn wait_for(events: &std::sync::mpsc::Receiver<BoardEvent>, what: impl Fn(&Board
 fn a_reply_survives_a_telemetry_flood() {
     let board = VirtualBoard::spawn_pty().unwrap();
     let mut link = BoardLink::open(board.path(), options()).unwrap();
-    link.stream_telemetry(nusense_firmware_core::limits::MIN_TELEMETRY_PERIOD_MS).unwrap();
+    link.stream_telemetry(nusense_firmware_core::limits::MIN_TELEMETRY_PERIOD_MS)
+        .unwrap();
     let flood = Duration::from_secs(4);
     std::thread::sleep(flood);
     let dropped = board.telemetry_dropped();
@@ -264,10 +265,16 @@ fn a_reply_survives_a_telemetry_flood() {
         nusense_firmware_core::limits::MIN_TELEMETRY_PERIOD_MS,
         stats.retries
     );
-    assert!(dropped > 0, "the flood must overflow the board's telemetry queue to test anything");
+    assert!(
+        dropped > 0,
+        "the flood must overflow the board's telemetry queue to test anything"
+    );
     assert_eq!((stats.retries, stats.timeouts), (0, 0));
     // What was buffered reached the host in order and undamaged; the board's backlog was bounded.
-    assert_eq!(stats.wire.bad_crc + stats.wire.bad_cobs + stats.wire.oversize + stats.wire.unknown_tag, 0);
+    assert_eq!(
+        stats.wire.bad_crc + stats.wire.bad_cobs + stats.wire.oversize + stats.wire.unknown_tag,
+        0
+    );
     assert!(backlog < 4 * 1000 / nusense_firmware_core::limits::MIN_TELEMETRY_PERIOD_MS as usize);
 }
 

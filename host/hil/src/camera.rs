@@ -111,11 +111,12 @@ impl BrightnessProbe for SimulatedCameraProbe {
     fn current_ma(&mut self, side: Side, luma: f64) -> Result<Option<f64>, CameraProbeError> {
         let curve = self.calibrated()?[side.index()];
         // Piecewise linear between the calibration points; beyond the last, the last segment extended.
-        let segment = (1..curve.len())
-            .find(|&i| luma <= curve[i])
-            .unwrap_or(curve.len() - 1);
+        let segment = (1..curve.len()).find(|&i| luma <= curve[i]).unwrap_or(curve.len() - 1);
         let (l0, l1) = (curve[segment - 1], curve[segment]);
-        let (m0, m1) = (f64::from(CALIBRATION_MA[segment - 1]), f64::from(CALIBRATION_MA[segment]));
+        let (m0, m1) = (
+            f64::from(CALIBRATION_MA[segment - 1]),
+            f64::from(CALIBRATION_MA[segment]),
+        );
         if l1 <= l0 {
             return Ok(None);
         }
@@ -195,7 +196,10 @@ mod tests {
             *light.lock().unwrap() = currents;
             let luma = probe.brightness().unwrap();
             let estimate = probe.current_ma(side, luma).unwrap().unwrap();
-            assert!((estimate - f64::from(ma)).abs() < 0.05 * f64::from(ma), "{side}: {ma} mA read back as {estimate}");
+            assert!(
+                (estimate - f64::from(ma)).abs() < 0.05 * f64::from(ma),
+                "{side}: {ma} mA read back as {estimate}"
+            );
         }
     }
 }

@@ -467,7 +467,9 @@ fn camera_confirms_each_current(session: &mut Session, camera: &mut dyn Brightne
         let seen = camera.current_ma(side, luma)?;
         if let Some(seen) = seen {
             if (seen - reported).abs() > CAMERA_CURRENT_TOLERANCE * reported.max(1.0) {
-                problems.push(format!("{side}: the board reports {reported:.1} mA, the camera sees {seen:.1} mA"));
+                problems.push(format!(
+                    "{side}: the board reports {reported:.1} mA, the camera sees {seen:.1} mA"
+                ));
             }
         }
         per_ma.push((luma - dark) / reported.max(1.0));
@@ -481,7 +483,9 @@ fn camera_confirms_each_current(session: &mut Session, camera: &mut dyn Brightne
         let median = (sorted[1] + sorted[2]) / 2.0;
         for (side, k) in Side::ALL.iter().zip(&per_ma) {
             if median <= 0.0 || (k - median).abs() > CAMERA_CURRENT_TOLERANCE * median {
-                problems.push(format!("{side}: {k:.3} luma per reported mA, the sides' median {median:.3}"));
+                problems.push(format!(
+                    "{side}: {k:.3} luma per reported mA, the sides' median {median:.3}"
+                ));
             }
         }
     }
@@ -497,9 +501,20 @@ fn camera_confirms_each_current(session: &mut Session, camera: &mut dyn Brightne
         let summary = if calibrated {
             let readings: Vec<String> = steps
                 .iter()
-                .map(|s| format!("{} {:.1}/{:.1}", s["side"].as_str().unwrap_or("?"), s["reported_ma"].as_f64().unwrap_or(0.0), s["camera_ma"].as_f64().unwrap_or(0.0)))
+                .map(|s| {
+                    format!(
+                        "{} {:.1}/{:.1}",
+                        s["side"].as_str().unwrap_or("?"),
+                        s["reported_ma"].as_f64().unwrap_or(0.0),
+                        s["camera_ma"].as_f64().unwrap_or(0.0)
+                    )
+                })
                 .collect();
-            format!("each string alone, reported/camera mA: {} (within {:.0} %)", readings.join(", "), CAMERA_CURRENT_TOLERANCE * 100.0)
+            format!(
+                "each string alone, reported/camera mA: {} (within {:.0} %)",
+                readings.join(", "),
+                CAMERA_CURRENT_TOLERANCE * 100.0
+            )
         } else {
             "each string alone gives the same light per reported mA as the others (uncalibrated camera)".into()
         };
@@ -557,7 +572,11 @@ fn telemetry_rate_and_jitter(session: &mut Session) -> Outcome {
     let loop_summary = if steps == 0 {
         Value::Null
     } else {
-        let mean = loop_timings.iter().map(|t| f64::from(t.period_mean_us) * f64::from(t.steps)).sum::<f64>() / steps as f64;
+        let mean = loop_timings
+            .iter()
+            .map(|t| f64::from(t.period_mean_us) * f64::from(t.steps))
+            .sum::<f64>()
+            / steps as f64;
         json!({
             "steps": steps,
             "period_mean_us": mean,
@@ -607,10 +626,16 @@ fn telemetry_rate_and_jitter(session: &mut Session) -> Outcome {
         "control_loop": loop_summary,
     });
     let clock = match (session.clock, board_clock_ratio) {
-        (BoardClock::Emulated, Some(ratio)) => format!(" (judged on the board's clock, which ran at {ratio:.2}x wall time)"),
+        (BoardClock::Emulated, Some(ratio)) => {
+            format!(" (judged on the board's clock, which ran at {ratio:.2}x wall time)")
+        }
         _ => String::new(),
     };
-    let loop_text = match (loop_summary["period_mean_us"].as_f64(), loop_summary["period_min_us"].as_u64(), loop_summary["period_max_us"].as_u64()) {
+    let loop_text = match (
+        loop_summary["period_mean_us"].as_f64(),
+        loop_summary["period_min_us"].as_u64(),
+        loop_summary["period_max_us"].as_u64(),
+    ) {
         (Some(mean), Some(min), Some(max)) => format!("; control loop {mean:.1} us ({min}-{max} us)"),
         _ => String::new(),
     };
@@ -668,7 +693,10 @@ fn round_trip_latency(session: &mut Session) -> Outcome {
     };
     let judged_p99 = p99.map(|p| p * scale);
     let clock = if scale < 1.0 {
-        format!(" (p99 {} ms in board time, clock at {scale:.2}x wall time)", fmt(judged_p99))
+        format!(
+            " (p99 {} ms in board time, clock at {scale:.2}x wall time)",
+            fmt(judged_p99)
+        )
     } else {
         String::new()
     };
@@ -690,7 +718,9 @@ fn over_limit_is_clamped(session: &mut Session) -> Outcome {
         .hard_limit_ma
         .min(session.max_current_ma.unwrap_or(options.hard_limit_ma));
     // Four strings at their limit would exceed the board's USB budget, which scales them down together.
-    let budget_share = session.max_total_current_ma.map_or(u16::MAX, |total| total / CHANNEL_COUNT as u16);
+    let budget_share = session
+        .max_total_current_ma
+        .map_or(u16::MAX, |total| total / CHANNEL_COUNT as u16);
     let limit = per_string_limit;
     let settles_at = per_string_limit.min(budget_share);
     let request = options.over_limit_request_ma;

@@ -187,7 +187,10 @@ mod tests {
         let camera = report.check("camera_current").unwrap();
         assert_eq!(camera.details["calibrated_in_ma"], true);
         for side in camera.details["sides"].as_array().unwrap() {
-            let (reported, seen) = (side["reported_ma"].as_f64().unwrap(), side["camera_ma"].as_f64().unwrap());
+            let (reported, seen) = (
+                side["reported_ma"].as_f64().unwrap(),
+                side["camera_ma"].as_f64().unwrap(),
+            );
             assert!((reported - 100.0).abs() < 5.0 && (seen - 100.0).abs() < 5.0, "{side}");
         }
     }
@@ -202,8 +205,16 @@ mod tests {
         let report = run_suite(&mut target, &HilOptions::quick(), &mut |_| {});
         let camera = report.check("camera_current").unwrap();
         assert_eq!(camera.verdict, Verdict::Fail, "{}", camera.summary);
-        assert!(camera.summary.starts_with("right: the board reports"), "{}", camera.summary);
-        assert_eq!(report.check("led_ramp").unwrap().verdict, Verdict::Pass, "the board's own word is fine");
+        assert!(
+            camera.summary.starts_with("right: the board reports"),
+            "{}",
+            camera.summary
+        );
+        assert_eq!(
+            report.check("led_ramp").unwrap().verdict,
+            Verdict::Pass,
+            "the board's own word is fine"
+        );
         let right = &camera.details["sides"][1];
         assert!((right["camera_ma"].as_f64().unwrap() - 125.0).abs() < 6.0, "{right}");
     }

@@ -87,7 +87,10 @@ mod tests {
 
     #[test]
     fn light_lines_are_parsed_in_milliamps() {
-        assert_eq!(parse_light_line("L 100123 99876 100001 0\n"), Some([100.123, 99.876, 100.001, 0.0]));
+        assert_eq!(
+            parse_light_line("L 100123 99876 100001 0\n"),
+            Some([100.123, 99.876, 100.001, 0.0])
+        );
         assert_eq!(parse_light_line("L 1 2 3"), None);
         assert_eq!(parse_light_line("L 1 2 3 4 5"), None);
         assert_eq!(parse_light_line("X 1 2 3 4"), None);
