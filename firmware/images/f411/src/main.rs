@@ -255,6 +255,9 @@ async fn serve_host_to_board(
     loop {
         receiver.wait_connection().await;
         defmt::info!("USB link up");
+        // DTR as it stands now; later changes come through `follow_dtr`.
+        let present = receiver.dtr();
+        with_controller(|c| c.set_host_present(present));
         let _: Result<(), EndpointError> = async {
             let mut packet = [0u8; USB_PACKET as usize];
             loop {
@@ -301,6 +304,8 @@ async fn serve_host_to_board(
         }
         .await;
         defmt::info!("USB link down");
+        // Unplugged or reset: no host until the next configuration and DTR.
+        with_controller(|c| c.set_host_present(false));
     }
 }
 
