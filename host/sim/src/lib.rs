@@ -14,6 +14,7 @@
 //! ```
 
 pub mod dataset;
+pub mod layer;
 pub mod mechanics;
 pub mod model;
 pub mod render;
