@@ -62,6 +62,9 @@ pub struct LayeredPad {
     pub grid_step_mm: f64,
     /// Refractive index of the elastomer between the pattern and the plate (parallax and refraction).
     pub refractive_index: f64,
+    /// The rigid plate the camera looks through.
+    pub plate_thickness_mm: f64,
+    pub plate_refractive_index: f64,
 }
 
 impl LayeredPad {
@@ -94,6 +97,9 @@ impl LayeredPad {
             border_margin_mm: 4.0,
             grid_step_mm: 0.25,
             refractive_index: 1.41,
+            // Plexiglass (PMMA).
+            plate_thickness_mm: 3.0,
+            plate_refractive_index: 1.49,
         }
     }
 
@@ -146,6 +152,16 @@ impl LayeredPad {
                 "refractive_index (>= 1)",
                 self.refractive_index,
                 self.refractive_index >= 1.0,
+            ),
+            (
+                "plate_thickness_mm (>= 0)",
+                self.plate_thickness_mm,
+                self.plate_thickness_mm >= 0.0,
+            ),
+            (
+                "plate_refractive_index (>= 1)",
+                self.plate_refractive_index,
+                self.plate_refractive_index >= 1.0,
             ),
         ];
         checks
@@ -797,7 +813,7 @@ mod tests {
             pattern_depth_mm: depth,
             border_margin_mm: margin,
             grid_step_mm: step,
-            refractive_index: 1.41,
+            ..LayeredPad::nusense()
         };
         let spectral = SpectralPad::new(&pad, [26.5, 20.0], depth);
         (pad, spectral)

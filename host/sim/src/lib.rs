@@ -15,6 +15,7 @@
 
 pub mod dataset;
 pub mod layer;
+pub mod lens;
 pub mod mechanics;
 pub mod model;
 pub mod render;
@@ -23,7 +24,7 @@ pub mod script;
 pub mod sweep;
 pub mod truth;
 
-pub use model::{ModelError, SensorModel, NOMINAL_LED_CURRENT_MA};
+pub use model::{Glare, Mechanics, ModelError, PadPose, SensorModel, NOMINAL_LED_CURRENT_MA};
 pub use render::{RenderError, Renderer};
 pub use scene::{Contact, Damage, Indenter, Occlusion, Scene, SceneError, SceneFile, SensorOverrides};
 pub use truth::{ContactTruth, CornerTruth, GroundTruth};

@@ -329,7 +329,8 @@ impl LoadedPad {
 #[derive(Clone, Debug)]
 pub struct DisplacementMesh {
     pub origin_mm: [f64; 2],
-    pub step_mm: f64,
+    /// Node spacing along x and y.
+    pub step_mm: [f64; 2],
     pub nx: usize,
     pub ny: usize,
     /// Row-major (x fastest), in mm.
@@ -351,7 +352,7 @@ impl DisplacementMesh {
         }
         Self {
             origin_mm: min,
-            step_mm,
+            step_mm: [step_mm, step_mm],
             nx,
             ny,
             values,
@@ -361,8 +362,8 @@ impl DisplacementMesh {
     /// Bilinear interpolation; zero outside the mesh (the field has decayed there).
     #[inline]
     pub fn at(&self, p: [f32; 2]) -> [f32; 2] {
-        let fx = (p[0] - self.origin_mm[0] as f32) / self.step_mm as f32;
-        let fy = (p[1] - self.origin_mm[1] as f32) / self.step_mm as f32;
+        let fx = (p[0] - self.origin_mm[0] as f32) / self.step_mm[0] as f32;
+        let fy = (p[1] - self.origin_mm[1] as f32) / self.step_mm[1] as f32;
         if !(fx >= 0.0 && fy >= 0.0) {
             return [0.0, 0.0];
         }
@@ -393,8 +394,8 @@ impl DisplacementMesh {
         for j in 0..self.ny {
             for i in 0..self.nx {
                 let q = [
-                    (self.origin_mm[0] + i as f64 * self.step_mm) as f32,
-                    (self.origin_mm[1] + j as f64 * self.step_mm) as f32,
+                    (self.origin_mm[0] + i as f64 * self.step_mm[0]) as f32,
+                    (self.origin_mm[1] + j as f64 * self.step_mm[1]) as f32,
                 ];
                 let mut v = self.values[j * self.nx + i].map(|c| -c);
                 for _ in 0..4 {

@@ -5,9 +5,12 @@
 //! of physical constants.
 
 use nusense_geometry::camera::FisheyeIntrinsics;
-use nusense_geometry::{CameraError, FisheyeCamera, PadGeometry};
+use nusense_geometry::{CameraError, PadGeometry};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
+
+use crate::layer::LayeredPad;
+use crate::lens::{Camera, Lens};
 
 /// LED current at which the pad looks like the real frames (each of the four sides).
 pub const NOMINAL_LED_CURRENT_MA: f32 = 100.0;
@@ -74,6 +77,15 @@ impl PadPose {
         }
     }
 
+    /// The validation sensor's pose: tilted about all three axes and off-centre the other way from the real one.
+    pub fn validation() -> Self {
+        Self {
+            distance_mm: 74.0,
+            shift_mm: [-1.4, 0.4],
+            rotation_deg: [-3.2, 2.4, -1.5],
+        }
+    }
+
     /// Rotation matrix (row-major) taking pad axes to camera axes.
     pub fn rotation(&self) -> [[f64; 3]; 3] {
         let [ax, ay, az] = self.rotation_deg.map(f64::to_radians);
@@ -126,6 +138,30 @@ impl Material {
     pub fn shear_modulus_n_per_mm2(&self) -> f64 {
         self.shear_modulus_kpa * 1e-3
     }
+}
+
+/// How the pad deforms under a load.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Mechanics {
+    /// An elastic half-space observed at the pattern's depth (Boussinesq and Cerruti), fitted to the real pair;
+    /// the camera sees the pattern directly (no refraction, no parallax).
+    HalfSpace(Material),
+    /// Layers bonded to a rigid plate in a frame ([`crate::layer`]); the camera looks through the plate and the
+    /// gel below the pattern, so it sees refraction and the parallax of the pattern's motion into the pad.
+    Layered(LayeredPad),
+}
+
+/// A bright reflection fixed in the image (an LED seen in the glass), added to what the pad shows.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Glare {
+    /// Centre as a fraction of the frame's width and height.
+    pub centre: [f64; 2],
+    /// Gaussian radius (1 sigma) as a fraction of the frame's width.
+    pub radius: f64,
+    /// Peak in 8-bit levels at nominal LED current (scales with the mean LED current).
+    pub level: f32,
 }
 
 /// The pad's look at nominal illumination (the real frames' LED currents), RGB in 0..255.
@@ -186,9 +222,9 @@ pub struct SensorModel {
     pub pad: PadGeometry,
     pub width: u32,
     pub height: u32,
-    pub intrinsics: FisheyeIntrinsics,
+    pub lens: Lens,
     pub pose: PadPose,
-    pub material: Material,
+    pub mechanics: Mechanics,
     pub colours: PadColours,
     /// Side of each cell's coloured square as a fraction of the cell pitch (the rest is the line between cells).
     pub yellow_fill: f64,
@@ -205,6 +241,12 @@ pub struct SensorModel {
     pub vignetting: f32,
     /// Standard deviation of per-pixel noise, in 8-bit levels.
     pub noise_sigma: f32,
+    /// Shot noise: variance added per level of signal (photon counting), in 8-bit levels.
+    #[serde(default)]
+    pub shot_noise: f32,
+    /// Reflections fixed in the image.
+    #[serde(default)]
+    pub glare: Vec<Glare>,
     /// Optical blur (Gaussian sigma) in px of this frame size.
     pub blur_px: f32,
     /// Encode and decode every frame as JPEG at this quality, as a webcam's MJPEG stream would.
@@ -221,9 +263,11 @@ impl SensorModel {
             pad: PadGeometry::default(),
             width,
             height,
-            intrinsics: FisheyeIntrinsics::paper(2048, 1536).scaled_to(width.max(1), height.max(1)),
+            lens: Lens::KannalaBrandt(
+                FisheyeIntrinsics::paper(2048, 1536).scaled_to(width.max(1), height.max(1)),
+            ),
             pose: PadPose::real(),
-            material: Material::real(),
+            mechanics: Mechanics::HalfSpace(Material::real()),
             colours: PadColours::real(),
             yellow_fill: REAL_YELLOW_FILL,
             rim_width_mm: 3.0,
@@ -234,6 +278,8 @@ impl SensorModel {
             vignetting: 0.25,
             // About what the real frames show in flat yellow areas at 2048 px; JPEG adds its own.
             noise_sigma: 2.0,
+            shot_noise: 0.0,
+            glare: Vec::new(),
             // About 2 px of defocus at 2048 px wide, scaled to this frame.
             blur_px: (2.0 * scale).max(0.3) as f32,
             jpeg_quality: None,
@@ -241,15 +287,69 @@ impl SensorModel {
         }
     }
 
-    pub fn camera(&self) -> Result<FisheyeCamera, ModelError> {
-        if self.intrinsics.width != self.width || self.intrinsics.height != self.height {
+    /// The validation sensor: the same pad seen by another camera, built to share none of the estimator's
+    /// assumptions: an equisolid, decentred lens with an off-centre principal point; the pad tilted and shifted
+    /// differently; the pad as layers bonded to a plate in a frame (refraction through the plate and gel, and the
+    /// parallax of the pattern's motion towards the camera); two glare spots; stronger vignetting; shot noise; JPEG
+    /// at quality 85 as a webcam's MJPEG stream.
+    pub fn validation(width: u32, height: u32) -> Self {
+        let real = Self::real(width, height);
+        Self {
+            lens: Lens::Equisolid(crate::lens::EquisolidLens::decentred(width.max(1), height.max(1))),
+            pose: PadPose::validation(),
+            mechanics: Mechanics::Layered(LayeredPad::nusense()),
+            vignetting: 0.4,
+            noise_sigma: 1.5,
+            shot_noise: 0.05,
+            glare: vec![
+                Glare {
+                    centre: [0.3, 0.22],
+                    radius: 0.03,
+                    level: 60.0,
+                },
+                Glare {
+                    centre: [0.74, 0.8],
+                    radius: 0.02,
+                    level: 90.0,
+                },
+            ],
+            jpeg_quality: Some(85),
+            texture_seed: 0x7661_6c69_6461_7465,
+            ..real
+        }
+    }
+
+    pub fn camera(&self) -> Result<Camera, ModelError> {
+        let (width, height) = self.lens.size();
+        if (width, height) != (self.width, self.height) {
             return Err(ModelError::BadValue {
-                field: "intrinsics.width/height",
+                field: "lens.width/height",
                 expected: "equal to the model's width and height",
-                value: f64::from(self.intrinsics.width),
+                value: f64::from(width),
             });
         }
-        Ok(FisheyeCamera::new(self.intrinsics)?)
+        Ok(Camera::new(&self.lens)?)
+    }
+
+    /// The material whose modulus sets an indenter's contact radius (Hertz): the half-space, or the stack's softest
+    /// layer.
+    pub fn contact_material(&self) -> Material {
+        match &self.mechanics {
+            Mechanics::HalfSpace(material) => *material,
+            Mechanics::Layered(pad) => {
+                let soft = pad.softest().copied().unwrap_or(crate::layer::ElasticLayer {
+                    thickness_mm: 1.0,
+                    shear_modulus_kpa: 1.0,
+                    poisson_ratio: 0.5,
+                });
+                Material {
+                    // Quadrature fine enough for the pattern's depth and the solver's grid.
+                    layer_depth_mm: pad.pattern_depth_mm.min(2.0 * pad.grid_step_mm),
+                    shear_modulus_kpa: soft.shear_modulus_kpa,
+                    poisson_ratio: soft.poisson_ratio,
+                }
+            }
+        }
     }
 
     pub fn validate(&self) -> Result<(), ModelError> {
@@ -296,15 +396,43 @@ impl SensorModel {
                 });
             }
         }
-        positive("material.layer_depth_mm", self.material.layer_depth_mm)?;
-        positive("material.shear_modulus_kpa", self.material.shear_modulus_kpa)?;
-        let nu = self.material.poisson_ratio;
-        if !(nu.is_finite() && (0.0..=0.5).contains(&nu)) {
-            return Err(ModelError::BadValue {
-                field: "material.poisson_ratio",
-                expected: "between 0 and 0.5",
-                value: nu,
-            });
+        match &self.mechanics {
+            Mechanics::HalfSpace(material) => {
+                positive("material.layer_depth_mm", material.layer_depth_mm)?;
+                positive("material.shear_modulus_kpa", material.shear_modulus_kpa)?;
+                let nu = material.poisson_ratio;
+                if !(nu.is_finite() && (0.0..=0.5).contains(&nu)) {
+                    return Err(ModelError::BadValue {
+                        field: "material.poisson_ratio",
+                        expected: "between 0 and 0.5",
+                        value: nu,
+                    });
+                }
+            }
+            Mechanics::Layered(pad) => {
+                if let Some((field, value)) = pad.problem() {
+                    return Err(ModelError::BadValue {
+                        field,
+                        expected: "see the field's name",
+                        value,
+                    });
+                }
+            }
+        }
+        non_negative("shot_noise", f64::from(self.shot_noise))?;
+        for glare in &self.glare {
+            let ok = glare.centre.iter().all(|v| v.is_finite())
+                && glare.radius.is_finite()
+                && glare.radius > 0.0
+                && glare.level.is_finite()
+                && glare.level >= 0.0;
+            if !ok {
+                return Err(ModelError::BadValue {
+                    field: "glare",
+                    expected: "finite centres, radius > 0, level >= 0",
+                    value: glare.radius,
+                });
+            }
         }
         if !(self.yellow_fill.is_finite() && self.yellow_fill > 0.0 && self.yellow_fill <= 1.0) {
             return Err(ModelError::BadValue {
@@ -365,6 +493,23 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_validation_sensor_frames_the_whole_pattern_like_the_real_one() {
+        for (w, h) in [(640, 480), (2048, 1536)] {
+            let m = SensorModel::validation(w, h);
+            m.validate().unwrap();
+            let r = crate::Renderer::new(SensorModel { width: w, height: h, ..m }).unwrap();
+            let px = |p: [f64; 2]| r.pad_mm_to_raw_px(p).unwrap();
+            let (sx, sy) = (f64::from(w) / 2048.0, f64::from(h) / 1536.0);
+            let (left, right, top, bottom) = (px([-26.5, 0.0]), px([26.5, 0.0]), px([0.0, -20.0]), px([0.0, 20.0]));
+            println!("{w}x{h}: left {left:?} right {right:?} top {top:?} bottom {bottom:?}");
+            // Inside the frame with a margin, and about as large as in the real frames (1390 x 1060 px at 2048).
+            assert!(left[0] > 150.0 * sx && right[0] < 1900.0 * sx, "{left:?} {right:?}");
+            assert!(top[1] > 100.0 * sy && bottom[1] < 1430.0 * sy, "{top:?} {bottom:?}");
+            assert!(((right[0] - left[0]) / sx - 1390.0).abs() < 200.0);
+        }
+    }
+
+    #[test]
     fn real_model_is_valid_at_common_sizes() {
         for (w, h) in [(2048, 1536), (640, 480), (320, 240), (1280, 720)] {
             SensorModel::real(w, h).validate().unwrap();
@@ -374,7 +519,10 @@ mod tests {
     #[test]
     fn invalid_models_are_typed_errors() {
         let mut m = SensorModel::real(640, 480);
-        m.material.poisson_ratio = 0.7;
+        m.mechanics = Mechanics::HalfSpace(Material {
+            poisson_ratio: 0.7,
+            ..Material::real()
+        });
         assert!(matches!(
             m.validate(),
             Err(ModelError::BadValue {

@@ -330,14 +330,16 @@ impl SensorOverrides {
                 *axis += extra;
             }
         }
-        if let Some(v) = self.layer_depth_mm {
-            model.material.layer_depth_mm = v;
-        }
-        if let Some(v) = self.shear_modulus_kpa {
-            model.material.shear_modulus_kpa = v;
-        }
-        if let Some(v) = self.poisson_ratio {
-            model.material.poisson_ratio = v;
+        if let crate::model::Mechanics::HalfSpace(material) = &mut model.mechanics {
+            if let Some(v) = self.layer_depth_mm {
+                material.layer_depth_mm = v;
+            }
+            if let Some(v) = self.shear_modulus_kpa {
+                material.shear_modulus_kpa = v;
+            }
+            if let Some(v) = self.poisson_ratio {
+                material.poisson_ratio = v;
+            }
         }
         model
     }

@@ -17,6 +17,8 @@ pub struct ContactTruth {
     pub torsion_nmm: f64,
     /// Radius of the loaded area (sphere: Hertz radius at this force; punch: its radius; edge: half its width).
     pub contact_radius_mm: f64,
+    /// The loaded area (disc, or the edge's strip), mm^2.
+    pub area_mm2: f64,
     /// The edge's direction in pad mm, in [0, 180), for edge contacts.
     pub edge_angle_deg: Option<f64>,
     /// The same direction as it appears in the raw frame around the contact centre, in [0, 180).
@@ -43,7 +45,13 @@ pub struct GroundTruth {
     /// Top, Right, Bottom, Left.
     pub led_currents_ma: [f32; 4],
     pub contacts: Vec<ContactTruth>,
+    /// Sum of the contacts' normal forces, N.
     pub total_force_n: f64,
+    /// Sum of the contacts' forces [fx, fy, fz] in the pad frame (x right, y down, z into the pad), N.
+    pub force_vector_n: [f64; 3],
+    /// Moment of the contacts' forces about the pad's normal through the pad centre (twists included), N mm,
+    /// positive from +x towards +y.
+    pub torque_nmm: f64,
     /// Row-major over the pad's interior corners (`PadGeometry::corner_slot` order).
     pub corners: Vec<CornerTruth>,
 }
