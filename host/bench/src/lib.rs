@@ -9,6 +9,7 @@
 
 pub mod metrics;
 pub mod report;
+pub mod validation;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -31,6 +32,8 @@ pub enum BenchError {
     Model(#[from] nusense_sim::ModelError),
     #[error("rendering a sweep frame: {0}")]
     Render(#[from] nusense_sim::RenderError),
+    #[error(transparent)]
+    Validation(#[from] nusense_sim::validation::ValidationError),
     #[error("variant {variant}: the estimator cannot use the simulated rest frame: {source}")]
     Reference {
         variant: String,
@@ -106,6 +109,8 @@ pub struct BenchOptions {
     pub real_dir: Option<PathBuf>,
     pub variants: Vec<Variant>,
     pub seed: u64,
+    /// Issue 12's figures for every estimator mode on the validation set of this profile; `None` skips them.
+    pub validation: Option<nusense_sim::validation::Profile>,
 }
 
 impl BenchOptions {
@@ -118,6 +123,7 @@ impl BenchOptions {
             real_dir: None,
             variants: standard_variants(),
             seed: 7,
+            validation: Some(nusense_sim::validation::Profile::Full),
         }
     }
 
@@ -127,6 +133,7 @@ impl BenchOptions {
             full_size: (FULL_SIZE.0 / 2, FULL_SIZE.1 / 2),
             sweep_stride: 4,
             timing_repeats: 1,
+            validation: Some(nusense_sim::validation::Profile::Quick),
             ..Self::full()
         }
     }
@@ -182,6 +189,7 @@ pub struct BenchReport {
     pub sweep_frames: usize,
     pub timing_repeats: usize,
     pub results: Vec<VariantResult>,
+    pub validation: Option<validation::ValidationReport>,
     pub machine: report::Machine,
 }
 
@@ -314,7 +322,17 @@ pub fn run_bench(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Resu
             };
         }
     }
+    let validation = match options.validation {
+        Some(profile) => Some(validation::run_validation(
+            profile,
+            options.seed,
+            &validation::estimator_modes(),
+            progress,
+        )?),
+        None => None,
+    };
     Ok(BenchReport {
+        validation,
         baseline: options.variants.first().map(|v| v.name.clone()).unwrap_or_default(),
         full_size: options.full_size,
         sweep_frames: datasets.first().map_or(0, Dataset::len),

@@ -1,5 +1,5 @@
-//! The benchmark's outputs: a markdown table, the Pareto front of time against error as SVG (written by hand:
-//! a handful of points and lines needs no plotting library), and the machine it ran on.
+//! The benchmark's outputs: markdown tables (the paper's sweeps per variant, the validation set per mode), the
+//! Pareto plot of time against error (plotters), and the machine it ran on.
 
 use std::fmt::Write as _;
 
@@ -163,6 +163,9 @@ pub fn markdown(report: &BenchReport) -> String {
         "\nPareto front (median time against localisation RMSE): {}.",
         front.join(", ")
     );
+    if let Some(validation) = &report.validation {
+        out.push_str(&validation_markdown(validation));
+    }
     out
 }
 
@@ -185,158 +188,189 @@ pub fn pareto_front(results: &[VariantResult]) -> Vec<&VariantResult> {
     front.into_iter().map(|(r, _, _)| r).collect()
 }
 
-/// Time (log axis) against localisation RMSE; the Pareto front joined by a line.
+/// Time (log axis) against localisation RMSE, drawn with plotters: every variant of the sweeps and every mode on
+/// the validation set, the sweeps' Pareto front joined by a line.
 pub fn pareto_svg(report: &BenchReport) -> String {
-    const W: f64 = 760.0;
-    const H: f64 = 480.0;
-    const LEFT: f64 = 70.0;
-    const RIGHT: f64 = 180.0;
-    const TOP: f64 = 40.0;
-    const BOTTOM: f64 = 60.0;
-    let points: Vec<(&VariantResult, f64, f64)> = report
+    use plotters::prelude::*;
+
+    let sweeps: Vec<(String, f64, f64)> = report
         .results
         .iter()
-        .filter_map(|r| Some((r, r.median_ms?, r.localisation_rmse_mm?)))
+        .filter_map(|r| Some((r.variant.name.clone(), r.median_ms?, r.localisation_rmse_mm?)))
         .filter(|(_, t, e)| *t > 0.0 && e.is_finite())
         .collect();
-    let mut svg = String::new();
-    let _ = writeln!(
-        svg,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{H}" viewBox="0 0 {W} {H}" font-family="sans-serif" font-size="12">"#
-    );
-    let _ = writeln!(svg, r#"<rect width="{W}" height="{H}" fill="white"/>"#);
-    let _ = writeln!(
-        svg,
-        r#"<text x="{}" y="22" font-size="15" text-anchor="middle">Estimator variants: median time per frame against localisation RMSE</text>"#,
-        W / 2.0
-    );
-    if points.is_empty() {
-        let _ = writeln!(
-            svg,
-            r#"<text x="{}" y="{}" text-anchor="middle">no variant produced both numbers</text></svg>"#,
-            W / 2.0,
-            H / 2.0
-        );
-        return svg;
-    }
-    let (t_min, t_max) = points
+    let modes: Vec<(String, f64, f64)> = report
+        .validation
         .iter()
-        .fold((f64::MAX, f64::MIN), |(lo, hi), p| (lo.min(p.1), hi.max(p.1)));
-    let e_max = points.iter().map(|p| p.2).fold(0.0, f64::max);
-    let log_lo = (t_min.log10() - 0.15).floor();
-    let log_hi = (t_max.log10() + 0.15).ceil().max(log_lo + 1.0);
-    let e_hi = if e_max > 0.0 { e_max * 1.15 } else { 1.0 };
-    let plot_w = W - LEFT - RIGHT;
-    let plot_h = H - TOP - BOTTOM;
-    let x_of = |t: f64| LEFT + (t.log10() - log_lo) / (log_hi - log_lo) * plot_w;
-    let y_of = |e: f64| TOP + plot_h - e / e_hi * plot_h;
-
-    let _ = writeln!(
-        svg,
-        r##"<rect x="{LEFT}" y="{TOP}" width="{plot_w}" height="{plot_h}" fill="none" stroke="#444"/>"##
-    );
-    let mut decade = log_lo;
-    while decade <= log_hi + 1e-9 {
-        let x = LEFT + (decade - log_lo) / (log_hi - log_lo) * plot_w;
-        let label = 10f64.powf(decade);
-        let _ = writeln!(
-            svg,
-            r##"<line x1="{x:.1}" y1="{TOP}" x2="{x:.1}" y2="{:.1}" stroke="#ddd"/>"##,
-            TOP + plot_h
-        );
-        let _ = writeln!(
-            svg,
-            r#"<text x="{x:.1}" y="{:.1}" text-anchor="middle">{}</text>"#,
-            TOP + plot_h + 18.0,
-            if label < 1.0 {
-                format!("{label}")
-            } else {
-                format!("{label:.0}")
-            }
-        );
-        decade += 1.0;
-    }
-    for k in 0..=4 {
-        let e = e_hi * f64::from(k) / 4.0;
-        let y = y_of(e);
-        let _ = writeln!(
-            svg,
-            r##"<line x1="{LEFT}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#eee"/>"##,
-            LEFT + plot_w
-        );
-        let _ = writeln!(
-            svg,
-            r#"<text x="{:.1}" y="{:.1}" text-anchor="end">{e:.2}</text>"#,
-            LEFT - 6.0,
-            y + 4.0
-        );
-    }
-    let _ = writeln!(
-        svg,
-        r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">median time per frame, ms (log scale)</text>"#,
-        LEFT + plot_w / 2.0,
-        H - 18.0
-    );
-    let _ = writeln!(
-        svg,
-        r#"<text x="18" y="{:.1}" text-anchor="middle" transform="rotate(-90 18 {:.1})">localisation RMSE, mm</text>"#,
-        TOP + plot_h / 2.0,
-        TOP + plot_h / 2.0
-    );
-    let front = pareto_front(&report.results);
-    let line: Vec<String> = front
-        .iter()
-        .filter_map(|r| {
-            Some(format!(
-                "{:.1},{:.1}",
-                x_of(r.median_ms?),
-                y_of(r.localisation_rmse_mm?)
+        .flat_map(|v| &v.modes)
+        .filter_map(|m| {
+            Some((
+                format!("{} (validation)", m.mode),
+                m.median_ms?,
+                m.localisation_rmse_mm?,
             ))
         })
+        .filter(|(_, t, e)| *t > 0.0 && e.is_finite())
         .collect();
-    if line.len() > 1 {
-        let _ = writeln!(
-            svg,
-            r##"<polyline points="{}" fill="none" stroke="#c0392b" stroke-width="2"/>"##,
-            line.join(" ")
-        );
+    let all: Vec<&(String, f64, f64)> = sweeps.iter().chain(&modes).collect();
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (800, 500)).into_drawing_area();
+        let drawn = (|| -> Result<(), Box<dyn std::error::Error + '_>> {
+            root.fill(&WHITE)?;
+            let caption = "Median time per frame against localisation RMSE";
+            if all.is_empty() {
+                root.titled(caption, ("sans-serif", 18))?.draw(&Text::new(
+                    "no variant produced both numbers",
+                    (250, 200),
+                    ("sans-serif", 14),
+                ))?;
+                return Ok(());
+            }
+            let t_min = all.iter().map(|p| p.1).fold(f64::MAX, f64::min);
+            let t_max = all.iter().map(|p| p.1).fold(f64::MIN, f64::max);
+            let e_max = all.iter().map(|p| p.2).fold(0.0, f64::max);
+            let mut chart = ChartBuilder::on(&root)
+                .caption(caption, ("sans-serif", 18))
+                .margin(15)
+                .x_label_area_size(40)
+                .y_label_area_size(55)
+                .build_cartesian_2d((t_min * 0.7..t_max * 1.5).log_scale(), 0.0..(e_max * 1.2).max(1e-3))?;
+            chart
+                .configure_mesh()
+                .x_desc("median time per frame, ms (log scale)")
+                .y_desc("localisation RMSE, mm")
+                .draw()?;
+            let front: Vec<(f64, f64)> = pareto_front(&report.results)
+                .iter()
+                .filter_map(|r| Some((r.median_ms?, r.localisation_rmse_mm?)))
+                .collect();
+            if front.len() > 1 {
+                chart
+                    .draw_series(LineSeries::new(front, RED.stroke_width(2)))?
+                    .label("Pareto front (sweeps)")
+                    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
+            }
+            for (points, colour, label) in [
+                (&sweeps, BLUE, "paper sweeps, real lens"),
+                (&modes, GREEN, "validation set"),
+            ] {
+                chart
+                    .draw_series(points.iter().map(|(name, t, e)| {
+                        EmptyElement::at((*t, *e))
+                            + Circle::new((0, 0), 5, colour.filled())
+                            + Text::new(name.clone(), (8, -12), ("sans-serif", 12))
+                    }))?
+                    .label(label)
+                    .legend(move |(x, y)| Circle::new((x + 10, y), 5, colour.filled()));
+            }
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()?;
+            root.present()?;
+            Ok(())
+        })();
+        if let Err(error) = drawn {
+            drop(root);
+            return format!(
+                "<svg xmlns=\"http://www.w3.org/2000/svg\"><text x=\"10\" y=\"20\">plot failed: {}</text></svg>",
+                escape(&error.to_string())
+            );
+        }
     }
-    for (r, t, e) in &points {
-        let on_front = front.iter().any(|f| std::ptr::eq(*f, *r));
-        let (x, y) = (x_of(*t), y_of(*e));
-        let colour = if on_front { "#c0392b" } else { "#2c3e50" };
-        let _ = writeln!(
-            svg,
-            r#"<circle cx="{x:.1}" cy="{y:.1}" r="5" fill="{colour}"><title>{}: {t:.2} ms, {e:.3} mm</title></circle>"#,
-            escape(&r.variant.name)
-        );
-        let _ = writeln!(
-            svg,
-            r#"<text x="{:.1}" y="{:.1}" fill="{colour}">{}</text>"#,
-            x + 8.0,
-            y - 6.0,
-            escape(&r.variant.name)
-        );
-    }
-    let _ = writeln!(
-        svg,
-        r##"<text x="{:.1}" y="{:.1}" fill="#c0392b">— Pareto front</text>"##,
-        W - RIGHT + 12.0,
-        TOP + 14.0
-    );
-    let _ = writeln!(
-        svg,
-        r##"<text x="{:.1}" y="{:.1}" fill="#555">{}</text>"##,
-        W - RIGHT + 12.0,
-        TOP + 32.0,
-        escape(&report.machine.date_utc)
-    );
-    svg.push_str("</svg>\n");
     svg
 }
 
 fn escape(text: &str) -> String {
     text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+/// Issue 12's table: every estimator mode on the validation set.
+pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
+    let mut out = String::new();
+    let _ =
+        writeln!(
+        out,
+        "\n## Every mode on the validation set (issue 12)\n\n{} frames ({:?} profile, seed {}) from the validation \
+         sensor (`nusense_sim::validation`: equisolid decentred lens, tilted pose, layered pad seen through plate and \
+         gel, glare, vignetting, shot noise, JPEG 85, LED drift); sizes {}. One force calibration per mode, fitted on \
+         the calibration presses only (N modes: one scale; gamma modes: F = a·gamma + b), applied everywhere. Speed: \
+         median/p99 of `estimate` on the main size's frames, speed-up against `{}` in this run. Floor: smallest force \
+         from which every level is detected in >= 90 % of presses. Two contacts: both listed within 3 mm and each \
+         force within 20 %. \"–\": the mode does not report what the figure needs.\n",
+        v.frames,
+        v.profile,
+        v.seed,
+        v.sizes.iter().map(|(w, h)| format!("{w}x{h}")).collect::<Vec<_>>().join(", "),
+        v.baseline
+    );
+    let _ = writeln!(
+        out,
+        "| mode | median ms | p99 ms | speed-up | loc. RMSE mm (misses) | force RMS N | force RMS N, camera moved | floor N | false contacts | edge mean/max deg (misses) | two contacts | tangential dir. mean/max deg | torque RMS N mm | rotation RMS/max deg | damaged found | other sizes loc. mm | refused | calibration |"
+    );
+    let _ = writeln!(out, "|{}", "---|".repeat(18));
+    for m in &v.modes {
+        let _ = writeln!(
+            out,
+            "| {} | {} | {} | {} | {} ({}/{}) | {} | {} | {} | {}/{} | {}/{} ({}/{}) | {} | {}/{} | {} | {}/{} | {}/{} | {} | {}/{} | {} |",
+            m.mode,
+            opt(m.median_ms, 2),
+            opt(m.p99_ms, 2),
+            m.speedup.map_or_else(|| "–".into(), |s| format!("{s:.1}x")),
+            opt(m.localisation_rmse_mm, 2),
+            m.localisation_misses,
+            m.localisation_frames,
+            opt(m.force_rms_n, 2),
+            opt(m.force_rms_with_motion_n, 2),
+            opt(m.detection_floor_n, 2),
+            m.false_contacts,
+            m.rest_frames,
+            opt(m.edge_mae_deg, 1),
+            opt(m.edge_max_deg, 1),
+            m.edge_misses,
+            m.edge_frames,
+            m.two_contacts_ok.map_or_else(|| "–".into(), |n| format!("{n}/{}", m.two_contact_frames)),
+            opt(m.tangential_direction_mae_deg, 1),
+            opt(m.tangential_direction_max_deg, 1),
+            opt(m.torque_rms_nmm, 2),
+            opt(m.camera_rotation_rms_deg, 2),
+            opt(m.camera_rotation_max_deg, 2),
+            m.damaged_detected,
+            m.damaged_frames,
+            opt(m.resolution_rmse_mm, 2),
+            m.refused,
+            m.frames,
+            m.calibration.as_deref().unwrap_or("–"),
+        );
+    }
+    let notes: Vec<String> = v
+        .modes
+        .iter()
+        .filter_map(|m| m.error.as_ref().map(|e| format!("- {}: {e}", m.mode)))
+        .collect();
+    if !notes.is_empty() {
+        let _ = writeln!(out, "\nNotes:\n{}", notes.join("\n"));
+    }
+    let _ = writeln!(
+        out,
+        "\nDetection rate by force: {}",
+        v.modes
+            .iter()
+            .map(|m| format!(
+                "{}: {}",
+                m.mode,
+                m.detection_rates
+                    .iter()
+                    .map(|(f, r)| format!("{f} N {:.0} %", 100.0 * r))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+            .collect::<Vec<_>>()
+            .join("; ")
+    );
+    out
 }
 
 #[cfg(test)]
@@ -374,11 +408,18 @@ mod tests {
             sweep_frames: 3,
             timing_repeats: 1,
             results: vec![result("slow exact", 100.0, 0.1), result("fast <rough>", 1.0, 1.0)],
+            validation: None,
             machine: Machine::this(),
         };
         let svg = pareto_svg(&report);
-        assert_eq!(svg.matches("<circle").count(), 2);
-        assert!(svg.contains("<polyline") && svg.contains("fast &lt;rough&gt;"));
+        // Two blue points and the legend's blue marker (no validation points); the front as a red line.
+        let blue = svg
+            .lines()
+            .filter(|l| l.starts_with("<circle") && l.contains("#0000FF"))
+            .count();
+        assert_eq!(blue, 3, "{svg}");
+        assert!(svg.contains("<polyline") && svg.contains("stroke=\"#FF0000\""), "{svg}");
+        assert!(svg.contains("fast &lt;rough&gt;"), "{svg}");
         assert!(markdown(&report).contains("| fast <rough> | 64x48 |"));
     }
 

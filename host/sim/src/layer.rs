@@ -109,7 +109,9 @@ impl LayeredPad {
 
     /// The layer that carries the contact's shape (the softest: it sets how far a tip sinks in).
     pub fn softest(&self) -> Option<&ElasticLayer> {
-        self.layers.iter().min_by(|a, b| a.shear_modulus_kpa.total_cmp(&b.shear_modulus_kpa))
+        self.layers
+            .iter()
+            .min_by(|a, b| a.shear_modulus_kpa.total_cmp(&b.shear_modulus_kpa))
     }
 
     /// A description of what is wrong, if anything.
@@ -119,7 +121,11 @@ impl LayeredPad {
         }
         for layer in &self.layers {
             let checks = [
-                ("layers.thickness_mm (> 0)", layer.thickness_mm, layer.thickness_mm > 0.0),
+                (
+                    "layers.thickness_mm (> 0)",
+                    layer.thickness_mm,
+                    layer.thickness_mm > 0.0,
+                ),
                 (
                     "layers.shear_modulus_kpa (> 0)",
                     layer.shear_modulus_kpa,
@@ -142,7 +148,11 @@ impl LayeredPad {
                 self.pattern_depth_mm,
                 self.pattern_depth_mm > 0.0 && self.pattern_depth_mm < h,
             ),
-            ("border_margin_mm (>= 0)", self.border_margin_mm, self.border_margin_mm >= 0.0),
+            (
+                "border_margin_mm (>= 0)",
+                self.border_margin_mm,
+                self.border_margin_mm >= 0.0,
+            ),
             (
                 "grid_step_mm (0.05 ..= 2)",
                 self.grid_step_mm,
@@ -884,9 +894,18 @@ mod tests {
                 let (_, mirrored_x) = press.node(nx - 1 - i, j);
                 let (_, mirrored_y) = press.node(i, ny - 1 - j);
                 let tol = 1e-12 * press_peak;
-                assert!((u[0] + mirrored_x[0]).abs() < tol && (u[1] - mirrored_x[1]).abs() < tol, "{at:?}");
-                assert!((u[0] - mirrored_y[0]).abs() < tol && (u[1] + mirrored_y[1]).abs() < tol, "{at:?}");
-                assert!((u[2] - mirrored_x[2]).abs() < tol && (u[2] - mirrored_y[2]).abs() < tol, "{at:?}");
+                assert!(
+                    (u[0] + mirrored_x[0]).abs() < tol && (u[1] - mirrored_x[1]).abs() < tol,
+                    "{at:?}"
+                );
+                assert!(
+                    (u[0] - mirrored_y[0]).abs() < tol && (u[1] + mirrored_y[1]).abs() < tol,
+                    "{at:?}"
+                );
+                assert!(
+                    (u[2] - mirrored_x[2]).abs() < tol && (u[2] - mirrored_y[2]).abs() < tol,
+                    "{at:?}"
+                );
                 // Outward everywhere on the axes.
                 if j == ny / 2 && i > nx / 2 {
                     assert!(u[0] > 0.0 && u[1].abs() < tol, "{at:?} {u:?}");
@@ -952,10 +971,16 @@ mod tests {
             };
             let (a, b) = (pressed.at(p), sum(&normal_only));
             let scale = b[0].hypot(b[1]);
-            assert!((a[0] - b[0]).hypot(a[1] - b[1]) < 0.015 * scale, "press at {p:?}: {a:?} vs {b:?}");
+            assert!(
+                (a[0] - b[0]).hypot(a[1] - b[1]) < 0.015 * scale,
+                "press at {p:?}: {a:?} vs {b:?}"
+            );
             let (a, b) = (sheared.at(p), sum(&shear_only));
             println!("r {r} mm: shear w {:.5} vs {:.5} (half-space)", a[2], b[2]);
-            assert!((a[2] - b[2]).abs() < 0.015 * b[2].abs(), "shear at {p:?}: {a:?} vs {b:?}");
+            assert!(
+                (a[2] - b[2]).abs() < 0.015 * b[2].abs(),
+                "shear at {p:?}: {a:?} vs {b:?}"
+            );
         }
     }
 }

@@ -64,14 +64,21 @@ impl EquisolidLens {
             return None;
         }
         let r = 2.0 * (theta / 2.0).sin();
-        let e = if rho > 0.0 { [r * p[0] / rho, r * p[1] / rho] } else { [0.0, 0.0] };
+        let e = if rho > 0.0 {
+            [r * p[0] / rho, r * p[1] / rho]
+        } else {
+            [0.0, 0.0]
+        };
         let d = self.distort(e);
         Some([self.f_px * d[0] + self.cx, self.f_px * self.aspect * d[1] + self.cy])
     }
 
     /// Normalised pinhole coordinates (x / z, y / z) of the ray through `px`.
     fn unproject(&self, px: Point2) -> Option<Point2> {
-        let target = [(px[0] - self.cx) / self.f_px, (px[1] - self.cy) / (self.f_px * self.aspect)];
+        let target = [
+            (px[0] - self.cx) / self.f_px,
+            (px[1] - self.cy) / (self.f_px * self.aspect),
+        ];
         // Newton on the distortion (a small perturbation of the identity), Jacobian by central differences.
         let mut e = target;
         for _ in 0..20 {
@@ -197,7 +204,10 @@ mod tests {
         for n in [[0.0, 0.0], [0.3, -0.2], [-0.45, 0.35], [0.05, 0.4]] {
             let px = camera.project([n[0] * 50.0, n[1] * 50.0, 50.0]).unwrap();
             let back = camera.raw_to_normalized(px).unwrap();
-            assert!((back[0] - n[0]).abs() < 1e-9 && (back[1] - n[1]).abs() < 1e-9, "{n:?} -> {px:?} -> {back:?}");
+            assert!(
+                (back[0] - n[0]).abs() < 1e-9 && (back[1] - n[1]).abs() < 1e-9,
+                "{n:?} -> {px:?} -> {back:?}"
+            );
         }
         // On the axis: the principal point; a ray at 30 degrees along +x lands at r = 2 f sin(15 deg) (1 - 0.04 r^2)
         // plus the decentring p2 (r^2 + 2 r^2) = 3 p2 r^2 along x and p1 r^2 along y.

@@ -23,6 +23,7 @@ pub mod scene;
 pub mod script;
 pub mod sweep;
 pub mod truth;
+pub mod validation;
 
 pub use model::{Glare, Mechanics, ModelError, PadPose, SensorModel, NOMINAL_LED_CURRENT_MA};
 pub use render::{RenderError, Renderer};

@@ -263,9 +263,7 @@ impl SensorModel {
             pad: PadGeometry::default(),
             width,
             height,
-            lens: Lens::KannalaBrandt(
-                FisheyeIntrinsics::paper(2048, 1536).scaled_to(width.max(1), height.max(1)),
-            ),
+            lens: Lens::KannalaBrandt(FisheyeIntrinsics::paper(2048, 1536).scaled_to(width.max(1), height.max(1))),
             pose: PadPose::real(),
             mechanics: Mechanics::HalfSpace(Material::real()),
             colours: PadColours::real(),
@@ -497,7 +495,12 @@ mod tests {
         for (w, h) in [(640, 480), (2048, 1536)] {
             let m = SensorModel::validation(w, h);
             m.validate().unwrap();
-            let r = crate::Renderer::new(SensorModel { width: w, height: h, ..m }).unwrap();
+            let r = crate::Renderer::new(SensorModel {
+                width: w,
+                height: h,
+                ..m
+            })
+            .unwrap();
             let px = |p: [f64; 2]| r.pad_mm_to_raw_px(p).unwrap();
             let (sx, sy) = (f64::from(w) / 2048.0, f64::from(h) / 1536.0);
             let (left, right, top, bottom) = (px([-26.5, 0.0]), px([26.5, 0.0]), px([0.0, -20.0]), px([0.0, 20.0]));

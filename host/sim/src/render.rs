@@ -410,7 +410,11 @@ impl Renderer {
         }
         let sin_air = 0.5 * (lo + hi);
         let cos_air = (1.0 - sin_air * sin_air).sqrt();
-        let along = if reach > 0.0 { [offset[0] / reach, offset[1] / reach] } else { [0.0, 0.0] };
+        let along = if reach > 0.0 {
+            [offset[0] / reach, offset[1] / reach]
+        } else {
+            [0.0, 0.0]
+        };
         let d_pad = [sin_air * along[0], sin_air * along[1], cos_air];
         let d_cam: [f64; 3] = std::array::from_fn(|i| r[i][0] * d_pad[0] + r[i][1] * d_pad[1] + r[i][2] * d_pad[2]);
         self.camera.project(d_cam)
@@ -428,7 +432,10 @@ impl Renderer {
     /// This renderer with the camera moved against the pad (`pose` replaced): what a camera that crept on its
     /// mount sees. The pad, its texture and its mechanics stay.
     pub fn with_pose(&self, pose: crate::model::PadPose) -> Result<Self, ModelError> {
-        let model = SensorModel { pose, ..self.model.clone() };
+        let model = SensorModel {
+            pose,
+            ..self.model.clone()
+        };
         model.validate()?;
         let (geometry, parallax) = pixel_geometry(&model, &self.camera, self.window.as_ref());
         let light = pixel_light(&model, &geometry);
@@ -703,7 +710,9 @@ impl Renderer {
         let torque_nmm = scene
             .contacts
             .iter()
-            .map(|c| c.torsion_nmm + c.position_mm[0] * c.tangential_force_n[1] - c.position_mm[1] * c.tangential_force_n[0])
+            .map(|c| {
+                c.torsion_nmm + c.position_mm[0] * c.tangential_force_n[1] - c.position_mm[1] * c.tangential_force_n[0]
+            })
             .sum();
         Ok(GroundTruth {
             width: self.model.width,
@@ -725,7 +734,9 @@ fn loaded_area_mm2(indenter: &crate::scene::Indenter, radius_mm: f64) -> f64 {
         crate::scene::Indenter::Sphere { .. } | crate::scene::Indenter::FlatPunch { .. } => {
             std::f64::consts::PI * radius_mm * radius_mm
         }
-        crate::scene::Indenter::Edge { length_mm, width_mm, .. } => length_mm * width_mm,
+        crate::scene::Indenter::Edge {
+            length_mm, width_mm, ..
+        } => length_mm * width_mm,
     }
 }
 
@@ -785,14 +796,15 @@ fn pixel_geometry(
                 }
                 let sideways = d[0].hypot(d[1]);
                 let sin_air = sideways / (sideways * sideways + d[2] * d[2]).sqrt();
-                let along = if sideways > 0.0 { [d[0] / sideways, d[1] / sideways] } else { [0.0, 0.0] };
+                let along = if sideways > 0.0 {
+                    [d[0] / sideways, d[1] / sideways]
+                } else {
+                    [0.0, 0.0]
+                };
                 let travel = window.travel(sin_air, window.gel_mm);
                 let slope = Window::tan_in(sin_air, window.gel_index);
                 Some((
-                    [
-                        c[0] + s * d[0] + travel * along[0],
-                        c[1] + s * d[1] + travel * along[1],
-                    ],
+                    [c[0] + s * d[0] + travel * along[0], c[1] + s * d[1] + travel * along[1]],
                     [slope * along[0], slope * along[1]],
                 ))
             }
@@ -813,7 +825,12 @@ fn pixel_geometry(
         (0..h)
             .flat_map(|j| (0..w).map(move |i| (i, j)))
             .map(|(i, j)| {
-                let corners = [j * (w + 1) + i, j * (w + 1) + i + 1, (j + 1) * (w + 1) + i, (j + 1) * (w + 1) + i + 1];
+                let corners = [
+                    j * (w + 1) + i,
+                    j * (w + 1) + i + 1,
+                    (j + 1) * (w + 1) + i,
+                    (j + 1) * (w + 1) + i + 1,
+                ];
                 let mean = |k: usize| corners.iter().map(|&c| slopes[c][k]).sum::<f64>() / 4.0;
                 [mean(0) as f32, mean(1) as f32]
             })
@@ -897,7 +914,10 @@ fn pixel_light(model: &SensorModel, geometry: &[PixelGeometry]) -> Vec<PixelLigh
             .glare
             .iter()
             .map(|g| {
-                let (gx, gy) = (g.centre[0] * f64::from(model.width), g.centre[1] * f64::from(model.height));
+                let (gx, gy) = (
+                    g.centre[0] * f64::from(model.width),
+                    g.centre[1] * f64::from(model.height),
+                );
                 let sigma = g.radius * f64::from(model.width);
                 f64::from(g.level) / 255.0 * (-((x - gx).powi(2) + (y - gy).powi(2)) / (2.0 * sigma * sigma)).exp()
             })
@@ -1105,7 +1125,10 @@ mod tests {
         );
         // Measured: shifts up to 4.0 px, parallax up to 0.8 px, worst disagreement 0.12 px.
         assert!(largest_shift > 3.0, "{largest_shift}");
-        assert!(parallax_effect > 0.2, "the motion towards the camera shows: {parallax_effect}");
+        assert!(
+            parallax_effect > 0.2,
+            "the motion towards the camera shows: {parallax_effect}"
+        );
         assert!(worst < 0.15, "{worst}");
         // The truth's totals.
         assert_eq!(truth.force_vector_n, [0.0, 0.0, 8.0]);
@@ -1132,7 +1155,8 @@ mod tests {
             ];
             let d = u(p);
             let towards_camera = if parallax { d[2] } else { 0.0 };
-            r.displaced_to_raw_px([p[0] + d[0], p[1] + d[1]], towards_camera).unwrap()
+            r.displaced_to_raw_px([p[0] + d[0], p[1] + d[1]], towards_camera)
+                .unwrap()
         };
         let nodes: Vec<Vec<Point2>> = (0..=N).map(|j| (0..=N).map(|i| node(i, j)).collect()).collect();
         let (mut area, mut cx, mut cy) = (0.0, 0.0, 0.0);

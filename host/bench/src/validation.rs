@@ -1,0 +1,541 @@
+//! Issue 12's figures, for every estimator mode, on the validation set (`nusense_sim::validation`): frames from a
+//! sensor that shares none of the estimator's assumptions.
+//!
+//! Readings are scored through their JSON form (the `analyze --json` contract), field by field: a mode that does
+//! not report a field (today: `force_vector_n`, `contacts`, `camera_motion`, `torque_nmm`) gets "–" for the
+//! figures that need it, and the figures light up as soon as the estimator's `Reading` carries the field.
+
+use std::time::Instant;
+
+use nusense_estimator::calibration::{fit_force_line, CalibrationSample, FitOptions};
+use nusense_estimator::{Estimator, Mode, SensorConfig};
+use nusense_sim::validation::{CaseKind, CaseTruth, Profile, ValidationRenderer, ValidationSet, FLOOR_FORCES_N};
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+use crate::metrics::{distance, edge_angle_error_deg, quantile, rms};
+use crate::BenchError;
+
+/// Every mode the estimator offers. The match is exhaustive on purpose: a new `Mode` does not compile here until
+/// it is listed, so no mode can miss the table.
+pub fn estimator_modes() -> Vec<Mode> {
+    let modes = vec![Mode::Fast, Mode::Paper];
+    for mode in &modes {
+        match mode {
+            Mode::Fast | Mode::Paper => {}
+        }
+    }
+    modes
+}
+
+/// A detection level counts as reliable at this rate (and so must every heavier level).
+pub const RELIABLE_DETECTION: f64 = 0.9;
+/// Two contacts are "both listed" when each true centre has its own reported contact this close.
+pub const TWO_CONTACT_MATCH_MM: f64 = 3.0;
+/// ... and each contact's force is within this fraction of the truth.
+pub const TWO_CONTACT_FORCE_TOLERANCE: f64 = 0.2;
+
+#[derive(Clone, Debug, Default, Deserialize)]
+struct ObservedContact {
+    centre_mm: Option<[f64; 2]>,
+    force_n: Option<f64>,
+}
+
+#[derive(Clone, Debug, Default, Deserialize)]
+struct ObservedMotion {
+    rotation_deg: Option<f64>,
+}
+
+/// What a reading says, read leniently from its JSON so that fields appear as the estimator gains them.
+#[derive(Clone, Debug, Default)]
+struct Observed {
+    contact: bool,
+    contact_mm: Option<[f64; 2]>,
+    gamma: Option<f64>,
+    force_vector_n: Option<[f64; 3]>,
+    torque_nmm: Option<f64>,
+    contacts: Option<Vec<ObservedContact>>,
+    camera_motion: Option<ObservedMotion>,
+    edge_angle_deg: Option<f64>,
+}
+
+fn field<T: DeserializeOwned>(value: &serde_json::Value, name: &str) -> Option<T> {
+    value.get(name).cloned().and_then(|v| serde_json::from_value(v).ok())
+}
+
+impl Observed {
+    fn of(reading: &impl Serialize) -> Self {
+        let Ok(value) = serde_json::to_value(reading) else {
+            return Self::default();
+        };
+        let contacts: Option<Vec<ObservedContact>> = field(&value, "contacts");
+        let contact_mm: Option<[f64; 2]> = field(&value, "contact_mm");
+        // `contact` is a flag today and may become the contact itself: either way, present and not false/null.
+        let flagged = match value.get("contact") {
+            Some(serde_json::Value::Bool(b)) => *b,
+            Some(serde_json::Value::Null) | None => false,
+            Some(_) => true,
+        };
+        Self {
+            contact: flagged || contacts.as_ref().is_some_and(|c| !c.is_empty()),
+            contact_mm,
+            gamma: field(&value, "gamma"),
+            force_vector_n: field(&value, "force_vector_n"),
+            torque_nmm: field(&value, "torque_nmm"),
+            contacts,
+            camera_motion: field(&value, "camera_motion"),
+            edge_angle_deg: field(&value, "edge_angle_deg"),
+        }
+    }
+}
+
+/// One mode's figures on the validation set.
+#[derive(Clone, Debug, Serialize)]
+pub struct ModeFigures {
+    pub mode: Mode,
+    /// Frames measured and frames refused with a typed error.
+    pub frames: usize,
+    pub refused: usize,
+    pub median_ms: Option<f64>,
+    pub p99_ms: Option<f64>,
+    /// Baseline median over this mode's, both on the validation frames of this run.
+    pub speedup: Option<f64>,
+    /// How force is calibrated: "scale" (N from the model, one factor) or "gamma line" (F = a gamma + b).
+    pub calibration: Option<String>,
+    pub localisation_rmse_mm: Option<f64>,
+    pub localisation_misses: usize,
+    pub localisation_frames: usize,
+    /// RMS force error on 1-8 N presses over the whole pad (missed presses count as 0 N), one calibration.
+    pub force_rms_n: Option<f64>,
+    /// The same with the camera-motion presses (rotation up to 5 degrees) included.
+    pub force_rms_with_motion_n: Option<f64>,
+    /// Smallest force from which every lighter-to-heavier level is detected at least RELIABLE_DETECTION of the time.
+    pub detection_floor_n: Option<f64>,
+    /// Detection rate per floor force (FLOOR_FORCES_N).
+    pub detection_rates: Vec<(f64, f64)>,
+    pub false_contacts: usize,
+    pub rest_frames: usize,
+    pub edge_mae_deg: Option<f64>,
+    pub edge_max_deg: Option<f64>,
+    pub edge_misses: usize,
+    pub edge_frames: usize,
+    /// Two presses 10 mm apart: both listed and each force within 20 % (None: the mode lists no contacts).
+    pub two_contacts_ok: Option<usize>,
+    pub two_contact_frames: usize,
+    pub tangential_direction_mae_deg: Option<f64>,
+    pub tangential_direction_max_deg: Option<f64>,
+    pub torque_rms_nmm: Option<f64>,
+    pub camera_rotation_rms_deg: Option<f64>,
+    pub camera_rotation_max_deg: Option<f64>,
+    /// Presses on damaged pads detected, and localisation at other frame sizes.
+    pub damaged_detected: usize,
+    pub damaged_frames: usize,
+    pub resolution_rmse_mm: Option<f64>,
+    pub error: Option<String>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ValidationReport {
+    pub profile: Profile,
+    pub seed: u64,
+    pub frames: usize,
+    pub sizes: Vec<(u32, u32)>,
+    pub baseline: String,
+    pub modes: Vec<ModeFigures>,
+}
+
+struct Scored {
+    kind: CaseKind,
+    truth: CaseTruth,
+    observed: Option<Observed>,
+    elapsed_ms: Option<f64>,
+}
+
+/// Renders the set once, size by size, and runs every mode on each frame as it is made.
+pub fn run_validation(
+    profile: Profile,
+    seed: u64,
+    modes: &[Mode],
+    progress: &mut dyn FnMut(&str),
+) -> Result<ValidationReport, BenchError> {
+    let set = ValidationSet::new(profile, seed);
+    let sizes = set.sizes();
+    let mut scored: Vec<Vec<Scored>> = modes.iter().map(|_| Vec::new()).collect();
+    let mut errors: Vec<Option<String>> = vec![None; modes.len()];
+    for (size_index, &size) in sizes.iter().enumerate() {
+        progress(&format!(
+            "validation: rendering the rest frame at {}x{}",
+            size.0, size.1
+        ));
+        let renderer = ValidationRenderer::new(size)?;
+        let reference = renderer.reference(seed)?;
+        let mut estimators: Vec<Option<Estimator>> = modes
+            .iter()
+            .enumerate()
+            .map(
+                |(m, &mode)| match Estimator::new(SensorConfig::default(), mode, &reference) {
+                    Ok(e) => Some(e),
+                    Err(error) => {
+                        errors[m].get_or_insert_with(|| format!("{}x{} rest frame: {error}", size.0, size.1));
+                        None
+                    }
+                },
+            )
+            .collect();
+        let cases: Vec<_> = set.cases.iter().filter(|c| c.size == size).collect();
+        for (k, case) in cases.iter().enumerate() {
+            progress(&format!(
+                "validation {}x{}: {} ({}/{})",
+                size.0,
+                size.1,
+                case.name,
+                k + 1,
+                cases.len()
+            ));
+            let (frame, truth) = renderer.render(case)?;
+            for (m, estimator) in estimators.iter_mut().enumerate() {
+                let (observed, elapsed_ms) = match estimator {
+                    Some(estimator) => {
+                        let started = Instant::now();
+                        let reading = estimator.estimate(&frame);
+                        let elapsed = started.elapsed().as_secs_f64() * 1e3;
+                        match reading {
+                            Ok(reading) => (Some(Observed::of(&reading)), (size_index == 0).then_some(elapsed)),
+                            Err(_) => (None, None),
+                        }
+                    }
+                    None => (None, None),
+                };
+                scored[m].push(Scored {
+                    kind: case.kind,
+                    truth: truth.clone(),
+                    observed,
+                    elapsed_ms,
+                });
+            }
+        }
+    }
+    let mut figures: Vec<ModeFigures> = modes
+        .iter()
+        .zip(&scored)
+        .zip(errors)
+        .map(|((&mode, scored), error)| ModeFigures {
+            error,
+            ..score(mode, scored)
+        })
+        .collect();
+    let baseline_index = modes.iter().position(|m| *m == Mode::Paper).unwrap_or(0);
+    let baseline = figures.get(baseline_index).and_then(|f| f.median_ms);
+    for f in &mut figures {
+        f.speedup = match (baseline, f.median_ms) {
+            (Some(base), Some(this)) if this > 0.0 => Some(base / this),
+            _ => None,
+        };
+    }
+    Ok(ValidationReport {
+        profile,
+        seed,
+        frames: set.cases.len(),
+        sizes,
+        baseline: modes.get(baseline_index).map(ToString::to_string).unwrap_or_default(),
+        modes: figures,
+    })
+}
+
+/// The strongest true contact's centre.
+fn strongest_centre(truth: &CaseTruth) -> Option<[f64; 2]> {
+    truth
+        .frame
+        .contacts
+        .iter()
+        .max_by(|a, b| a.normal_force_n.total_cmp(&b.normal_force_n))
+        .map(|c| c.centre_mm)
+}
+
+/// The one force calibration, fitted on the calibration cases only.
+enum ForceCalibration {
+    /// The mode reports newtons: one scale factor on fz (least squares through the origin).
+    Scale(f64),
+    /// The mode reports gamma: F = a gamma + b, fitted robustly as `nusense calibrate` does.
+    GammaLine { a: f64, b: f64 },
+}
+
+impl ForceCalibration {
+    fn fit(scored: &[Scored]) -> Option<Self> {
+        let calibration: Vec<(&Observed, f64)> = scored
+            .iter()
+            .filter(|s| s.kind == CaseKind::Calibration)
+            .filter_map(|s| Some((s.observed.as_ref()?, s.truth.frame.force_vector_n[2])))
+            .collect();
+        let newtons: Vec<(f64, f64)> = calibration
+            .iter()
+            .filter_map(|(o, truth)| Some((o.force_vector_n?[2], *truth)))
+            .collect();
+        if newtons.len() >= 3 {
+            let (sxy, sxx) = newtons
+                .iter()
+                .fold((0.0, 0.0), |(sxy, sxx), (x, y)| (sxy + x * y, sxx + x * x));
+            return (sxx > 0.0).then(|| Self::Scale(sxy / sxx));
+        }
+        let samples: Vec<CalibrationSample> = calibration
+            .iter()
+            .filter_map(|(o, truth)| {
+                Some(CalibrationSample {
+                    gamma: o.gamma?,
+                    force_n: *truth,
+                })
+            })
+            .collect();
+        let fit = fit_force_line(&samples, &FitOptions::default()).ok()?;
+        Some(Self::GammaLine { a: fit.a, b: fit.b })
+    }
+
+    fn name(&self) -> String {
+        match self {
+            Self::Scale(s) => format!("scale {s:.3}"),
+            Self::GammaLine { a, b } => format!("gamma line {a:.2} g {b:+.2}"),
+        }
+    }
+
+    /// The calibrated normal force of a reading; no contact reads 0 N, and a force is never negative.
+    fn force_n(&self, o: &Observed) -> Option<f64> {
+        if !o.contact {
+            return Some(0.0);
+        }
+        let f = match self {
+            Self::Scale(s) => o.force_vector_n?[2] * s,
+            Self::GammaLine { a, b } => a * o.gamma? + b,
+        };
+        Some(f.max(0.0))
+    }
+
+    fn scale(&self) -> f64 {
+        match self {
+            Self::Scale(s) => *s,
+            Self::GammaLine { .. } => 1.0,
+        }
+    }
+}
+
+fn angle_between_deg(a: [f64; 2], b: [f64; 2]) -> f64 {
+    let cross = a[0] * b[1] - a[1] * b[0];
+    let dot = a[0] * b[0] + a[1] * b[1];
+    cross.atan2(dot).abs().to_degrees()
+}
+
+fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
+    let of = |kind: CaseKind| scored.iter().filter(move |s| s.kind == kind);
+    let times: Vec<f64> = scored.iter().filter_map(|s| s.elapsed_ms).collect();
+    let calibration = ForceCalibration::fit(scored);
+
+    let mut location_errors = Vec::new();
+    let mut localisation_misses = 0;
+    for s in of(CaseKind::Press) {
+        match (
+            s.observed.as_ref().filter(|o| o.contact).and_then(|o| o.contact_mm),
+            strongest_centre(&s.truth),
+        ) {
+            (Some(found), Some(truth)) => location_errors.push(distance(found, truth)),
+            _ => localisation_misses += 1,
+        }
+    }
+
+    let force_errors = |kinds: &[CaseKind]| -> Option<f64> {
+        let calibration = calibration.as_ref()?;
+        let errors: Vec<f64> = scored
+            .iter()
+            .filter(|s| kinds.contains(&s.kind))
+            .map(|s| {
+                let truth = s.truth.frame.force_vector_n[2];
+                let found = s.observed.as_ref().and_then(|o| calibration.force_n(o)).unwrap_or(0.0);
+                found - truth
+            })
+            .collect();
+        rms(&errors)
+    };
+
+    let detection_rates: Vec<(f64, f64)> = FLOOR_FORCES_N
+        .iter()
+        .map(|&force| {
+            let at: Vec<&Scored> = of(CaseKind::Floor)
+                .filter(|s| (s.truth.frame.force_vector_n[2] - force).abs() < 1e-9)
+                .collect();
+            let found = at
+                .iter()
+                .filter(|s| s.observed.as_ref().is_some_and(|o| o.contact))
+                .count();
+            (force, found as f64 / at.len().max(1) as f64)
+        })
+        .collect();
+    let detection_floor_n = (0..detection_rates.len())
+        .find(|&i| detection_rates[i..].iter().all(|(_, rate)| *rate >= RELIABLE_DETECTION))
+        .map(|i| detection_rates[i].0);
+    let rests: Vec<&Scored> = of(CaseKind::Rest).collect();
+    let false_contacts = rests
+        .iter()
+        .filter(|s| s.observed.as_ref().is_some_and(|o| o.contact))
+        .count();
+
+    let mut edge_errors = Vec::new();
+    let mut edge_misses = 0;
+    for s in of(CaseKind::Edge) {
+        let truth = s.truth.frame.contacts.first().and_then(|c| c.edge_angle_deg);
+        match (s.observed.as_ref().and_then(|o| o.edge_angle_deg), truth) {
+            (Some(found), Some(truth)) => edge_errors.push(edge_angle_error_deg(found, truth)),
+            _ => edge_misses += 1,
+        }
+    }
+
+    let two: Vec<&Scored> = of(CaseKind::TwoContacts).collect();
+    let lists_contacts = scored
+        .iter()
+        .any(|s| s.observed.as_ref().is_some_and(|o| o.contacts.is_some()));
+    let two_contacts_ok = lists_contacts.then(|| {
+        let scale = calibration.as_ref().map_or(1.0, ForceCalibration::scale);
+        two.iter()
+            .filter(|s| {
+                let Some(listed) = s.observed.as_ref().and_then(|o| o.contacts.as_ref()) else {
+                    return false;
+                };
+                let mut used = vec![false; listed.len()];
+                s.truth.frame.contacts.iter().all(|truth| {
+                    let best = listed
+                        .iter()
+                        .enumerate()
+                        .filter(|(i, c)| !used[*i] && c.centre_mm.is_some())
+                        .map(|(i, c)| (i, distance(c.centre_mm.unwrap_or_default(), truth.centre_mm)))
+                        .min_by(|a, b| a.1.total_cmp(&b.1));
+                    match best {
+                        Some((i, d)) if d <= TWO_CONTACT_MATCH_MM => {
+                            used[i] = true;
+                            listed[i].force_n.is_some_and(|f| {
+                                (f * scale - truth.normal_force_n).abs()
+                                    <= TWO_CONTACT_FORCE_TOLERANCE * truth.normal_force_n
+                            })
+                        }
+                        _ => false,
+                    }
+                })
+            })
+            .count()
+    });
+
+    let direction_errors: Vec<f64> = of(CaseKind::Tangential)
+        .filter_map(|s| {
+            let found = s.observed.as_ref()?.force_vector_n?;
+            let truth = s.truth.frame.force_vector_n;
+            Some(angle_between_deg([found[0], found[1]], [truth[0], truth[1]]))
+        })
+        .collect();
+    let direction_count = of(CaseKind::Tangential).count();
+    // Misses count as a full reversal when the mode reports force vectors at all.
+    let direction_errors = if direction_errors.is_empty() {
+        direction_errors
+    } else {
+        let mut all = direction_errors;
+        all.resize(direction_count, 180.0);
+        all
+    };
+
+    let torque_errors: Vec<f64> = of(CaseKind::Twist)
+        .filter_map(|s| {
+            let scale = calibration.as_ref().map_or(1.0, ForceCalibration::scale);
+            Some(s.observed.as_ref()?.torque_nmm? * scale - s.truth.frame.torque_nmm)
+        })
+        .collect();
+
+    let rotation_errors: Vec<f64> = scored
+        .iter()
+        .filter_map(|s| {
+            let (_, image) = s.truth.camera_motion?;
+            let found = s.observed.as_ref()?.camera_motion.as_ref()?.rotation_deg?;
+            Some(found - image.rotation_deg)
+        })
+        .collect();
+
+    let damaged: Vec<&Scored> = of(CaseKind::Damaged).collect();
+    let resolution_errors: Vec<f64> = of(CaseKind::Resolution)
+        .filter_map(|s| {
+            Some(distance(
+                s.observed.as_ref().filter(|o| o.contact)?.contact_mm?,
+                strongest_centre(&s.truth)?,
+            ))
+        })
+        .collect();
+
+    ModeFigures {
+        mode,
+        frames: scored.len(),
+        refused: scored.iter().filter(|s| s.observed.is_none()).count(),
+        median_ms: quantile(&times, 0.5),
+        p99_ms: quantile(&times, 0.99),
+        speedup: None,
+        calibration: calibration.as_ref().map(ForceCalibration::name),
+        localisation_rmse_mm: rms(&location_errors),
+        localisation_misses,
+        localisation_frames: of(CaseKind::Press).count(),
+        force_rms_n: force_errors(&[CaseKind::Press]),
+        force_rms_with_motion_n: force_errors(&[CaseKind::Press, CaseKind::CameraMotion]),
+        detection_floor_n,
+        detection_rates,
+        false_contacts,
+        rest_frames: rests.len(),
+        edge_mae_deg: nusense_estimator::stats::mean(&edge_errors),
+        edge_max_deg: edge_errors.iter().copied().reduce(f64::max),
+        edge_misses,
+        edge_frames: of(CaseKind::Edge).count(),
+        two_contacts_ok,
+        two_contact_frames: two.len(),
+        tangential_direction_mae_deg: nusense_estimator::stats::mean(&direction_errors),
+        tangential_direction_max_deg: direction_errors.iter().copied().reduce(f64::max),
+        torque_rms_nmm: rms(&torque_errors),
+        camera_rotation_rms_deg: rms(&rotation_errors),
+        camera_rotation_max_deg: rotation_errors.iter().map(|e| e.abs()).reduce(f64::max),
+        damaged_detected: damaged
+            .iter()
+            .filter(|s| s.observed.as_ref().is_some_and(|o| o.contact))
+            .count(),
+        damaged_frames: damaged.len(),
+        resolution_rmse_mm: rms(&resolution_errors),
+        error: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn new_reading_fields_are_read_when_present_and_absent_ones_stay_empty() {
+        let today =
+            serde_json::json!({"contact": true, "contact_mm": [1.0, 2.0], "gamma": 0.5, "edge_angle_deg": null});
+        let o = Observed::of(&today);
+        assert!(o.contact && o.contact_mm == Some([1.0, 2.0]) && o.gamma == Some(0.5));
+        assert!(o.force_vector_n.is_none() && o.contacts.is_none() && o.camera_motion.is_none());
+        let tomorrow = serde_json::json!({
+            "contact": null,
+            "contacts": [{"centre_mm": [3.0, 4.0], "centre_px": [1.0, 1.0], "force_n": 2.5, "area_mm2": 9.0}],
+            "force_vector_n": [0.1, -0.2, 2.5],
+            "torque_nmm": 1.5,
+            "camera_motion": {"rotation_deg": 2.0, "shift_px": [1.0, 0.0], "scale": 1.0},
+        });
+        let o = Observed::of(&tomorrow);
+        assert!(o.contact, "a listed contact is a contact");
+        assert_eq!(o.force_vector_n, Some([0.1, -0.2, 2.5]));
+        assert_eq!(o.contacts.as_ref().map(Vec::len), Some(1));
+        assert_eq!(o.camera_motion.and_then(|m| m.rotation_deg), Some(2.0));
+        assert_eq!(o.torque_nmm, Some(1.5));
+    }
+
+    #[test]
+    fn every_mode_is_listed() {
+        assert_eq!(estimator_modes(), [Mode::Fast, Mode::Paper]);
+    }
+
+    #[test]
+    fn direction_errors_are_unsigned_angles() {
+        assert!((angle_between_deg([1.0, 0.0], [0.0, 1.0]) - 90.0).abs() < 1e-12);
+        assert!((angle_between_deg([1.0, 0.0], [-1.0, -1e-12]) - 180.0).abs() < 1e-6);
+        assert!((angle_between_deg([1.0, 1.0], [1.0, 0.9]) - (45.0 - 0.9f64.atan().to_degrees())).abs() < 1e-12);
+    }
+}

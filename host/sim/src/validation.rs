@@ -1,0 +1,538 @@
+//! The validation set of issue 12: frames the estimator has never seen, made by a sensor that shares none of its
+//! assumptions ([`SensorModel::validation`]: another lens and pose, a layered pad solved independently of any
+//! estimator kernel, refraction and parallax, glare, vignetting, shot noise, JPEG), with ground truth for every
+//! frame.
+//!
+//! A [`ValidationSet`] is a list of [`Case`]s, deterministic for a profile and a seed; a [`ValidationRenderer`] per
+//! frame size renders the rest frame every case is measured against and each case's frame with its
+//! [`CaseTruth`]. Cases come in [`CaseKind`]s, one per question the benchmark asks; the calibration cases are
+//! apart, so that a force calibration fitted on them is scored on the others.
+
+use image::RgbImage;
+use nusense_geometry::Point2;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::model::{ModelError, PadPose, SensorModel, NOMINAL_LED_CURRENT_MA};
+use crate::render::{RenderError, Renderer};
+use crate::scene::{Contact, Damage, Scene};
+use crate::truth::GroundTruth;
+
+/// How many frames: `Quick` for tests and CI (1024 x 768, a few per kind), `Full` for the documented numbers
+/// (2048 x 1536, many per kind).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Profile {
+    Quick,
+    Full,
+}
+
+/// What a case asks of the estimator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CaseKind {
+    /// Sphere presses of 1-8 N near the centre: the one force calibration is fitted on these only.
+    Calibration,
+    /// Presses of 1-8 N anywhere on the pad with spheres (3, 5, 8 mm) and flat tips (1.5, 3 mm).
+    Press,
+    /// Light presses (0.2-2 N) at several positions: the detection floor.
+    Floor,
+    /// An edge (20 mm x 1 mm) at many angles.
+    Edge,
+    /// Two spheres 10 mm apart.
+    TwoContacts,
+    /// A press with a tangential push in a random direction.
+    Tangential,
+    /// A press with a twist about the normal and no net tangential force.
+    Twist,
+    /// No contact: LED drift, noise, JPEG, and camera motion up to 5 degrees.
+    Rest,
+    /// Presses seen by a camera rotated up to 5 degrees and shifted against the rest frame.
+    CameraMotion,
+    /// Presses on a pad with ink missing or smeared.
+    Damaged,
+    /// Presses at other frame sizes.
+    Resolution,
+}
+
+impl CaseKind {
+    pub const ALL: [CaseKind; 11] = [
+        CaseKind::Calibration,
+        CaseKind::Press,
+        CaseKind::Floor,
+        CaseKind::Edge,
+        CaseKind::TwoContacts,
+        CaseKind::Tangential,
+        CaseKind::Twist,
+        CaseKind::Rest,
+        CaseKind::CameraMotion,
+        CaseKind::Damaged,
+        CaseKind::Resolution,
+    ];
+}
+
+/// The camera moved against the pad between the rest frame and this frame: added to the pad's pose.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CameraMotion {
+    /// About the camera's x, y and z (optical) axes, degrees.
+    pub rotation_deg: [f64; 3],
+    /// In the pad's plane, mm.
+    pub shift_mm: [f64; 2],
+}
+
+/// The camera's motion as the image shows it: the similarity transform that best maps the rest lattice's raw px
+/// before the motion onto the same material points after it (least squares over the interior corners). The shift
+/// is that of the lattice's centroid; the rotation and scale are about it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ImageMotion {
+    /// From +x towards +y (clockwise on screen), degrees.
+    pub rotation_deg: f64,
+    pub shift_px: [f64; 2],
+    pub scale: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Case {
+    pub name: String,
+    pub kind: CaseKind,
+    pub size: (u32, u32),
+    pub scene: Scene,
+    pub camera_motion: Option<CameraMotion>,
+    /// The LEDs' effective currents for this frame (drift against the rest frame's nominal currents).
+    pub led_currents_ma: [f32; 4],
+    pub seed: u64,
+}
+
+/// Everything true about one case's frame.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CaseTruth {
+    pub frame: GroundTruth,
+    /// The motion given to the camera, and what it does in the image.
+    pub camera_motion: Option<(CameraMotion, ImageMotion)>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ValidationSet {
+    pub profile: Profile,
+    pub seed: u64,
+    pub cases: Vec<Case>,
+}
+
+/// Largest |x| and |y| of a press centre, mm: the whole pattern (53 x 40 mm) less a margin that keeps the largest
+/// tip on the pad.
+const REACH_MM: [f64; 2] = [23.0, 17.0];
+/// LED drift of a frame against its rest frame: each side's output within +-3 % (+-8 % on drift rest frames).
+const DRIFT: f32 = 0.03;
+const REST_DRIFT: f32 = 0.08;
+/// Largest camera rotation about the optical axis, degrees, and tilt about the others.
+const MAX_ROLL_DEG: f64 = 5.0;
+const MAX_TILT_DEG: f64 = 1.0;
+const MAX_CAMERA_SHIFT_MM: f64 = 1.0;
+pub const TWO_CONTACT_SEPARATION_MM: f64 = 10.0;
+/// Forces of the detection-floor cases, N.
+pub const FLOOR_FORCES_N: [f64; 7] = [0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0];
+
+impl ValidationSet {
+    pub fn new(profile: Profile, seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let main = match profile {
+            Profile::Quick => (1024, 768),
+            Profile::Full => (2048, 1536),
+        };
+        let many = |quick: usize, full: usize| if profile == Profile::Quick { quick } else { full };
+        let mut cases: Vec<Case> = Vec::new();
+        let mut push = |rng: &mut ChaCha8Rng, kind: CaseKind, size, scene, camera_motion, drift: f32| {
+            let led_currents_ma =
+                std::array::from_fn(|_| NOMINAL_LED_CURRENT_MA * (1.0 + rng.gen_range(-drift..=drift)));
+            let index = cases.len();
+            cases.push(Case {
+                name: format!("{}_{index:03}", kind_name(kind)),
+                kind,
+                size,
+                scene,
+                camera_motion,
+                led_currents_ma,
+                seed: seed.wrapping_mul(1_000_003).wrapping_add(index as u64 + 1),
+            });
+        };
+        let anywhere = |rng: &mut ChaCha8Rng| {
+            [
+                rng.gen_range(-REACH_MM[0]..=REACH_MM[0]),
+                rng.gen_range(-REACH_MM[1]..=REACH_MM[1]),
+            ]
+        };
+        let any_tip = |rng: &mut ChaCha8Rng, at: Point2, force: f64| match rng.gen_range(0..5) {
+            0 => Contact::sphere(3.0, at, force),
+            1 => Contact::sphere(5.0, at, force),
+            2 => Contact::sphere(8.0, at, force),
+            3 => Contact::flat_punch(1.5, at, force),
+            _ => Contact::flat_punch(3.0, at, force),
+        };
+
+        let forces = many(8, 16);
+        for i in 0..forces {
+            let force = 1.0 + 7.0 * i as f64 / (forces - 1) as f64;
+            let at = [rng.gen_range(-8.0..=8.0), rng.gen_range(-6.0..=6.0)];
+            let scene = Scene::with_contact(Contact::sphere(5.0, at, force));
+            push(&mut rng, CaseKind::Calibration, main, scene, None, 0.0);
+        }
+        for _ in 0..many(24, 80) {
+            let (at, force) = (anywhere(&mut rng), rng.gen_range(1.0..=8.0));
+            let scene = Scene::with_contact(any_tip(&mut rng, at, force));
+            push(&mut rng, CaseKind::Press, main, scene, None, DRIFT);
+        }
+        for force in FLOOR_FORCES_N {
+            for k in 0..many(3, 8) {
+                let at = anywhere(&mut rng);
+                let tip = if k % 2 == 0 {
+                    Contact::sphere(5.0, at, force)
+                } else {
+                    Contact::flat_punch(3.0, at, force)
+                };
+                push(&mut rng, CaseKind::Floor, main, Scene::with_contact(tip), None, DRIFT);
+            }
+        }
+        let edges = many(8, 24);
+        for k in 0..edges {
+            let angle = 180.0 * k as f64 / edges as f64 + rng.gen_range(0.0..180.0 / edges as f64);
+            let at = [rng.gen_range(-12.0..=12.0), rng.gen_range(-8.0..=8.0)];
+            let scene = Scene::with_contact(Contact::edge(20.0, 1.0, angle, at, rng.gen_range(3.0..=8.0)));
+            push(&mut rng, CaseKind::Edge, main, scene, None, DRIFT);
+        }
+        for _ in 0..many(6, 16) {
+            let mid = [rng.gen_range(-14.0..=14.0), rng.gen_range(-9.0..=9.0)];
+            let direction = rng.gen_range(0.0..std::f64::consts::PI);
+            let half = [
+                0.5 * TWO_CONTACT_SEPARATION_MM * direction.cos(),
+                0.5 * TWO_CONTACT_SEPARATION_MM * direction.sin(),
+            ];
+            let a = Contact::sphere(4.0, [mid[0] - half[0], mid[1] - half[1]], rng.gen_range(2.0..=6.0));
+            let b = Contact::sphere(4.0, [mid[0] + half[0], mid[1] + half[1]], rng.gen_range(2.0..=6.0));
+            let scene = Scene {
+                contacts: vec![a, b],
+                ..Scene::default()
+            };
+            push(&mut rng, CaseKind::TwoContacts, main, scene, None, DRIFT);
+        }
+        for _ in 0..many(8, 24) {
+            let at = [rng.gen_range(-15.0..=15.0), rng.gen_range(-10.0..=10.0)];
+            let normal = rng.gen_range(3.0..=6.0);
+            let (magnitude, direction) = (
+                normal * rng.gen_range(0.2..=0.5),
+                rng.gen_range(0.0..std::f64::consts::TAU),
+            );
+            let mut contact = Contact::sphere(5.0, at, normal);
+            contact.tangential_force_n = [magnitude * direction.cos(), magnitude * direction.sin()];
+            push(
+                &mut rng,
+                CaseKind::Tangential,
+                main,
+                Scene::with_contact(contact),
+                None,
+                DRIFT,
+            );
+        }
+        for k in 0..many(4, 12) {
+            let at = [rng.gen_range(-10.0..=10.0), rng.gen_range(-6.0..=6.0)];
+            let mut contact = Contact::sphere(8.0, at, rng.gen_range(4.0..=6.0));
+            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            contact.torsion_nmm = sign * rng.gen_range(5.0..=20.0);
+            push(
+                &mut rng,
+                CaseKind::Twist,
+                main,
+                Scene::with_contact(contact),
+                None,
+                DRIFT,
+            );
+        }
+        let rests = many(6, 16);
+        for k in 0..rests {
+            // Half under LED drift alone, half with the camera moved as well.
+            let motion = (k % 2 == 1).then(|| camera_motion(&mut rng));
+            push(&mut rng, CaseKind::Rest, main, Scene::rest(), motion, REST_DRIFT);
+        }
+        for _ in 0..many(8, 24) {
+            let (at, force) = (anywhere(&mut rng), rng.gen_range(1.0..=8.0));
+            let scene = Scene::with_contact(Contact::sphere(5.0, at, force));
+            let motion = Some(camera_motion(&mut rng));
+            push(&mut rng, CaseKind::CameraMotion, main, scene, motion, DRIFT);
+        }
+        for k in 0..many(3, 8) {
+            let (at, force) = (anywhere(&mut rng), rng.gen_range(2.0..=8.0));
+            let mut scene = Scene::with_contact(Contact::sphere(5.0, at, force));
+            let centre = anywhere(&mut rng);
+            scene.damage.push(if k % 2 == 0 {
+                Damage::Missing {
+                    centre_mm: centre,
+                    radius_mm: rng.gen_range(2.0..=5.0),
+                }
+            } else {
+                Damage::Smeared {
+                    centre_mm: centre,
+                    radius_mm: rng.gen_range(3.0..=6.0),
+                    smear_mm: 0.5,
+                }
+            });
+            push(&mut rng, CaseKind::Damaged, main, scene, None, DRIFT);
+        }
+        let sizes: &[(u32, u32)] = match profile {
+            Profile::Quick => &[(640, 480)],
+            Profile::Full => &[(640, 480), (1280, 960), (1600, 1200)],
+        };
+        for &size in sizes {
+            for _ in 0..many(4, 4) {
+                let (at, force) = (anywhere(&mut rng), rng.gen_range(1.0..=8.0));
+                let scene = Scene::with_contact(Contact::sphere(5.0, at, force));
+                push(&mut rng, CaseKind::Resolution, size, scene, None, DRIFT);
+            }
+        }
+        Self { profile, seed, cases }
+    }
+
+    /// The frame sizes the cases use, the main one first.
+    pub fn sizes(&self) -> Vec<(u32, u32)> {
+        let mut sizes: Vec<(u32, u32)> = Vec::new();
+        for case in &self.cases {
+            if !sizes.contains(&case.size) {
+                sizes.push(case.size);
+            }
+        }
+        sizes
+    }
+
+    pub fn of_kind(&self, kind: CaseKind) -> impl Iterator<Item = &Case> {
+        self.cases.iter().filter(move |c| c.kind == kind)
+    }
+}
+
+fn kind_name(kind: CaseKind) -> &'static str {
+    match kind {
+        CaseKind::Calibration => "calibration",
+        CaseKind::Press => "press",
+        CaseKind::Floor => "floor",
+        CaseKind::Edge => "edge",
+        CaseKind::TwoContacts => "two_contacts",
+        CaseKind::Tangential => "tangential",
+        CaseKind::Twist => "twist",
+        CaseKind::Rest => "rest",
+        CaseKind::CameraMotion => "camera_motion",
+        CaseKind::Damaged => "damaged",
+        CaseKind::Resolution => "resolution",
+    }
+}
+
+fn camera_motion(rng: &mut ChaCha8Rng) -> CameraMotion {
+    let sign = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+    CameraMotion {
+        rotation_deg: [
+            rng.gen_range(-MAX_TILT_DEG..=MAX_TILT_DEG),
+            rng.gen_range(-MAX_TILT_DEG..=MAX_TILT_DEG),
+            sign * rng.gen_range(0.5..=MAX_ROLL_DEG),
+        ],
+        shift_mm: [
+            rng.gen_range(-MAX_CAMERA_SHIFT_MM..=MAX_CAMERA_SHIFT_MM),
+            rng.gen_range(-MAX_CAMERA_SHIFT_MM..=MAX_CAMERA_SHIFT_MM),
+        ],
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ValidationError {
+    #[error("the validation sensor: {0}")]
+    Model(#[from] ModelError),
+    #[error("rendering a validation frame: {0}")]
+    Render(#[from] RenderError),
+    #[error("case {case} is {found:?} but this renderer makes {expected:?} frames")]
+    WrongSize {
+        case: String,
+        found: (u32, u32),
+        expected: (u32, u32),
+    },
+}
+
+/// The validation sensor at one frame size.
+pub struct ValidationRenderer {
+    renderer: Renderer,
+}
+
+impl ValidationRenderer {
+    pub fn new(size: (u32, u32)) -> Result<Self, ValidationError> {
+        Ok(Self {
+            renderer: Renderer::new(SensorModel::validation(size.0, size.1))?,
+        })
+    }
+
+    pub fn renderer(&self) -> &Renderer {
+        &self.renderer
+    }
+
+    /// The rest frame every case of this size is measured against: nominal LEDs, the camera where it was
+    /// mounted.
+    pub fn reference(&self, set_seed: u64) -> Result<RgbImage, ValidationError> {
+        Ok(self
+            .renderer
+            .render(&Scene::rest(), [NOMINAL_LED_CURRENT_MA; 4], set_seed)?
+            .0)
+    }
+
+    pub fn render(&self, case: &Case) -> Result<(RgbImage, CaseTruth), ValidationError> {
+        let expected = (self.renderer.model().width, self.renderer.model().height);
+        if case.size != expected {
+            return Err(ValidationError::WrongSize {
+                case: case.name.clone(),
+                found: case.size,
+                expected,
+            });
+        }
+        match case.camera_motion {
+            None => {
+                let (image, frame) = self.renderer.render(&case.scene, case.led_currents_ma, case.seed)?;
+                Ok((
+                    image,
+                    CaseTruth {
+                        frame,
+                        camera_motion: None,
+                    },
+                ))
+            }
+            Some(motion) => {
+                let pose = self.renderer.model().pose;
+                let moved_pose = PadPose {
+                    distance_mm: pose.distance_mm,
+                    shift_mm: [
+                        pose.shift_mm[0] + motion.shift_mm[0],
+                        pose.shift_mm[1] + motion.shift_mm[1],
+                    ],
+                    rotation_deg: std::array::from_fn(|k| pose.rotation_deg[k] + motion.rotation_deg[k]),
+                };
+                let moved = self.renderer.with_pose(moved_pose)?;
+                let (image, frame) = moved.render(&case.scene, case.led_currents_ma, case.seed)?;
+                let before = self
+                    .renderer
+                    .ground_truth(&Scene::rest(), case.led_currents_ma, case.seed)?;
+                let after = moved.ground_truth(&Scene::rest(), case.led_currents_ma, case.seed)?;
+                let pairs: Vec<(Point2, Point2)> = before
+                    .corners
+                    .iter()
+                    .zip(&after.corners)
+                    .map(|(a, b)| (a.rest_px, b.rest_px))
+                    .collect();
+                Ok((
+                    image,
+                    CaseTruth {
+                        frame,
+                        camera_motion: Some((motion, similarity(&pairs))),
+                    },
+                ))
+            }
+        }
+    }
+}
+
+/// Least-squares similarity a -> b: rotation and scale about the centroid of a, and the centroid's motion.
+pub fn similarity(pairs: &[(Point2, Point2)]) -> ImageMotion {
+    let n = pairs.len().max(1) as f64;
+    let ca = [
+        pairs.iter().map(|p| p.0[0]).sum::<f64>() / n,
+        pairs.iter().map(|p| p.0[1]).sum::<f64>() / n,
+    ];
+    let cb = [
+        pairs.iter().map(|p| p.1[0]).sum::<f64>() / n,
+        pairs.iter().map(|p| p.1[1]).sum::<f64>() / n,
+    ];
+    // z = sum conj(a) b / sum |a|^2 in complex numbers: scale e^{i angle}.
+    let (mut re, mut im, mut norm) = (0.0f64, 0.0f64, 0.0f64);
+    for (a, b) in pairs {
+        let (ax, ay) = (a[0] - ca[0], a[1] - ca[1]);
+        let (bx, by) = (b[0] - cb[0], b[1] - cb[1]);
+        re += ax * bx + ay * by;
+        im += ax * by - ay * bx;
+        norm += ax * ax + ay * ay;
+    }
+    ImageMotion {
+        rotation_deg: im.atan2(re).to_degrees(),
+        shift_px: [cb[0] - ca[0], cb[1] - ca[1]],
+        scale: re.hypot(im) / norm.max(f64::MIN_POSITIVE),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_set_is_deterministic_valid_and_covers_every_kind() {
+        let a = ValidationSet::new(Profile::Quick, 3);
+        assert_eq!(a, ValidationSet::new(Profile::Quick, 3));
+        assert_ne!(a, ValidationSet::new(Profile::Quick, 4));
+        let pad = nusense_geometry::PadGeometry::default();
+        for case in &a.cases {
+            case.scene.validate(&pad).unwrap();
+        }
+        for kind in CaseKind::ALL {
+            assert!(a.of_kind(kind).count() >= 3, "{kind:?}");
+        }
+        let full = ValidationSet::new(Profile::Full, 3);
+        assert!(full.cases.len() > 2 * a.cases.len());
+        assert_eq!(full.sizes()[0], (2048, 1536));
+        // Two contacts are 10 mm apart; twists carry no net tangential force; camera rolls reach up to 5 degrees.
+        for case in full.of_kind(CaseKind::TwoContacts) {
+            let (p, q) = (case.scene.contacts[0].position_mm, case.scene.contacts[1].position_mm);
+            assert!(((p[0] - q[0]).hypot(p[1] - q[1]) - TWO_CONTACT_SEPARATION_MM).abs() < 1e-12);
+        }
+        for case in full.of_kind(CaseKind::Twist) {
+            assert_eq!(case.scene.contacts[0].tangential_force_n, [0.0, 0.0]);
+        }
+        let largest_roll = full
+            .of_kind(CaseKind::CameraMotion)
+            .map(|c| c.camera_motion.unwrap().rotation_deg[2].abs())
+            .fold(0.0, f64::max);
+        assert!(largest_roll > 4.0 && largest_roll <= MAX_ROLL_DEG, "{largest_roll}");
+    }
+
+    #[test]
+    fn the_similarity_fit_recovers_a_known_motion() {
+        let (angle, scale, shift) = (3f64.to_radians(), 1.01, [4.0, -2.5]);
+        let pairs: Vec<(Point2, Point2)> = (0..20)
+            .map(|i| {
+                let a = [f64::from(i % 5) * 30.0 + 100.0, f64::from(i / 5) * 25.0 + 80.0];
+                let c = [160.0, 117.5];
+                let (dx, dy) = (a[0] - c[0], a[1] - c[1]);
+                let b = [
+                    c[0] + shift[0] + scale * (angle.cos() * dx - angle.sin() * dy),
+                    c[1] + shift[1] + scale * (angle.sin() * dx + angle.cos() * dy),
+                ];
+                (a, b)
+            })
+            .collect();
+        let m = similarity(&pairs);
+        assert!((m.rotation_deg - 3.0).abs() < 1e-12, "{m:?}");
+        assert!(
+            (m.scale - 1.01).abs() < 1e-12 && (m.shift_px[0] - 4.0).abs() < 1e-9 && (m.shift_px[1] + 2.5).abs() < 1e-9
+        );
+    }
+
+    #[test]
+    fn a_rolled_camera_turns_the_image_by_about_its_roll() {
+        let renderer = ValidationRenderer::new((320, 240)).unwrap();
+        let case = Case {
+            name: "roll".into(),
+            kind: CaseKind::Rest,
+            size: (320, 240),
+            scene: Scene::rest(),
+            camera_motion: Some(CameraMotion {
+                rotation_deg: [0.0, 0.0, 4.0],
+                shift_mm: [0.0, 0.0],
+            }),
+            led_currents_ma: [100.0; 4],
+            seed: 1,
+        };
+        let (_, truth) = renderer.render(&case).unwrap();
+        let (_, image) = truth.camera_motion.unwrap();
+        // The pad turns by the roll in camera coordinates; the fisheye, tilt and refraction bend it a little.
+        assert!((image.rotation_deg - 4.0).abs() < 0.3, "{image:?}");
+        assert!(truth.frame.contacts.is_empty() && truth.frame.force_vector_n == [0.0; 3]);
+    }
+}
