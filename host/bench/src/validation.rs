@@ -527,6 +527,157 @@ mod tests {
         assert_eq!(o.torque_nmm, Some(1.5));
     }
 
+    fn truth(contacts: &[([f64; 2], [f64; 3])], motion_deg: Option<f64>) -> CaseTruth {
+        use nusense_sim::validation::{CameraMotion, ImageMotion};
+        use nusense_sim::{ContactTruth, GroundTruth, Indenter};
+        let contacts: Vec<ContactTruth> = contacts
+            .iter()
+            .map(|&(centre_mm, f)| ContactTruth {
+                indenter: Indenter::Sphere { radius_mm: 5.0 },
+                centre_mm,
+                centre_px: [0.0, 0.0],
+                normal_force_n: f[2],
+                tangential_force_n: [f[0], f[1]],
+                torsion_nmm: 0.0,
+                contact_radius_mm: 2.0,
+                area_mm2: 4.0 * std::f64::consts::PI,
+                edge_angle_deg: None,
+                edge_angle_px_deg: None,
+            })
+            .collect();
+        let force_vector_n = contacts.iter().fold([0.0; 3], |a, c| {
+            [
+                a[0] + c.tangential_force_n[0],
+                a[1] + c.tangential_force_n[1],
+                a[2] + c.normal_force_n,
+            ]
+        });
+        CaseTruth {
+            frame: GroundTruth {
+                width: 64,
+                height: 48,
+                seed: 0,
+                led_currents_ma: [100.0; 4],
+                total_force_n: force_vector_n[2],
+                force_vector_n,
+                torque_nmm: 0.0,
+                contacts,
+                corners: Vec::new(),
+            },
+            camera_motion: motion_deg.map(|deg| {
+                (
+                    CameraMotion {
+                        rotation_deg: [0.0, 0.0, deg],
+                        shift_mm: [0.0, 0.0],
+                    },
+                    ImageMotion {
+                        rotation_deg: deg,
+                        shift_px: [0.0, 0.0],
+                        scale: 1.0,
+                    },
+                )
+            }),
+        }
+    }
+
+    fn case(kind: CaseKind, truth: CaseTruth, reading: Option<serde_json::Value>) -> Scored {
+        Scored {
+            kind,
+            truth,
+            observed: reading.as_ref().map(Observed::of),
+            elapsed_ms: Some(1.0),
+        }
+    }
+
+    #[test]
+    fn the_figures_are_the_known_answers_of_a_scripted_mode() {
+        use serde_json::json;
+        // A mode that reports twice the true force in its own units, misses one press, places another 0.3 mm off,
+        // detects from 0.5 N, lists two contacts, turns pushes by 10 degrees and reads the camera's roll 0.1 off.
+        let press = |at: [f64; 2], f: f64| truth(&[(at, [0.0, 0.0, f])], None);
+        let reading =
+            |at: [f64; 2], fz: f64| json!({"contact": true, "contact_mm": at, "force_vector_n": [0.0, 0.0, fz]});
+        let mut scored = Vec::new();
+        for f in [1.0, 3.0, 5.0, 8.0] {
+            scored.push(case(
+                CaseKind::Calibration,
+                press([0.0, 0.0], f),
+                Some(reading([0.0, 0.0], 2.0 * f)),
+            ));
+        }
+        scored.push(case(
+            CaseKind::Press,
+            press([5.0, 5.0], 4.0),
+            Some(reading([5.3, 5.0], 8.0)),
+        ));
+        scored.push(case(
+            CaseKind::Press,
+            press([-5.0, 2.0], 2.0),
+            Some(json!({"contact": false})),
+        ));
+        for (f, seen) in [
+            (0.2, false),
+            (0.3, true),
+            (0.5, true),
+            (0.75, true),
+            (1.0, true),
+            (1.5, true),
+            (2.0, true),
+        ] {
+            let r = if seen {
+                reading([0.0, 0.0], 2.0 * f)
+            } else {
+                json!({"contact": false})
+            };
+            scored.push(case(CaseKind::Floor, press([0.0, 0.0], f), Some(r)));
+        }
+        // 0.3 N is seen once out of two: the floor is 0.5 N.
+        scored.push(case(
+            CaseKind::Floor,
+            press([0.0, 0.0], 0.3),
+            Some(json!({"contact": false})),
+        ));
+        scored.push(case(
+            CaseKind::Rest,
+            truth(&[], Some(3.0)),
+            Some(json!({"contact": false, "camera_motion": {"rotation_deg": 3.1}})),
+        ));
+        scored.push(case(CaseKind::Rest, truth(&[], None), Some(json!({"contact": true}))));
+        let two = truth(&[([-5.0, 0.0], [0.0, 0.0, 2.0]), ([5.0, 0.0], [0.0, 0.0, 4.0])], None);
+        let listed = json!({"contact": true, "contacts": [
+            {"centre_mm": [5.5, 0.0], "force_n": 8.4}, {"centre_mm": [-5.0, 0.5], "force_n": 3.8}]});
+        scored.push(case(CaseKind::TwoContacts, two.clone(), Some(listed)));
+        let wrong_force = json!({"contact": true, "contacts": [
+            {"centre_mm": [5.0, 0.0], "force_n": 8.0}, {"centre_mm": [-5.0, 0.0], "force_n": 6.0}]});
+        scored.push(case(CaseKind::TwoContacts, two, Some(wrong_force)));
+        let push = truth(&[([0.0, 0.0], [1.0, 0.0, 4.0])], None);
+        let turned = [2.0 * 10f64.to_radians().cos(), 2.0 * 10f64.to_radians().sin(), 8.0];
+        scored.push(case(
+            CaseKind::Tangential,
+            push,
+            Some(json!({"contact": true, "force_vector_n": turned})),
+        ));
+
+        let f = score(Mode::Fast, &scored);
+        assert_eq!(f.calibration.as_deref(), Some("scale 0.500"));
+        assert!((f.localisation_rmse_mm.unwrap() - 0.3).abs() < 1e-12);
+        assert_eq!((f.localisation_misses, f.localisation_frames), (1, 2));
+        // The missed 2 N press reads 0 N; the other is exact.
+        assert!(
+            (f.force_rms_n.unwrap() - (4.0f64 / 2.0).sqrt()).abs() < 1e-12,
+            "{:?}",
+            f.force_rms_n
+        );
+        assert_eq!(f.detection_floor_n, Some(0.5));
+        assert_eq!(f.detection_rates[1], (0.3, 0.5));
+        assert_eq!((f.false_contacts, f.rest_frames), (1, 2));
+        assert_eq!((f.two_contacts_ok, f.two_contact_frames), (Some(1), 2));
+        assert!((f.tangential_direction_mae_deg.unwrap() - 10.0).abs() < 1e-9);
+        assert!((f.camera_rotation_rms_deg.unwrap() - 0.1).abs() < 1e-9);
+        assert_eq!(f.refused, 0);
+        assert_eq!(f.median_ms, Some(1.0));
+    }
+
     #[test]
     fn every_mode_is_listed() {
         assert_eq!(estimator_modes(), [Mode::Fast, Mode::Paper]);

@@ -1,5 +1,5 @@
-//! `nusense bench`: every estimator variant's speed against its error, written as a markdown table, JSON and
-//! an SVG of the Pareto front.
+//! `nusense bench`: every estimator variant's speed against its error on the paper's sweeps, and every estimator
+//! mode on the validation set (issue 12's figures), written as markdown tables, JSON and a Pareto plot (SVG).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -12,7 +12,8 @@ pub struct Args {
     /// Folder for bench.md, bench.json and pareto.svg.
     #[arg(long, value_name = "DIR", default_value = "bench-out")]
     out: PathBuf,
-    /// CI-sized run: half-size frames, a quarter of each sweep, one timing pass.
+    /// CI-sized run: half-size frames, a quarter of each sweep, one timing pass, and the quick validation set
+    /// (1024x768) instead of the full one (2048x1536).
     #[arg(long)]
     quick: bool,
     /// Folder with the real pair (reference_fisheye.jpg, touch_fisheye.jpg); by default shared/data/real is
