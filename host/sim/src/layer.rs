@@ -539,11 +539,11 @@ fn fft_size(n: usize) -> usize {
     loop {
         let mut r = m;
         for p in [2, 3, 5] {
-            while r % p == 0 {
+            while r.is_multiple_of(p) {
                 r /= p;
             }
         }
-        if r == 1 && m % 4 == 0 {
+        if r == 1 && m.is_multiple_of(4) {
             return m;
         }
         m += 1;

@@ -97,7 +97,8 @@ impl EquisolidLens {
                 [(dx[1] - dxm[1]) / (2.0 * h), (dy[1] - dym[1]) / (2.0 * h)],
             ];
             let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
-            if !(det.abs() > 1e-12) {
+            // A NaN determinant is as singular as a zero one.
+            if !det.is_finite() || det.abs() <= 1e-12 {
                 return None;
             }
             e[0] -= (j[1][1] * residual[0] - j[0][1] * residual[1]) / det;
