@@ -1,6 +1,7 @@
 //! `nusense record OUT.mcap`: runs the pipeline headless and records frames, readings and board telemetry.
 //! `nusense record --recover IN.mcap OUT.mcap`: rewrites a recording that was cut short with its summary.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -9,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use nusense_daemon::pipeline::{open_sources, Pipeline, PipelineOptions};
-use nusense_daemon::record::{recover, RecorderOptions, DEFAULT_FLUSH_INTERVAL};
+use nusense_daemon::record::{recover, RecorderOptions, SensorContext, DEFAULT_FLUSH_INTERVAL};
 
 use super::common::{board_choice, describe_start, frame_choice, init_logging, load_config, SourceArgs};
 
@@ -57,6 +58,19 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         describe_start(&frames, &board).replacen("nusense serve", "nusense record", 1)
     );
     let sources = open_sources(&frames, &board).context("opening the frame source and LED board")?;
+    let source = sources.frames.info();
+    let identity = BTreeMap::from([
+        ("source_kind".to_string(), source.kind.to_string()),
+        ("source".to_string(), source.name),
+        ("width".to_string(), source.width.to_string()),
+        ("height".to_string(), source.height.to_string()),
+        ("fps".to_string(), source.fps.to_string()),
+        ("mode".to_string(), args.source.mode.to_string()),
+    ]);
+    let sensor = SensorContext {
+        config: config.clone(),
+        identity,
+    };
     let pipeline = Pipeline::start(
         sources.frames,
         sources.board,
@@ -65,6 +79,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let handle = pipeline.handle();
     let options = RecorderOptions {
         flush_interval: Duration::from_millis(args.flush_ms.max(10)),
+        sensor: Some(sensor),
         ..Default::default()
     };
     handle

@@ -382,11 +382,7 @@ fn publish(shared: &Shared, reading: DaemonReading) {
     });
     let published = Arc::new(PublishedReading { reading, json });
     if let Some(recorder) = shared.recorder.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
-        recorder.record(RecordItem::Reading {
-            frame_id: published.reading.frame_id,
-            time_us: published.reading.capture_time_us,
-            json: published.json.clone().into(),
-        });
+        recorder.record(RecordItem::Reading(published.clone()));
     }
     *shared.latest_reading.write().unwrap_or_else(|e| e.into_inner()) = Some(published.clone());
     // No subscribers is fine: nobody is watching.

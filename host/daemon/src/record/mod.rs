@@ -1,4 +1,5 @@
-//! Recordings: frames (the camera's JPEG), readings and board telemetry as MCAP channels.
+//! Recordings: frames (the camera's JPEG), camera calibration, annotations, readings and board telemetry as MCAP
+//! channels, with the Foxglove SDK's schemas where one fits (see `messages`).
 //!
 //! Crash safety: each chunk is built in memory and written whole (no placeholder length ever reaches the disk),
 //! then fsynced, at least every [`RecorderOptions::flush_interval`] (500 ms by default). A recorder killed
@@ -10,12 +11,14 @@
 //! ([`RecorderOptions::queue_bytes`]), the open chunk by [`RecorderOptions::chunk_bytes`]; replay streams from
 //! disk a chunk at a time.
 
-mod messages;
+pub(crate) mod messages;
 mod reader;
 mod recover;
 mod replay;
 mod writer;
 
+pub use messages::SHEAR_DRAW_GAIN;
+pub(crate) use messages::{channel_table, Kind};
 pub use reader::{
     ends_finished, read_recording, ChannelInfo, RecordedFrame, RecordedMessage, RecordedMetadata, Recording,
     RecordingReader, SchemaInfo,
@@ -23,12 +26,17 @@ pub use reader::{
 pub use recover::{recover, RecoverSummary};
 pub use replay::McapReplay;
 pub use writer::{
-    encode_jpeg, RecordItem, RecordStats, RecordSummary, Recorder, RecorderOptions, DEFAULT_CHUNK_BYTES,
+    encode_jpeg, RecordItem, RecordStats, RecordSummary, Recorder, RecorderOptions, SensorContext, DEFAULT_CHUNK_BYTES,
     DEFAULT_FLUSH_INTERVAL, DEFAULT_QUEUE_BYTES,
 };
 
 /// Camera frames, as `foxglove.CompressedImage` so that Foxglove and other MCAP viewers show them.
 pub const FRAME_TOPIC: &str = "/camera/image";
+/// The fisheye lens for the frames' size, as `foxglove.CameraCalibration`; again whenever the size changes.
+pub const CALIBRATION_TOPIC: &str = "/camera/calibration";
+/// Each reading drawn over its frame, as `foxglove.ImageAnnotations`: lattice corners, shear vectors, contact and
+/// force.
+pub const ANNOTATIONS_TOPIC: &str = "/camera/annotations";
 /// One [`crate::pipeline::DaemonReading`] per processed frame.
 pub const READING_TOPIC: &str = "/nusense/reading";
 /// Board telemetry (LED channels, temperature, supply) as the board reported it.
@@ -127,6 +135,22 @@ mod tests {
         }))
     }
 
+    fn published(frame_id: u64, time_us: u64) -> Arc<crate::pipeline::PublishedReading> {
+        let reading = crate::pipeline::DaemonReading {
+            frame_id,
+            capture_time_us: time_us,
+            processed_time_us: time_us + 5000,
+            latency_ms: 5.0,
+            queue_ms: 0.1,
+            reference_frame_id: Some(0),
+            estimate: None,
+            error: Some("no rest frame yet".into()),
+            led: None,
+        };
+        let json = serde_json::to_string(&reading).unwrap();
+        Arc::new(crate::pipeline::PublishedReading { reading, json })
+    }
+
     fn record_frames(recorder: &Recorder, frames: u64) {
         for frame_id in 0..frames {
             let time_us = 1_700_000_000_000_000 + frame_id * 33_333;
@@ -136,11 +160,7 @@ mod tests {
                 image: image(),
                 jpeg: None,
             });
-            recorder.record(RecordItem::Reading {
-                frame_id,
-                time_us,
-                json: format!("{{\"frame_id\":{frame_id}}}").into(),
-            });
+            recorder.record(RecordItem::Reading(published(frame_id, time_us)));
         }
     }
 
@@ -276,6 +296,7 @@ mod tests {
             chunk_bytes: 1,
             queue_bytes: 1_000_000,
             flush_interval: Duration::from_secs(3600),
+            sensor: None,
         };
         let recorder = Recorder::start(std::path::Path::new("stalled.mcap"), destination, options).unwrap();
         *gate.0.lock().unwrap() = false;
@@ -297,5 +318,39 @@ mod tests {
         gate.1.notify_all();
         let summary = recorder.finish().unwrap();
         assert_eq!(summary.frames + summary.dropped, 40);
+    }
+
+    #[test]
+    fn the_foxglove_layout_names_only_channels_that_are_published() {
+        fn topics(value: &serde_json::Value, found: &mut Vec<String>) {
+            fn take(text: &str, found: &mut Vec<String>) {
+                if text.starts_with('/') {
+                    found.push(text.split('.').next().unwrap_or(text).to_string());
+                }
+            }
+            match value {
+                serde_json::Value::String(text) => take(text, found),
+                serde_json::Value::Array(items) => items.iter().for_each(|v| topics(v, found)),
+                serde_json::Value::Object(map) => {
+                    for (key, value) in map {
+                        take(key, found);
+                        topics(value, found);
+                    }
+                }
+                _ => {}
+            }
+        }
+        let layout: serde_json::Value =
+            serde_json::from_str(include_str!("../../../../docs/foxglove/nusense-layout.json")).unwrap();
+        let mut found = Vec::new();
+        topics(&layout, &mut found);
+        let published: Vec<_> = channel_table().iter().map(|c| c.topic.to_string()).collect();
+        assert!(found.len() >= 5, "{found:?}");
+        for topic in &found {
+            assert!(
+                published.contains(topic),
+                "the layout shows {topic}, which is not published"
+            );
+        }
     }
 }

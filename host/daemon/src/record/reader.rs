@@ -73,6 +73,10 @@ impl RecordedMessage {
                 let image: Image = serde_json::from_slice(&self.data).ok()?;
                 base64::engine::general_purpose::STANDARD.decode(image.data).ok()?
             }
+            "protobuf" if self.schema_name() == Some("foxglove.CompressedImage") => {
+                let image = <foxglove::messages::CompressedImage as foxglove::Decode>::decode(&self.data[..]).ok()?;
+                image.data.to_vec()
+            }
             _ => return None,
         };
         Some(RecordedFrame {

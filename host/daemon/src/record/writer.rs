@@ -1,5 +1,6 @@
 //! The recorder: a writer thread fed by a queue bounded in bytes, writing whole chunks and fsyncing them.
 
+use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -13,8 +14,9 @@ use mcap::records::MessageHeader;
 use mcap::write::NoSeek;
 use serde::Serialize;
 
-use super::messages::{ChannelSet, Encoded};
+use super::messages::{self, channel_table, Kind};
 use super::{RecordError, RecordFailure};
+use crate::pipeline::PublishedReading;
 
 /// How long a chunk may stay open by default: a power cut loses at most this much (plus the time the disk takes
 /// to complete the fsync), a SIGKILL at most the same (the kernel keeps what was written).
@@ -33,6 +35,43 @@ pub struct RecorderOptions {
     pub flush_interval: Duration,
     /// Bytes waiting for the writer thread before new items are dropped.
     pub queue_bytes: u64,
+    /// The sensor and its configuration: the camera calibration channel and the file's metadata records.
+    pub sensor: Option<SensorContext>,
+}
+
+/// What a recording says about the sensor that made it.
+#[derive(Clone, Debug)]
+pub struct SensorContext {
+    pub config: nusense_estimator::SensorConfig,
+    /// Identity of the sensor and of the source (serial numbers, device, frame size...), as metadata key/values.
+    pub identity: BTreeMap<String, String>,
+}
+
+impl SensorContext {
+    /// The MCAP metadata records: `nusense.sensor` (identity), `nusense.config` (the whole configuration as
+    /// JSON) and `nusense.calibration` (the lens and the force calibration, each as JSON).
+    fn metadata(&self) -> Vec<mcap::records::Metadata> {
+        let json = |value: serde_json::Result<String>| value.unwrap_or_else(|e| format!("not serialisable: {e}"));
+        let mut identity = self.identity.clone();
+        identity.insert("nusense_version".into(), env!("CARGO_PKG_VERSION").into());
+        vec![
+            mcap::records::Metadata {
+                name: "nusense.sensor".into(),
+                metadata: identity,
+            },
+            mcap::records::Metadata {
+                name: "nusense.config".into(),
+                metadata: BTreeMap::from([("json".into(), json(serde_json::to_string(&self.config)))]),
+            },
+            mcap::records::Metadata {
+                name: "nusense.calibration".into(),
+                metadata: BTreeMap::from([
+                    ("lens".into(), json(serde_json::to_string(&self.config.camera))),
+                    ("force".into(), json(serde_json::to_string(&self.config.calibration))),
+                ]),
+            },
+        ]
+    }
 }
 
 impl Default for RecorderOptions {
@@ -41,6 +80,7 @@ impl Default for RecorderOptions {
             chunk_bytes: DEFAULT_CHUNK_BYTES,
             flush_interval: DEFAULT_FLUSH_INTERVAL,
             queue_bytes: DEFAULT_QUEUE_BYTES,
+            sensor: None,
         }
     }
 }
@@ -66,11 +106,8 @@ pub enum RecordItem {
         image: Arc<image::RgbImage>,
         jpeg: Option<Arc<Vec<u8>>>,
     },
-    Reading {
-        frame_id: u64,
-        time_us: u64,
-        json: Arc<str>,
-    },
+    /// The published reading: its JSON on the reading channel, and its annotations over the frame.
+    Reading(Arc<PublishedReading>),
     Telemetry {
         time_us: u64,
         json: Arc<str>,
@@ -83,7 +120,11 @@ impl RecordItem {
         let bytes = match self {
             RecordItem::Frame { jpeg: Some(jpeg), .. } => jpeg.len(),
             RecordItem::Frame { image, .. } => image.as_raw().len(),
-            RecordItem::Reading { json, .. } | RecordItem::Telemetry { json, .. } => json.len(),
+            RecordItem::Reading(published) => {
+                let corners = published.reading.estimate.as_ref().map_or(0, |e| e.shear_field.len());
+                published.json.len() + corners * std::mem::size_of::<nusense_estimator::ShearVector>()
+            }
+            RecordItem::Telemetry { json, .. } => json.len(),
         };
         bytes as u64 + std::mem::size_of::<RecordItem>() as u64
     }
@@ -161,8 +202,21 @@ impl Recorder {
         let mut writer = write_options(options.chunk_bytes)
             .create(NoSeek::new(BufWriter::with_capacity(FILE_BUFFER_BYTES, writer)))
             .map_err(|source| RecordError::from_mcap(&path_text, source))?;
-        let channels =
-            ChannelSet::register(&mut writer).map_err(|source| RecordError::from_mcap(&path_text, source))?;
+        let mcap_error = |source| RecordError::from_mcap(&path_text, source);
+        let mut channels = Vec::new();
+        for spec in channel_table() {
+            let schema_id = writer
+                .add_schema(&spec.schema.name, &spec.schema.encoding, &spec.schema.data)
+                .map_err(mcap_error)?;
+            channels.push(
+                writer
+                    .add_channel(schema_id, spec.topic, &spec.message_encoding, &BTreeMap::new())
+                    .map_err(mcap_error)?,
+            );
+        }
+        for metadata in options.sensor.iter().flat_map(SensorContext::metadata) {
+            writer.write_metadata(&metadata).map_err(mcap_error)?;
+        }
         // Schemas and channels reach the disk before any message, so even a file killed in its first chunk
         // tells a reader what it holds.
         writer
@@ -185,7 +239,8 @@ impl Recorder {
             stats: stats.clone(),
             failure: failure.clone(),
             path: path_text.clone(),
-            sequences: [0; 3],
+            sequences: [0; 5],
+            calibrated_size: None,
             unsynced: false,
         };
         let thread = std::thread::Builder::new()
@@ -302,13 +357,16 @@ impl Durable {
 
 struct WriterThread {
     writer: Option<McapFileWriter>,
-    channels: ChannelSet,
+    /// Channel ids by [`Kind`].
+    channels: Vec<u16>,
     durable: Durable,
     options: RecorderOptions,
     stats: Arc<RecordStats>,
     failure: Arc<Mutex<Option<RecordFailure>>>,
     path: String,
-    sequences: [u32; 3],
+    sequences: [u32; 5],
+    /// The frame size the last calibration message was for.
+    calibrated_size: Option<(u32, u32)>,
     /// Bytes were handed to the writer since the last fsync.
     unsynced: bool,
 }
@@ -343,7 +401,7 @@ impl WriterThread {
     }
 
     fn write(&mut self, item: RecordItem) -> Result<(), std::io::Error> {
-        let (slot, time_us, encoded, counter) = match item {
+        match item {
             RecordItem::Frame {
                 frame_id,
                 capture_time_us,
@@ -354,34 +412,55 @@ impl WriterThread {
                     Some(jpeg) => jpeg,
                     None => Arc::new(encode_jpeg(&image, FRAME_JPEG_QUALITY)),
                 };
-                self.sequences[0] = frame_id as u32;
-                let encoded = self.channels.frame(capture_time_us, &jpeg);
-                (0, capture_time_us, encoded, &self.stats.frames)
+                let size = image.dimensions();
+                if let (Some(sensor), false) = (&self.options.sensor, self.calibrated_size == Some(size)) {
+                    let calibration = messages::calibration(capture_time_us, &sensor.config, size.0, size.1);
+                    self.calibrated_size = Some(size);
+                    let sequence = self.next_sequence(Kind::Calibration);
+                    self.put(Kind::Calibration, sequence, capture_time_us, &calibration)?;
+                }
+                self.put(
+                    Kind::Frame,
+                    frame_id as u32,
+                    capture_time_us,
+                    &messages::frame(capture_time_us, &jpeg),
+                )?;
+                self.stats.frames.fetch_add(1, Ordering::Relaxed);
             }
-            RecordItem::Reading {
-                frame_id,
-                time_us,
-                json,
-            } => {
-                self.sequences[1] = frame_id as u32;
-                (1, time_us, self.channels.reading(&json), &self.stats.readings)
+            RecordItem::Reading(published) => {
+                let frame_id = published.reading.frame_id as u32;
+                let time_us = published.reading.capture_time_us;
+                if let Some(annotations) = messages::annotations(&published) {
+                    self.put(Kind::Annotations, frame_id, time_us, &annotations)?;
+                }
+                self.put(Kind::Reading, frame_id, time_us, &messages::reading(&published))?;
+                self.stats.readings.fetch_add(1, Ordering::Relaxed);
             }
             RecordItem::Telemetry { time_us, json } => {
-                self.sequences[2] = self.sequences[2].wrapping_add(1);
-                (2, time_us, self.channels.telemetry(&json), &self.stats.telemetry)
+                let sequence = self.next_sequence(Kind::Telemetry);
+                self.put(Kind::Telemetry, sequence, time_us, &messages::telemetry(&json))?;
+                self.stats.telemetry.fetch_add(1, Ordering::Relaxed);
             }
-        };
-        let Encoded { channel_id, data } = encoded;
+        }
+        Ok(())
+    }
+
+    fn next_sequence(&mut self, kind: Kind) -> u32 {
+        let slot = &mut self.sequences[kind as usize];
+        *slot = slot.wrapping_add(1);
+        *slot
+    }
+
+    fn put(&mut self, kind: Kind, sequence: u32, time_us: u64, data: &[u8]) -> Result<(), std::io::Error> {
         let header = MessageHeader {
-            channel_id,
-            sequence: self.sequences[slot],
+            channel_id: self.channels[kind as usize],
+            sequence,
             log_time: time_us.saturating_mul(1000),
             publish_time: time_us.saturating_mul(1000),
         };
         let writer = self.writer.as_mut().ok_or_else(writer_gone)?;
-        writer.write_to_known_channel(&header, &data).map_err(into_io)?;
+        writer.write_to_known_channel(&header, data).map_err(into_io)?;
         self.unsynced = true;
-        counter.fetch_add(1, Ordering::Relaxed);
         Ok(())
     }
 
