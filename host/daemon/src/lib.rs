@@ -6,5 +6,6 @@
 
 pub mod api;
 mod dashboard;
+pub mod foxglove_live;
 pub mod pipeline;
 pub mod record;

@@ -7,6 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context};
 use nusense_daemon::api::{self, AppState};
+use nusense_daemon::foxglove_live::FoxgloveLive;
 use nusense_daemon::pipeline::{open_sources, Pipeline, PipelineOptions};
 
 use super::common::{board_choice, describe_start, frame_choice, init_logging, load_config, SourceArgs};
@@ -26,6 +27,10 @@ pub struct Args {
     /// Folder for recordings started from the API without a path.
     #[arg(long, value_name = "DIR")]
     pub recordings: Option<PathBuf>,
+    /// Also serve the sensor to the Foxglove app (Foxglove WebSocket protocol) on ADDR, 127.0.0.1:8765 when
+    /// given alone. Loopback only: the protocol has no authentication (reach it from elsewhere through SSH).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
+    pub foxglove: Option<SocketAddr>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
@@ -37,6 +42,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if !listen.ip().is_loopback() && token.is_none() {
         bail!("listening on {listen} (beyond this machine) requires a token: pass --token or set NUSENSE_TOKEN");
     }
+    if let Some(addr) = args.foxglove.filter(|a| !a.ip().is_loopback()) {
+        bail!("--foxglove {addr}: the Foxglove server has no authentication, so it listens on loopback only");
+    }
     let config = load_config(args.source.config.as_ref())?;
     let frames = frame_choice(&args.source);
     let board = board_choice(&args.source, &frames);
@@ -45,8 +53,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let pipeline = Pipeline::start(
         sources.frames,
         sources.board,
-        PipelineOptions::new(config, args.source.mode),
+        PipelineOptions::new(config.clone(), args.source.mode),
     )?;
+    let pipeline_handle = pipeline.handle();
     let mut state = AppState::new(pipeline.handle(), sources.scene, token);
     if let Some(dir) = &args.recordings {
         state.recordings_dir = dir.clone();
@@ -60,6 +69,14 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             .await
             .with_context(|| format!("listening on {listen}"))?;
         let local = listener.local_addr()?;
+        let _foxglove = match args.foxglove {
+            Some(addr) => {
+                let live = FoxgloveLive::start(pipeline_handle, config, addr).await?;
+                eprintln!("nusense serve: Foxglove WebSocket at ws://{}/", live.addr());
+                Some(live)
+            }
+            None => None,
+        };
         eprintln!("nusense serve: dashboard at http://{local}/  (API under /api/, stop with Ctrl-C)");
         api::serve(listener, state, async {
             let _ = tokio::signal::ctrl_c().await;
