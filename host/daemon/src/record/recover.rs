@@ -43,16 +43,20 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverSummary, RecordErro
         path: output_text.clone(),
         source,
     };
+    let mut next = reader.next_message();
+    // A recording cut before its first message keeps its channels, as plain records: in a chunk they would make a
+    // chunk (and a chunk index) that holds no message.
+    let options = write_options(DEFAULT_CHUNK_BYTES).use_chunks(next.is_some());
     let file = File::create_new(output).map_err(create_error)?;
     let sync_handle = file.try_clone().map_err(create_error)?;
-    let mut writer = write_options(DEFAULT_CHUNK_BYTES)
+    let mut writer = options
         .create(NoSeek::new(BufWriter::new(file)))
         .map_err(|source| RecordError::from_mcap(&output_text, source))?;
     let mcap_error = |source| RecordError::from_mcap(&output_text, source);
     let mut ids = IdMap::default();
     let mut metadata_written = 0;
     let mut messages = 0u64;
-    while let Some(message) = reader.next_message() {
+    while let Some(message) = next.take() {
         // Metadata in file order, before the messages that followed it.
         for metadata in &reader.metadata[metadata_written..] {
             writer
@@ -74,6 +78,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverSummary, RecordErro
             .write_to_known_channel(&header, &message.data)
             .map_err(mcap_error)?;
         messages += 1;
+        next = reader.next_message();
     }
     for metadata in &reader.metadata[metadata_written..] {
         writer
