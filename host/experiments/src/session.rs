@@ -1,0 +1,553 @@
+//! Scripted sessions on the simulator, recorded as the daemon records a real sensor, with their ground truth:
+//! frames and readings in MCAP (through the daemon's own recorder), the applied force as the CSV a force/torque
+//! sensor logs on its own clock (a fixed offset from the camera's, noise, a higher rate), and `truth.json`.
+//!
+//! The pad is elastic except where a session asks for a viscoelastic term (a standard linear solid under force
+//! control): the pattern deforms as if loaded by `(1 - w) F + w c`, where the creep part `c` follows the applied
+//! force `F` with time constant `tau` (`dc/dt = (F - c) / tau`). Loading and unloading then trace a loop.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use nusense_daemon::pipeline::DaemonReading;
+use nusense_daemon::record::{encode_jpeg, RecordError, RecordItem, Recorder, RecorderOptions};
+use nusense_estimator::{EstimateError, Estimator, Mode, SensorConfig};
+use nusense_sim::{Contact, Damage, ModelError, RenderError, Renderer, Scene, SensorModel};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// The camera clock's start: a fixed moment, so that sessions are reproducible byte for byte.
+const START_US: u64 = 1_700_000_000_000_000;
+const SPHERE_RADIUS_MM: f64 = 5.0;
+/// Below this the scene is the pad at rest (the sphere has lifted off).
+const LIFT_OFF_N: f64 = 0.02;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SessionKind {
+    /// Presses of different depths and speeds at the centre, for the force calibration.
+    Calibration,
+    /// Triangular loading/unloading cycles on a viscoelastic pad.
+    Hysteresis,
+    /// Repeated touches with drift and spread in force and position.
+    Repeatability,
+    /// Touches at a grid of known targets (`targets.csv`).
+    Localisation,
+    /// The same touches on an intact and on a damaged pad (`intact.mcap`, `damaged.mcap`).
+    Damage,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SessionOptions {
+    pub width: u32,
+    pub height: u32,
+    pub frame_rate_hz: f64,
+    pub ft_rate_hz: f64,
+    /// F/T clock minus camera clock, seconds.
+    pub ft_offset_s: f64,
+    /// Standard deviation of the F/T sensor's noise on each axis, N.
+    pub ft_noise_n: f64,
+    pub seed: u64,
+    /// The recorded frames' JPEG quality (the readings are estimated from the decoded JPEG, as in the daemon).
+    pub jpeg_quality: u8,
+    /// Touches (repeatability, damage) or cycles (hysteresis, calibration presses).
+    pub repetitions: usize,
+    /// Localisation: targets per row and per column.
+    pub grid: [usize; 2],
+    /// The hysteresis session's viscoelastic term.
+    pub viscoelastic: Viscoelastic,
+}
+
+impl SessionOptions {
+    /// Small frames and few repetitions: seconds of rendering, for tests.
+    pub fn short() -> Self {
+        Self {
+            width: 160,
+            height: 120,
+            frame_rate_hz: 10.0,
+            ft_rate_hz: 200.0,
+            ft_offset_s: 0.43,
+            ft_noise_n: 0.03,
+            seed: 17,
+            jpeg_quality: 90,
+            repetitions: 4,
+            grid: [2, 2],
+            viscoelastic: Viscoelastic {
+                weight: 0.3,
+                tau_s: 0.4,
+            },
+        }
+    }
+
+    /// The documentation's example sessions: larger frames, more repetitions.
+    pub fn example() -> Self {
+        Self {
+            width: 320,
+            height: 240,
+            frame_rate_hz: 15.0,
+            repetitions: 10,
+            grid: [4, 3],
+            ..Self::short()
+        }
+    }
+}
+
+/// A standard linear solid's creep under force control, see the module documentation.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Viscoelastic {
+    /// Share of the deformation that creeps, 0 (elastic) to 1.
+    pub weight: f64,
+    pub tau_s: f64,
+}
+
+#[derive(Debug, Error)]
+pub enum SessionError {
+    #[error("the simulated sensor: {0}")]
+    Model(#[from] ModelError),
+    #[error("rendering frame {frame}: {source}")]
+    Render { frame: usize, source: RenderError },
+    #[error("the rest frame: {0}")]
+    Reference(EstimateError),
+    #[error(transparent)]
+    Record(#[from] RecordError),
+    #[error("cannot write {path}: {source}")]
+    Write { path: String, source: std::io::Error },
+    #[error("a session needs a frame rate, F/T rate and size above zero and at least one repetition")]
+    BadOptions,
+}
+
+/// One touch of a session's script.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TouchTruth {
+    /// Camera-clock seconds since the Unix epoch.
+    pub start_s: f64,
+    pub end_s: f64,
+    pub peak_n: f64,
+    pub position_mm: [f64; 2],
+}
+
+/// What happened at one recorded frame.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameTruth {
+    pub frame_id: u64,
+    /// Camera-clock seconds since the Unix epoch.
+    pub time_s: f64,
+    /// The force pressing on the pad (what the F/T sensor measures, before its noise), N.
+    pub applied_n: f64,
+    /// The force the pad's deformation corresponds to (equal to `applied_n` on an elastic pad), N.
+    pub deformation_n: f64,
+    pub position_mm: Option<[f64; 2]>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DamageTruth {
+    pub centre_mm: [f64; 2],
+    pub radius_mm: f64,
+    /// Interior corners inside the damaged disc (see [`corners_lost`]).
+    pub corners_lost: usize,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SessionTruth {
+    pub kind: SessionKind,
+    pub frame_interval_s: f64,
+    pub ft_offset_s: f64,
+    pub viscoelastic: Option<Viscoelastic>,
+    pub touches: Vec<TouchTruth>,
+    pub frames: Vec<FrameTruth>,
+    pub damage: Option<DamageTruth>,
+}
+
+/// The files a session wrote.
+#[derive(Clone, Debug)]
+pub struct SessionFiles {
+    /// The session (for damage: the damaged pad).
+    pub recording: PathBuf,
+    /// Damage: the intact pad.
+    pub intact: Option<PathBuf>,
+    pub ft_log: PathBuf,
+    pub targets: Option<PathBuf>,
+    pub truth: PathBuf,
+    pub truth_data: SessionTruth,
+}
+
+/// A script: where the sphere is and how hard it is pressed at any time, and what is scripted to happen.
+struct Script {
+    duration_s: f64,
+    touches: Vec<TouchTruth>,
+    /// Applied force and position at a time since the start.
+    at: Box<dyn Fn(f64) -> (f64, [f64; 2])>,
+}
+
+fn smoothstep(t: f64) -> f64 {
+    let t = t.clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// Touches one after the other: `lead_s` at rest, then for each a ramp, a hold, a release and a gap.
+fn touch_script(lead_s: f64, touches: Vec<([f64; 2], f64)>) -> Script {
+    const RAMP_S: f64 = 0.3;
+    const HOLD_S: f64 = 0.5;
+    const GAP_S: f64 = 0.5;
+    let period = 2.0 * RAMP_S + HOLD_S + GAP_S;
+    let start = START_US as f64 * 1e-6;
+    let truths = touches
+        .iter()
+        .enumerate()
+        .map(|(k, &(position_mm, peak_n))| {
+            let begin = lead_s + k as f64 * period;
+            TouchTruth {
+                start_s: start + begin,
+                end_s: start + begin + 2.0 * RAMP_S + HOLD_S,
+                peak_n,
+                position_mm,
+            }
+        })
+        .collect();
+    let duration_s = lead_s + touches.len() as f64 * period;
+    Script {
+        duration_s,
+        touches: truths,
+        at: Box::new(move |t| {
+            let k = ((t - lead_s) / period).floor();
+            if k < 0.0 || k as usize >= touches.len() {
+                return (0.0, touches.first().map_or([0.0; 2], |t| t.0));
+            }
+            let (position, peak) = touches[k as usize];
+            let local = t - lead_s - k * period;
+            let envelope = if local < RAMP_S {
+                smoothstep(local / RAMP_S)
+            } else if local < RAMP_S + HOLD_S {
+                1.0
+            } else {
+                1.0 - smoothstep((local - RAMP_S - HOLD_S) / RAMP_S)
+            };
+            (peak * envelope, position)
+        }),
+    }
+}
+
+/// Presses of different peaks and speeds (so that the cross-correlation has a single best lag).
+fn calibration_script(presses: usize) -> Script {
+    const PEAKS_N: [f64; 6] = [4.0, 8.0, 5.5, 7.0, 3.0, 6.5];
+    const RISE_S: [f64; 6] = [0.6, 1.0, 0.7, 0.9, 0.5, 0.8];
+    let lead_s = 0.5;
+    let segments: Vec<(f64, f64, f64)> = (0..presses.max(1))
+        .scan(lead_s, |begin, k| {
+            let (peak, rise) = (PEAKS_N[k % 6], RISE_S[k % 6]);
+            let segment = (*begin, rise, peak);
+            *begin += 2.0 * rise + 0.4;
+            Some(segment)
+        })
+        .collect();
+    let duration_s = segments.last().map_or(lead_s, |&(b, r, _)| b + 2.0 * r + 0.4);
+    Script {
+        duration_s,
+        touches: Vec::new(),
+        at: Box::new(move |t| {
+            let force = segments
+                .iter()
+                .find(|&&(b, r, _)| t >= b && t < b + 2.0 * r)
+                .map_or(0.0, |&(b, r, peak)| peak * (1.0 - ((t - b - r) / r).abs()));
+            (force, [0.0, 0.0])
+        }),
+    }
+}
+
+/// Triangular cycles 0 -> 8 N -> 0.
+fn hysteresis_script(cycles: usize) -> Script {
+    const PEAK_N: f64 = 8.0;
+    const HALF_S: f64 = 1.5;
+    let lead_s = 0.5;
+    let cycles = cycles.max(1);
+    Script {
+        duration_s: 2.0 * lead_s + cycles as f64 * 2.0 * HALF_S,
+        touches: Vec::new(),
+        at: Box::new(move |t| {
+            let local = t - lead_s;
+            if local < 0.0 || local >= cycles as f64 * 2.0 * HALF_S {
+                return (0.0, [0.0, 0.0]);
+            }
+            let phase = local.rem_euclid(2.0 * HALF_S) / HALF_S;
+            (PEAK_N * (1.0 - (phase - 1.0).abs()), [0.0, 0.0])
+        }),
+    }
+}
+
+/// The targets of a localisation session: a grid over the middle of the pad, visited row by row.
+pub fn target_grid(grid: [usize; 2]) -> Vec<[f64; 2]> {
+    let axis = |n: usize, half: f64| -> Vec<f64> {
+        if n <= 1 {
+            vec![0.0]
+        } else {
+            (0..n).map(|i| -half + 2.0 * half * i as f64 / (n - 1) as f64).collect()
+        }
+    };
+    let (xs, ys) = (axis(grid[0], 14.0), axis(grid[1], 9.0));
+    ys.iter().flat_map(|&y| xs.iter().map(move |&x| [x, y])).collect()
+}
+
+/// The damaged pad's damage: the ink gone in a disc away from the touches.
+pub const DAMAGE_CENTRE_MM: [f64; 2] = [-13.0, 8.0];
+pub const DAMAGE_RADIUS_MM: f64 = 4.5;
+
+/// Interior corners that lie inside the damaged disc, on the pad at rest (the pattern's geometry). Corners just
+/// outside it may be lost too, when one of their squares loses most of its ink.
+pub fn corners_lost(model: &SensorModel, centre_mm: [f64; 2], radius_mm: f64) -> usize {
+    model
+        .pad
+        .corners()
+        .filter(|&corner| {
+            let p = model.pad.corner_mm(corner);
+            (p[0] - centre_mm[0]).hypot(p[1] - centre_mm[1]) < radius_mm
+        })
+        .count()
+}
+
+/// Renders and records a session of `kind` into `dir`; `progress(done, total)` after each frame.
+pub fn write_session(
+    kind: SessionKind,
+    options: &SessionOptions,
+    dir: &Path,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<SessionFiles, SessionError> {
+    if !(options.frame_rate_hz > 0.0 && options.ft_rate_hz > 0.0 && options.width > 0 && options.repetitions > 0) {
+        return Err(SessionError::BadOptions);
+    }
+    std::fs::create_dir_all(dir).map_err(|source| SessionError::Write {
+        path: dir.display().to_string(),
+        source,
+    })?;
+    let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
+    let n = options.repetitions;
+    let script = match kind {
+        SessionKind::Calibration => calibration_script(n),
+        SessionKind::Hysteresis => hysteresis_script(n.div_ceil(2)),
+        SessionKind::Repeatability => {
+            let spread = Normal::new(0.0, 0.25).expect("a positive deviation");
+            let force_spread = Normal::new(0.0, 0.1).expect("a positive deviation");
+            let touches = (0..n)
+                .map(|k| {
+                    let drift = k as f64;
+                    let position = [
+                        4.0 + 0.12 * drift + spread.sample(&mut rng),
+                        -3.0 + spread.sample(&mut rng),
+                    ];
+                    (position, 6.0 - 0.08 * drift + force_spread.sample(&mut rng))
+                })
+                .collect();
+            touch_script(0.5, touches)
+        }
+        SessionKind::Localisation => {
+            touch_script(0.5, target_grid(options.grid).into_iter().map(|p| (p, 6.0)).collect())
+        }
+        SessionKind::Damage => touch_script(0.5, vec![([6.0, -4.0], 6.0), ([10.0, 6.0], 5.0)]),
+    };
+    let viscoelastic = (kind == SessionKind::Hysteresis).then_some(options.viscoelastic);
+    let ft_step = 1.0 / options.ft_rate_hz;
+    let frame_step = 1.0 / options.frame_rate_hz;
+    let start_s = START_US as f64 * 1e-6;
+
+    // Integrate the creep at the F/T rate; sample frames as they fall due.
+    let mut ft_csv = String::from("time_s,fx,fy,fz,tx,ty,tz\n");
+    let noise = Normal::new(0.0, options.ft_noise_n.max(0.0)).expect("a finite deviation");
+    let mut creep = 0.0;
+    let mut frames = Vec::new();
+    let ft_steps = (script.duration_s / ft_step).ceil() as usize;
+    for i in 0..=ft_steps {
+        let t = i as f64 * ft_step;
+        let (applied, position) = (script.at)(t);
+        let deformation = match viscoelastic {
+            Some(v) => {
+                creep += (applied - creep) * (1.0 - (-ft_step / v.tau_s).exp());
+                (1.0 - v.weight) * applied + v.weight * creep
+            }
+            None => applied,
+        };
+        let mut sample = || noise.sample(&mut rng);
+        // Compression reads negative on the F/T sensor's z axis, as it does on most.
+        ft_csv.push_str(&format!(
+            "{:.6},{:.4},{:.4},{:.4},{:.5},{:.5},{:.5}\n",
+            start_s + t + options.ft_offset_s,
+            sample(),
+            sample(),
+            -applied + sample(),
+            0.01 * sample(),
+            0.01 * sample(),
+            0.01 * sample()
+        ));
+        while (frames.len() as f64) * frame_step <= t + 1e-9 && (frames.len() as f64) * frame_step <= script.duration_s
+        {
+            let frame_t = frames.len() as f64 * frame_step;
+            frames.push(FrameTruth {
+                frame_id: frames.len() as u64,
+                time_s: start_s + frame_t,
+                applied_n: applied,
+                deformation_n: deformation,
+                position_mm: (applied > LIFT_OFF_N).then_some(position),
+            });
+        }
+    }
+    let ft_log = dir.join("ft.csv");
+    write(&ft_log, &ft_csv)?;
+
+    let model = SensorModel::real(options.width, options.height);
+    let damage = (kind == SessionKind::Damage).then(|| DamageTruth {
+        centre_mm: DAMAGE_CENTRE_MM,
+        radius_mm: DAMAGE_RADIUS_MM,
+        corners_lost: corners_lost(&model, DAMAGE_CENTRE_MM, DAMAGE_RADIUS_MM),
+    });
+    let renderer = Renderer::new(model)?;
+    let mut files = SessionFiles {
+        recording: dir.join(if kind == SessionKind::Damage {
+            "damaged.mcap"
+        } else {
+            "session.mcap"
+        }),
+        intact: None,
+        ft_log,
+        targets: None,
+        truth: dir.join("truth.json"),
+        truth_data: SessionTruth {
+            kind,
+            frame_interval_s: frame_step,
+            ft_offset_s: options.ft_offset_s,
+            viscoelastic,
+            touches: script.touches,
+            frames,
+            damage: damage.clone(),
+        },
+    };
+    let total = files.truth_data.frames.len() * if damage.is_some() { 2 } else { 1 };
+    let mut done = 0;
+    let mut step = |progress: &mut dyn FnMut(usize, usize)| {
+        done += 1;
+        progress(done, total);
+    };
+    if let Some(damage) = &damage {
+        let intact = dir.join("intact.mcap");
+        record(&renderer, options, &files.truth_data.frames, &[], &intact, &mut |_| {
+            step(progress)
+        })?;
+        let ink = Damage::Missing {
+            centre_mm: damage.centre_mm,
+            radius_mm: damage.radius_mm,
+        };
+        record(
+            &renderer,
+            options,
+            &files.truth_data.frames,
+            &[ink],
+            &files.recording,
+            &mut |_| step(progress),
+        )?;
+        files.intact = Some(intact);
+    } else {
+        record(
+            &renderer,
+            options,
+            &files.truth_data.frames,
+            &[],
+            &files.recording,
+            &mut |_| step(progress),
+        )?;
+    }
+    if kind == SessionKind::Localisation {
+        let targets = dir.join("targets.csv");
+        let mut csv = String::from("x_mm,y_mm\n");
+        for t in target_grid(options.grid) {
+            csv.push_str(&format!("{},{}\n", t[0], t[1]));
+        }
+        write(&targets, &csv)?;
+        files.targets = Some(targets);
+    }
+    let json = serde_json::to_string_pretty(&files.truth_data).expect("truth is plain data");
+    write(&files.truth, &json)?;
+    Ok(files)
+}
+
+fn write(path: &Path, text: &str) -> Result<(), SessionError> {
+    std::fs::write(path, text).map_err(|source| SessionError::Write {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// Renders the frames, estimates each from its decoded JPEG against frame 0 (the rest frame, as the daemon
+/// does), and records frame and reading.
+fn record(
+    renderer: &Renderer,
+    options: &SessionOptions,
+    frames: &[FrameTruth],
+    damage: &[Damage],
+    path: &Path,
+    on_frame: &mut dyn FnMut(usize),
+) -> Result<(), SessionError> {
+    let recorder = Recorder::create(path, RecorderOptions::default())?;
+    let mut estimator: Option<Estimator> = None;
+    for (index, frame) in frames.iter().enumerate() {
+        let mut scene = match frame.position_mm {
+            Some(position) if frame.deformation_n > LIFT_OFF_N => {
+                Scene::with_contact(Contact::sphere(SPHERE_RADIUS_MM, position, frame.deformation_n))
+            }
+            _ => Scene::rest(),
+        };
+        scene.damage = damage.to_vec();
+        let (image, _) = renderer
+            .render(
+                &scene,
+                [nusense_sim::NOMINAL_LED_CURRENT_MA; 4],
+                options.seed + index as u64 + 1,
+            )
+            .map_err(|source| SessionError::Render { frame: index, source })?;
+        let jpeg = encode_jpeg(&image, options.jpeg_quality);
+        let decoded = image::load_from_memory(&jpeg)
+            .map(|i| i.to_rgb8())
+            .unwrap_or_else(|_| image.clone());
+        let capture_time_us = START_US + (frame.time_s * 1e6 - START_US as f64).round() as u64;
+        let started = Instant::now();
+        let (estimate, error) = match estimator.as_mut() {
+            None => {
+                estimator = Some(
+                    Estimator::new(SensorConfig::default(), Mode::Fast, &decoded).map_err(SessionError::Reference)?,
+                );
+                (None, Some("the rest frame".to_string()))
+            }
+            Some(estimator) => match estimator.estimate(&decoded) {
+                Ok(reading) => (Some(reading), None),
+                Err(error) => (None, Some(error.to_string())),
+            },
+        };
+        let elapsed_us = started.elapsed().as_micros() as u64;
+        let reading = DaemonReading {
+            frame_id: frame.frame_id,
+            capture_time_us,
+            processed_time_us: capture_time_us + elapsed_us,
+            latency_ms: elapsed_us as f64 * 1e-3,
+            queue_ms: 0.0,
+            reference_frame_id: Some(0),
+            estimate,
+            error,
+            led: None,
+        };
+        recorder.record(RecordItem::Frame {
+            frame_id: frame.frame_id,
+            capture_time_us,
+            image: Arc::new(image),
+            jpeg: Some(Arc::new(jpeg)),
+        });
+        let json = serde_json::to_string(&reading).expect("a reading serialises");
+        recorder.record(RecordItem::Reading {
+            frame_id: frame.frame_id,
+            time_us: capture_time_us,
+            json: json.into(),
+        });
+        on_frame(index);
+    }
+    recorder.finish()?;
+    Ok(())
+}
