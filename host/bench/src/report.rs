@@ -6,6 +6,7 @@ use std::fmt::Write as _;
 use serde::Serialize;
 
 use super::{BenchReport, VariantResult};
+use crate::validation::ModeFigures;
 
 /// What the numbers were measured on.
 #[derive(Clone, Debug, Serialize)]
@@ -41,6 +42,14 @@ impl Machine {
             profile: if cfg!(debug_assertions) { "debug" } else { "release" },
         }
     }
+
+    /// One line naming the machine, the build and the time of the run.
+    pub fn markdown_line(&self) -> String {
+        format!(
+            "Machine: {} ({} logical CPUs, `nproc`), {}; {} build; run {}.",
+            self.cpu_model, self.logical_cpus, self.os, self.profile, self.date_utc
+        )
+    }
 }
 
 /// `YYYY-MM-DD HH:MM UTC` from the system clock (civil-from-days, no time zone database needed).
@@ -74,11 +83,7 @@ pub fn markdown(report: &BenchReport) -> String {
     let mut out = String::new();
     let m = &report.machine;
     let _ = writeln!(out, "# Estimator speed against error (`nusense bench`)\n");
-    let _ = writeln!(
-        out,
-        "Machine: {} ({} logical CPUs, `nproc`), {}; {} build; run {}.\n",
-        m.cpu_model, m.logical_cpus, m.os, m.profile, m.date_utc
-    );
+    let _ = writeln!(out, "{}\n", m.markdown_line());
     let _ = writeln!(
         out,
         "Simulated sweeps (nusense-sim, the paper's experiments): {} frames at {}x{} \"full\" resolution; each \
@@ -287,63 +292,164 @@ fn escape(text: &str) -> String {
     text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
-/// Issue 12's table: every estimator mode on the validation set.
+/// One row of issue 12's table: a figure, the issue's target for it, and each mode's value.
+struct Row {
+    figure: String,
+    target: &'static str,
+    /// `Some(true)` met, `Some(false)` missed (a mode without the figure misses it), `None`: no target.
+    values: Vec<(String, Option<bool>)>,
+}
+
+/// Issue 12's table: every estimator mode on the validation set, one row per figure with the issue's target, one
+/// column per mode.
 pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
+    let main = v.sizes.first().map_or_else(String::new, |(w, h)| format!("{w}x{h}"));
     let mut out = String::new();
     let _ =
         writeln!(
         out,
         "\n## Every mode on the validation set (issue 12)\n\n{} frames ({:?} profile, seed {}) from the validation \
-         sensor (`nusense_sim::validation`: equisolid decentred lens, tilted pose, layered pad seen through plate and \
-         gel, glare, vignetting, shot noise, JPEG 85, LED drift); sizes {}. One force calibration per mode, fitted on \
-         the calibration presses only (N modes: one scale; gamma modes: F = a·gamma + b), applied everywhere. Speed: \
-         median/p99 of `estimate` on the main size's frames, speed-up against `{}` in this run. Floor: smallest force \
-         from which every level is detected in >= 90 % of presses. Two contacts: both listed within 3 mm and each \
-         force within 20 %. \"–\": the mode does not report what the figure needs.\n",
+         sensor (`nusense_sim::validation`, docs/validation.md: equisolid decentred lens, tilted pose, layered pad \
+         seen through plate and gel, glare, vignetting, shot noise, JPEG 85, LED drift); sizes {}. One force \
+         calibration per mode, fitted on the calibration presses only (N modes: one scale; gamma modes: \
+         F = a·gamma + b), applied everywhere; a missed press reads 0 N. Speed: median/p99 of `estimate` on the \
+         {main} frames, one thread, speed-up against `{}` in this run. Floor: smallest force from which every level \
+         is detected in >= 90 % of presses. \"–\": the mode does not report what the figure needs; ✗: the issue's \
+         target is missed.\n",
         v.frames,
         v.profile,
         v.seed,
         v.sizes.iter().map(|(w, h)| format!("{w}x{h}")).collect::<Vec<_>>().join(", "),
         v.baseline
     );
+    let within = |value: Option<f64>, limit: f64| Some(value.is_some_and(|x| x <= limit));
+    let mut rows: Vec<Row> = Vec::new();
+    let mut row = |figure: String, target: &'static str, value: &dyn Fn(&ModeFigures) -> (String, Option<bool>)| {
+        rows.push(Row {
+            figure,
+            target,
+            values: v.modes.iter().map(value).collect(),
+        });
+    };
+    row(
+        format!("median / p99 ms per {main} frame"),
+        "<= 2 ms at 2048x1536",
+        &|m| {
+            let at_full = v.sizes.first() == Some(&(2048, 1536));
+            (
+                format!("{} / {}", opt(m.median_ms, 2), opt(m.p99_ms, 2)),
+                at_full.then_some(m.median_ms.is_some_and(|t| t <= 2.0)),
+            )
+        },
+    );
+    row(format!("speed-up against {}", v.baseline), "", &|m| {
+        (m.speedup.map_or_else(|| "–".into(), |s| format!("{s:.1}x")), None)
+    });
+    row("localisation RMSE, mm (misses)".into(), "<= 0.25", &|m| {
+        (
+            format!(
+                "{} ({}/{})",
+                opt(m.localisation_rmse_mm, 2),
+                m.localisation_misses,
+                m.localisation_frames
+            ),
+            Some(m.localisation_misses == 0 && m.localisation_rmse_mm.is_some_and(|e| e <= 0.25)),
+        )
+    });
+    row(
+        "force RMS, N: 1-8 N over the pad, one calibration".into(),
+        "<= 0.3",
+        &|m| (opt(m.force_rms_n, 2), within(m.force_rms_n, 0.3)),
+    );
+    row("... camera moved (roll up to 5°) included".into(), "<= 0.3", &|m| {
+        (
+            opt(m.force_rms_with_motion_n, 2),
+            within(m.force_rms_with_motion_n, 0.3),
+        )
+    });
+    row("camera rotation error, RMS / max °".into(), "<= 0.2", &|m| {
+        (
+            format!(
+                "{} / {}",
+                opt(m.camera_rotation_rms_deg, 2),
+                opt(m.camera_rotation_max_deg, 2)
+            ),
+            within(m.camera_rotation_max_deg, 0.2),
+        )
+    });
+    row("detection floor, N".into(), "<= 0.5", &|m| {
+        (opt(m.detection_floor_n, 2), within(m.detection_floor_n, 0.5))
+    });
+    row("false contacts on rest frames".into(), "0", &|m| {
+        (
+            format!("{}/{}", m.false_contacts, m.rest_frames),
+            Some(m.false_contacts == 0),
+        )
+    });
+    row("edge direction error, mean / max ° (misses)".into(), "<= 2", &|m| {
+        (
+            format!(
+                "{} / {} ({}/{})",
+                opt(m.edge_mae_deg, 1),
+                opt(m.edge_max_deg, 1),
+                m.edge_misses,
+                m.edge_frames
+            ),
+            Some(m.edge_misses == 0 && m.edge_max_deg.is_some_and(|e| e <= 2.0)),
+        )
+    });
+    row(
+        "two contacts 10 mm apart: both listed, each force ±20 %".into(),
+        "all",
+        &|m| match m.two_contacts_ok {
+            Some(n) => (format!("{n}/{}", m.two_contact_frames), Some(n == m.two_contact_frames)),
+            None => ("–".into(), Some(false)),
+        },
+    );
+    row("tangential force direction error, mean / max °".into(), "<= 5", &|m| {
+        (
+            format!(
+                "{} / {}",
+                opt(m.tangential_direction_mae_deg, 1),
+                opt(m.tangential_direction_max_deg, 1)
+            ),
+            within(m.tangential_direction_max_deg, 5.0),
+        )
+    });
+    row("torque RMS, N mm".into(), "", &|m| (opt(m.torque_rms_nmm, 2), None));
+    row("presses on damaged pads detected".into(), "", &|m| {
+        (format!("{}/{}", m.damaged_detected, m.damaged_frames), None)
+    });
+    row("localisation RMSE at other sizes, mm".into(), "", &|m| {
+        (opt(m.resolution_rmse_mm, 2), None)
+    });
+    row("frames refused".into(), "0", &|m| {
+        (format!("{}/{}", m.refused, m.frames), Some(m.refused == 0))
+    });
+    row("force calibration".into(), "", &|m| {
+        (m.calibration.clone().unwrap_or_else(|| "–".into()), None)
+    });
+
     let _ = writeln!(
         out,
-        "| mode | median ms | p99 ms | speed-up | loc. RMSE mm (misses) | force RMS N | force RMS N, camera moved | floor N | false contacts | edge mean/max deg (misses) | two contacts | tangential dir. mean/max deg | torque RMS N mm | rotation RMS/max deg | damaged found | other sizes loc. mm | refused | calibration |"
+        "| figure | target | {} |",
+        v.modes
+            .iter()
+            .map(|m| m.mode.to_string())
+            .collect::<Vec<_>>()
+            .join(" | ")
     );
-    let _ = writeln!(out, "|{}", "---|".repeat(18));
-    for m in &v.modes {
-        let _ = writeln!(
-            out,
-            "| {} | {} | {} | {} | {} ({}/{}) | {} | {} | {} | {}/{} | {}/{} ({}/{}) | {} | {}/{} | {} | {}/{} | {}/{} | {} | {}/{} | {} |",
-            m.mode,
-            opt(m.median_ms, 2),
-            opt(m.p99_ms, 2),
-            m.speedup.map_or_else(|| "–".into(), |s| format!("{s:.1}x")),
-            opt(m.localisation_rmse_mm, 2),
-            m.localisation_misses,
-            m.localisation_frames,
-            opt(m.force_rms_n, 2),
-            opt(m.force_rms_with_motion_n, 2),
-            opt(m.detection_floor_n, 2),
-            m.false_contacts,
-            m.rest_frames,
-            opt(m.edge_mae_deg, 1),
-            opt(m.edge_max_deg, 1),
-            m.edge_misses,
-            m.edge_frames,
-            m.two_contacts_ok.map_or_else(|| "–".into(), |n| format!("{n}/{}", m.two_contact_frames)),
-            opt(m.tangential_direction_mae_deg, 1),
-            opt(m.tangential_direction_max_deg, 1),
-            opt(m.torque_rms_nmm, 2),
-            opt(m.camera_rotation_rms_deg, 2),
-            opt(m.camera_rotation_max_deg, 2),
-            m.damaged_detected,
-            m.damaged_frames,
-            opt(m.resolution_rmse_mm, 2),
-            m.refused,
-            m.frames,
-            m.calibration.as_deref().unwrap_or("–"),
-        );
+    let _ = writeln!(out, "|---|---|{}", "---|".repeat(v.modes.len()));
+    for r in &rows {
+        let cells: Vec<String> = r
+            .values
+            .iter()
+            .map(|(text, met)| match met {
+                Some(false) => format!("{text} ✗"),
+                _ => text.clone(),
+            })
+            .collect();
+        let _ = writeln!(out, "| {} | {} | {} |", r.figure, r.target, cells.join(" | "));
     }
     let notes: Vec<String> = v
         .modes
@@ -423,6 +529,89 @@ mod tests {
         assert!(markdown(&report).contains("| fast <rough> | 64x48 |"));
     }
 
+    #[test]
+    fn the_validation_table_marks_missed_targets_and_only_those() {
+        use crate::validation::{score, ValidationReport};
+        use nusense_estimator::Mode;
+        let mut good = score(Mode::Fast, &[]);
+        good.median_ms = Some(1.5);
+        good.localisation_rmse_mm = Some(0.2);
+        good.localisation_frames = 3;
+        good.force_rms_n = Some(0.25);
+        good.force_rms_with_motion_n = Some(0.3);
+        good.camera_rotation_rms_deg = Some(0.1);
+        good.camera_rotation_max_deg = Some(0.15);
+        good.detection_floor_n = Some(0.5);
+        good.rest_frames = 4;
+        good.edge_mae_deg = Some(1.0);
+        good.edge_max_deg = Some(1.9);
+        good.edge_frames = 2;
+        good.two_contacts_ok = Some(2);
+        good.two_contact_frames = 2;
+        good.tangential_direction_mae_deg = Some(2.0);
+        good.tangential_direction_max_deg = Some(4.0);
+        // Paper mode as today: no force vector, contacts or camera motion, and one press missed.
+        let mut paper = score(Mode::Paper, &[]);
+        paper.median_ms = Some(30.0);
+        paper.localisation_rmse_mm = Some(0.2);
+        paper.localisation_misses = 1;
+        paper.localisation_frames = 3;
+        paper.detection_floor_n = Some(1.0);
+        paper.false_contacts = 1;
+        paper.rest_frames = 4;
+        let report = |size| ValidationReport {
+            profile: nusense_sim::validation::Profile::Full,
+            seed: 7,
+            frames: 10,
+            sizes: vec![size],
+            baseline: "paper".into(),
+            modes: vec![good.clone(), paper.clone()],
+            machine: Machine::this(),
+        };
+        let table = validation_markdown(&report((2048, 1536)));
+        let line = |start: &str| {
+            table
+                .lines()
+                .find(|l| l.starts_with(start))
+                .unwrap_or_else(|| panic!("no row {start}: {table}"))
+                .to_owned()
+        };
+        assert!(table.contains("| figure | target | fast | paper |"), "{table}");
+        assert_eq!(
+            line("| median / p99 ms per 2048x1536 frame"),
+            "| median / p99 ms per 2048x1536 frame | <= 2 ms at 2048x1536 | 1.50 / – | 30.00 / – ✗ |"
+        );
+        assert_eq!(
+            line("| localisation RMSE"),
+            "| localisation RMSE, mm (misses) | <= 0.25 | 0.20 (0/3) | 0.20 (1/3) ✗ |"
+        );
+        assert_eq!(
+            line("| force RMS"),
+            "| force RMS, N: 1-8 N over the pad, one calibration | <= 0.3 | 0.25 | – ✗ |"
+        );
+        assert_eq!(
+            line("| detection floor"),
+            "| detection floor, N | <= 0.5 | 0.50 | 1.00 ✗ |"
+        );
+        assert_eq!(
+            line("| false contacts"),
+            "| false contacts on rest frames | 0 | 0/4 | 1/4 ✗ |"
+        );
+        assert_eq!(
+            line("| two contacts"),
+            "| two contacts 10 mm apart: both listed, each force ±20 % | all | 2/2 | – ✗ |"
+        );
+        assert_eq!(
+            line("| camera rotation"),
+            "| camera rotation error, RMS / max ° | <= 0.2 | 0.10 / 0.15 | – / – ✗ |"
+        );
+        // Speed is judged against the 2 ms target only on 2048x1536 frames.
+        let quick = validation_markdown(&report((1024, 768)));
+        assert!(
+            quick.contains("| median / p99 ms per 1024x768 frame | <= 2 ms at 2048x1536 | 1.50 / – | 30.00 / – |"),
+            "{quick}"
+        );
+    }
     #[test]
     fn utc_date_is_well_formed() {
         let date = utc_now();

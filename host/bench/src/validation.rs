@@ -142,9 +142,10 @@ pub struct ValidationReport {
     pub sizes: Vec<(u32, u32)>,
     pub baseline: String,
     pub modes: Vec<ModeFigures>,
+    pub machine: crate::report::Machine,
 }
 
-struct Scored {
+pub(crate) struct Scored {
     kind: CaseKind,
     truth: CaseTruth,
     observed: Option<Observed>,
@@ -239,6 +240,7 @@ pub fn run_validation(
         sizes,
         baseline: modes.get(baseline_index).map(ToString::to_string).unwrap_or_default(),
         modes: figures,
+        machine: crate::report::Machine::this(),
     })
 }
 
@@ -323,7 +325,7 @@ fn angle_between_deg(a: [f64; 2], b: [f64; 2]) -> f64 {
     cross.atan2(dot).abs().to_degrees()
 }
 
-fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
+pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
     let of = |kind: CaseKind| scored.iter().filter(move |s| s.kind == kind);
     let times: Vec<f64> = scored.iter().filter_map(|s| s.elapsed_ms).collect();
     let calibration = ForceCalibration::fit(scored);
