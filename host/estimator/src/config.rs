@@ -157,6 +157,99 @@ impl Default for PaperParams {
     }
 }
 
+/// Which elastic solution relates surface tractions to the pattern's displacement (see [`crate::elastic`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ElasticModel {
+    /// A layer of gel on a rigid plate: the NUSense pad.
+    BondedLayer,
+    /// An elastic half-space (Boussinesq and Cerruti): the fallback when the layer's thickness is unknown.
+    HalfSpace,
+}
+
+/// The pad's mechanics: what turns displacements in mm into forces in N without any calibration.
+///
+/// Defaults describe the NUSense pad (the paper's layer stack): 2.2 mm of soft gel on 3 mm of Plexiglass, under an
+/// outer Sorta-Clear 18 skin and the dyed pattern layer. The skin is stiffer than the gel and spreads the load;
+/// `cover_mm` is its equivalent thickness of gel, and with the gel's modulus it is the project's model of the real
+/// pad (the simulator's `Material::real`: the pattern 2.8 mm deep, G = 48 kPa). `nusense calibrate` fits the
+/// modulus's scale from a force/torque log.
+///
+/// The pad's edge is free by default: measured on simulated pads without a clamped edge, assuming one where there
+/// is none moves contacts near the edge by up to 1 mm and costs 0.35 N RMS of force, while on a pad bonded 3 mm
+/// beyond the pattern the rigid plate below already confines the response to a few millimetres.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ElasticConfig {
+    pub model: ElasticModel,
+    /// Shear modulus of the gel, kPa.
+    pub shear_modulus_kpa: f64,
+    /// 0.5 = incompressible (silicone gels nearly are).
+    pub poisson_ratio: f64,
+    /// Depth of the pattern layer below the contact surface, as an equivalent thickness of gel, mm.
+    pub cover_mm: f64,
+    /// Gel between the pattern layer and the rigid plate, mm (bonded layer only).
+    pub gel_mm: f64,
+    /// The pad is bonded to its frame around the pattern (bonded layer only).
+    pub bonded_border: bool,
+    /// Distance from the pattern's edge to where the pad is bonded to its frame, mm.
+    pub border_margin_mm: f64,
+}
+
+impl Default for ElasticConfig {
+    fn default() -> Self {
+        Self {
+            model: ElasticModel::BondedLayer,
+            shear_modulus_kpa: 48.0,
+            poisson_ratio: 0.5,
+            cover_mm: 2.8,
+            gel_mm: 2.2,
+            bonded_border: false,
+            border_margin_mm: 3.0,
+        }
+    }
+}
+
+/// The traction inverse and the contact test (see [`crate::inverse`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InverseConfig {
+    /// Displacement noise of one corner along one axis (1 sigma), mm: the regularisation's noise level. Measured
+    /// from rest frames by `nusense calibrate`; the default is what the fast detector shows on the simulated real
+    /// sensor at 640 x 480 (the lowest resolution the daemon captures by default).
+    pub noise_mm: f64,
+    /// Prior scale (1 sigma) of the force one traction cell carries, N. The regularisation rule is MAP under this
+    /// prior: lambda = (noise_mm / traction_prior_n)^2. The default is the load of an 8 N press (the top of the
+    /// paper's range) spread over a 5 mm radius, per cell.
+    pub traction_prior_n: f64,
+    /// The contact test never assumes less noise than this, mm (identical frames would otherwise have none).
+    pub noise_floor_mm: f64,
+    /// Probability that the contact test calls a rest frame a contact.
+    pub false_alarm_probability: f64,
+}
+
+impl Default for InverseConfig {
+    fn default() -> Self {
+        Self { noise_mm: 0.01, traction_prior_n: 1.0, noise_floor_mm: 0.002, false_alarm_probability: 1e-6 }
+    }
+}
+
+/// When the pad moves against the camera and stays there without a contact, a new rest frame is taken.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RetareConfig {
+    /// Motion that counts: the largest displacement the fitted camera motion gives a corner, mm.
+    pub motion_mm: f64,
+    /// Consecutive frames without contact and with that motion before the re-tare.
+    pub frames: u32,
+}
+
+impl Default for RetareConfig {
+    fn default() -> Self {
+        Self { motion_mm: 0.1, frames: 30 }
+    }
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SensorConfig {
@@ -168,6 +261,13 @@ pub struct SensorConfig {
     pub calibration: ForceCalibration,
     pub surface: SurfaceConfig,
     pub paper: PaperParams,
+    pub elastic: ElasticConfig,
+    pub inverse: InverseConfig,
+    pub retare: RetareConfig,
+    /// The raw px -> pad mm map fitted on this sensor's rest frame by `nusense calibrate`; without it, each rest
+    /// frame fits its own.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pad_map: Option<crate::pad_map::StoredPadMap>,
 }
 
 impl Default for SensorConfig {
@@ -180,6 +280,10 @@ impl Default for SensorConfig {
             calibration: ForceCalibration::default(),
             surface: SurfaceConfig::default(),
             paper: PaperParams::default(),
+            elastic: ElasticConfig::default(),
+            inverse: InverseConfig::default(),
+            retare: RetareConfig::default(),
+            pad_map: None,
         }
     }
 }
@@ -300,6 +404,35 @@ impl SensorConfig {
         }
         fraction("paper.quad_min_solidity", p.quad_min_solidity)?;
         finite_positive("paper.pair_distance_px", p.pair_distance_px)?;
+        let e = &self.elastic;
+        finite_positive("elastic.shear_modulus_kpa", e.shear_modulus_kpa)?;
+        if !(e.poisson_ratio.is_finite() && (0.0..=0.5).contains(&e.poisson_ratio)) {
+            return Err(invalid("elastic.poisson_ratio", e.poisson_ratio, "between 0 and 0.5"));
+        }
+        if !(e.cover_mm.is_finite() && (0.1..=20.0).contains(&e.cover_mm)) {
+            return Err(invalid("elastic.cover_mm", e.cover_mm, "0.1 ..= 20 mm"));
+        }
+        if !(e.gel_mm.is_finite() && (0.1..=50.0).contains(&e.gel_mm)) {
+            return Err(invalid("elastic.gel_mm", e.gel_mm, "0.1 ..= 50 mm"));
+        }
+        if !(e.border_margin_mm.is_finite() && (0.0..=50.0).contains(&e.border_margin_mm)) {
+            return Err(invalid("elastic.border_margin_mm", e.border_margin_mm, "0 ..= 50 mm"));
+        }
+        let i = &self.inverse;
+        finite_positive("inverse.noise_mm", i.noise_mm)?;
+        finite_positive("inverse.traction_prior_n", i.traction_prior_n)?;
+        finite_positive("inverse.noise_floor_mm", i.noise_floor_mm)?;
+        if !(i.false_alarm_probability.is_finite() && i.false_alarm_probability > 0.0 && i.false_alarm_probability < 0.5)
+        {
+            return Err(invalid("inverse.false_alarm_probability", i.false_alarm_probability, "strictly between 0 and 0.5"));
+        }
+        finite_positive("retare.motion_mm", self.retare.motion_mm)?;
+        if self.retare.frames == 0 {
+            return Err(invalid("retare.frames", 0, ">= 1"));
+        }
+        if let Some(map) = &self.pad_map {
+            map.validate().map_err(|reason| invalid("pad_map", reason, "a map written by `nusense calibrate`"))?;
+        }
         Ok(())
     }
 }

@@ -9,7 +9,7 @@
 
 use nusense_geometry::Point2;
 
-use crate::homography::solve;
+use crate::linalg::solve_small as solve;
 
 /// One corner of the field: reference position and motion, both in paper px.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -22,6 +22,8 @@ pub enum EstimateError {
     Config(#[from] ConfigError),
     #[error("B-spline surface: {0}")]
     Surface(#[from] SurfaceError),
+    #[error("elastic model: {0}")]
+    Model(#[from] crate::elastic::ElasticError),
     #[error("mode {mode:?} is not available: {reason}")]
     ModeUnavailable { mode: Mode, reason: String },
 }

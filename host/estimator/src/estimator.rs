@@ -1,12 +1,17 @@
-//! The estimator: a rest frame found once, then every frame measured against it, stage by stage
-//! (detection -> registration -> surface and gamma -> force -> contact -> edge). Only detection differs between
-//! the modes; everything after it is shared.
+//! The estimator: a rest frame found once, then every frame measured against it, stage by stage:
+//! detection -> registration by lattice index -> displacements in pad mm -> camera motion fitted jointly with the
+//! tractions and removed -> the contact test -> the mode's outputs (the traction inverse's force vector, contacts
+//! and pressure map, or the paper's gamma line) -> gamma for comparison. Modes differ in detection (`paper`) and
+//! in what turns the compensated displacements into force, location and edge (`fast`, `paper`: the paper's gamma
+//! line and shear field; `inverse`: the traction map); motion removal and the contact test are shared.
 
 use std::str::FromStr;
+use std::sync::Arc;
 use std::time::Instant;
 
 use image::RgbImage;
-use nusense_geometry::{CornerIndex, Point2};
+use nusense_geometry::Point2;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::config::SensorConfig;
@@ -15,19 +20,33 @@ use crate::detection::FastTracker;
 use crate::edge::{edge_direction, EdgeEstimate};
 use crate::error::EstimateError;
 use crate::force::force;
+use crate::homography::Homography;
+use crate::inverse::{InverseModel, Stage1, Stage2, TestOutcome, MOTION_PARAMETERS};
 use crate::lattice::{CornerObservation, Lattice, SquareObservation};
+use crate::motion::{camera_motion, largest_displacement_mm};
 use crate::pad_map::{camera_for, PadMapping};
 use crate::paper::PaperDetector;
+use crate::reading::{
+    CameraMotion, ContactRegion, ContactTest, EdgeReading, GammaReading, LatticeCounts, PressureMap, Reading,
+    ShearVector, Touch,
+};
 use crate::registration::{register, Registration};
-use crate::shear::{gamma, ShearSampler};
+use crate::shear::{gamma, ShearSampler, ShearSamples};
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
-    /// Our pipeline: colour, topology and tracking; points undistorted, never pixels.
+    /// Fast detection; force from the paper's gamma line, location from the shear field.
     Fast,
-    /// The sensor authors' published pipeline and parameters.
+    /// The sensor authors' published detection and force line.
     Paper,
+    /// Fast detection and the traction inverse: force vector, torque, every contact, pressure map.
+    #[default]
+    Inverse,
+}
+
+impl Mode {
+    pub const ALL: [Self; 3] = [Self::Fast, Self::Paper, Self::Inverse];
 }
 
 impl FromStr for Mode {
@@ -37,7 +56,8 @@ impl FromStr for Mode {
         match s {
             "fast" => Ok(Self::Fast),
             "paper" => Ok(Self::Paper),
-            other => Err(format!("unknown mode `{other}`; allowed: fast, paper")),
+            "inverse" => Ok(Self::Inverse),
+            other => Err(format!("unknown mode `{other}`; allowed: fast, paper, inverse")),
         }
     }
 }
@@ -47,53 +67,9 @@ impl std::fmt::Display for Mode {
         f.write_str(match self {
             Self::Fast => "fast",
             Self::Paper => "paper",
+            Self::Inverse => "inverse",
         })
     }
-}
-
-/// One lattice corner's motion.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct ShearVector {
-    pub index: CornerIndex,
-    pub reference_px: Option<Point2>,
-    pub current_px: Option<Point2>,
-    /// Motion on the pad since the reference, mm; `None` when either frame missed the corner.
-    pub displacement_mm: Option<Point2>,
-    /// Seen in both frames with a plausible motion (only valid corners enter the surface).
-    pub valid: bool,
-}
-
-#[derive(Clone, Debug, Serialize)]
-pub struct Reading {
-    pub contact: bool,
-    pub contact_px: Option<[f64; 2]>,
-    pub contact_undistorted_px: Option<[f64; 2]>,
-    pub contact_mm: Option<[f64; 2]>,
-    /// alpha * sum ||s - s_ref|| over `samples_used` samples, in paper px (see `pad_map`).
-    pub gamma: f64,
-    /// 0 without contact, else a * gamma + b as it is (see `force`).
-    pub force_n: f64,
-    /// a * gamma + b whether or not there is contact.
-    pub force_model_n: f64,
-    pub edge_angle_deg: Option<f64>,
-    pub edge_confidence: f64,
-    /// Corners found in this frame.
-    pub points_detected: usize,
-    pub points_expected: usize,
-    pub squares_detected: usize,
-    pub squares_expected: usize,
-    /// Corners seen in both frames with a plausible motion.
-    pub points_valid: usize,
-    /// Corners seen in both frames but masked as implausible.
-    pub points_implausible: usize,
-    pub samples_used: usize,
-    pub samples_total: usize,
-    /// Third-largest local (non-affine) corner shear, mm: the contact decision's statistic.
-    pub contact_score_mm: f64,
-    /// The fast tracker had to search the whole frame again.
-    pub recovered: bool,
-    pub shear_field: Vec<ShearVector>,
-    pub elapsed_ms: f64,
 }
 
 struct FrameLattice {
@@ -108,25 +84,37 @@ enum Detector {
     Paper(Box<PaperDetector>),
 }
 
+/// The rest frame as the measurement sees it.
+struct Rest {
+    lattice: Lattice,
+    mapping: PadMapping,
+    /// Each corner in pad mm (nominal grid position where the rest frame missed it).
+    corners_mm: Vec<Point2>,
+    /// Each corner in paper px (zero where missed; masked by validity).
+    paper_px: Vec<Point2>,
+    sampler: ShearSampler,
+}
+
 pub struct Estimator {
     config: SensorConfig,
     mode: Mode,
     detector: Detector,
-    mapping: PadMapping,
-    reference: Lattice,
-    reference_paper_px: Vec<Point2>,
-    sampler: ShearSampler,
+    rest: Rest,
+    model: Arc<InverseModel>,
+    /// Consecutive frames with motion and without contact.
+    moved_frames: u32,
+    retare_count: u64,
 }
-
-/// A contact moves many corners; one mis-tracked square moves at most a few (an edge square two). The contact
-/// statistic is the residual shear of the corner ranked this high.
-const CONTACT_SUPPORT: usize = 3;
-
-/// An edge direction needs at least this fraction of the corners around the sheared region.
-const MIN_EDGE_COVERAGE: f64 = 0.9;
 
 /// Fewer valid corners than this fraction of the lattice is not a measurement.
 const MIN_VALID_FRACTION: f64 = 0.25;
+/// ...and never fewer than the motion model has parameters (with room to judge them).
+const MIN_VALID_CORNERS: usize = 2 * MOTION_PARAMETERS;
+/// A contact moves many corners; one mis-tracked square moves at most a few (an edge square two). The contact
+/// score is the local shear of the corner ranked this high.
+const CONTACT_SUPPORT: usize = 3;
+/// An edge direction (fast and paper modes) needs at least this fraction of the corners around the sheared region.
+const MIN_EDGE_COVERAGE: f64 = 0.9;
 
 impl Estimator {
     /// Finds the lattice in the rest frame once; frames are then measured against it.
@@ -135,7 +123,7 @@ impl Estimator {
         let (width, height) = reference.dimensions();
         let pad = config.pad;
         let (detector, squares, corners) = match mode {
-            Mode::Fast => {
+            Mode::Fast | Mode::Inverse => {
                 let (tracker, detection) = FastTracker::from_reference(reference, pad, config.thresholds)?;
                 (Detector::Fast(tracker), detection.squares, detection.corners)
             }
@@ -146,32 +134,13 @@ impl Estimator {
             }
         };
         let camera = camera_for(&config, width, height)?;
-        let undistorted: Vec<Option<Point2>> =
-            corners.iter().map(|c| c.and_then(|p| camera.undistort_px(p))).collect();
-        let mapping = PadMapping::new(camera, &pad, &undistorted)?;
-        let reference = build_lattice(&config, &mapping, squares, &corners);
-        let needed = min_valid(&config);
-        if reference.corners_found() < needed {
-            return Err(EstimateError::TooFewPoints { found: reference.corners_found(), needed });
-        }
-        let reference_paper_px: Vec<Point2> = reference
-            .corners
-            .iter()
-            .map(|c| c.undistorted_px.map(|p| mapping.to_paper(p)).unwrap_or([0.0, 0.0]))
-            .collect();
-        let reference_valid: Vec<bool> = reference.corners.iter().map(|c| c.undistorted_px.is_some()).collect();
-        let sampler = ShearSampler::new(
-            usize::from(pad.corner_rows()),
-            usize::from(pad.corner_cols()),
-            &config.surface,
-            &reference_paper_px,
-            &reference_valid,
-        )?;
-        Ok(Self { config, mode, detector, mapping, reference, reference_paper_px, sampler })
+        let rest = Rest::new(&config, camera, squares, &corners)?;
+        let model = InverseModel::shared(&config)?;
+        Ok(Self { config, mode, detector, rest, model, moved_frames: 0, retare_count: 0 })
     }
 
     pub fn reference_lattice(&self) -> &Lattice {
-        &self.reference
+        &self.rest.lattice
     }
 
     pub fn config(&self) -> &SensorConfig {
@@ -183,7 +152,16 @@ impl Estimator {
     }
 
     pub fn mapping(&self) -> &PadMapping {
-        &self.mapping
+        &self.rest.mapping
+    }
+
+    /// Re-tares since the estimator was built (persistent motion without contact; see `RetareConfig`).
+    pub fn retare_count(&self) -> u64 {
+        self.retare_count
+    }
+
+    pub fn inverse_model(&self) -> &InverseModel {
+        &self.model
     }
 
     /// The lattice of a frame (detection only: no registration against the reference).
@@ -203,14 +181,15 @@ impl Estimator {
                 (squares, corners, quads, false)
             }
         };
-        let lattice = build_lattice(&self.config, &self.mapping, squares, &corners);
+        let lattice = build_lattice(&self.config, &self.rest.mapping, squares, &corners);
         Ok(FrameLattice { lattice, squares_found, recovered })
     }
 
     pub fn estimate(&mut self, frame: &RgbImage) -> Result<Reading, EstimateError> {
         let started = Instant::now();
         let (width, height) = frame.dimensions();
-        let (expected_width, expected_height) = (self.mapping.camera().width(), self.mapping.camera().height());
+        let camera = self.rest.mapping.camera();
+        let (expected_width, expected_height) = (camera.width(), camera.height());
         if (width, height) != (expected_width, expected_height) {
             return Err(EstimateError::FrameSizeMismatch {
                 expected_width,
@@ -220,118 +199,282 @@ impl Estimator {
             });
         }
         let FrameLattice { lattice, squares_found, recovered } = self.detect_frame(frame)?;
-        let registration = register(&self.reference, &lattice, self.config.thresholds.max_displacement_cells);
+        let registration = register(&self.rest.lattice, &lattice, self.config.thresholds.max_displacement_cells);
         let needed = min_valid(&self.config);
         if registration.valid_count() < needed {
             return Err(EstimateError::TooFewPoints { found: registration.valid_count(), needed });
         }
-        let mut reading = self.measure(&lattice, &registration)?;
+        let (mut reading, moved_mm) = self.measure(&lattice, &registration)?;
         reading.recovered = recovered;
-        reading.squares_detected = squares_found;
+        reading.counts.squares_detected = squares_found;
+        reading.retared = self.follow_motion(&reading, moved_mm, &lattice)?;
+        reading.retare_count = self.retare_count;
         reading.elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
         Ok(reading)
     }
 
-    /// Everything after detection: surfaces, gamma, force, contact, edge.
-    fn measure(&self, lattice: &Lattice, registration: &Registration) -> Result<Reading, EstimateError> {
+    /// Everything after detection and registration.
+    /// Also returns the largest displacement the camera motion gave a corner, mm.
+    fn measure(&self, lattice: &Lattice, registration: &Registration) -> Result<(Reading, f64), EstimateError> {
         let valid: Vec<bool> = registration.corners.iter().map(|c| c.valid).collect();
-        let current_paper_px: Vec<Point2> = lattice
+        let current_mm: Vec<Option<Point2>> =
+            lattice.corners.iter().zip(&valid).map(|(c, &ok)| if ok { c.mm } else { None }).collect();
+        let motion = self.remove_motion(&current_mm, &valid)?;
+        let floor_mm = self.config.inverse.noise_floor_mm;
+        let noise_mm = self.model.frame_noise_mm(&motion.stage, floor_mm).max(floor_mm);
+        let outcome = self.model.test(&motion.stage, noise_mm);
+
+        let uncompensated_paper_px: Vec<Point2> = lattice
             .corners
             .iter()
             .zip(&valid)
-            .map(|(c, &ok)| if ok { c.undistorted_px.map(|p| self.mapping.to_paper(p)) } else { None })
+            .map(|(c, &ok)| if ok { c.undistorted_px.map(|p| self.rest.mapping.to_paper(p)) } else { None })
             .map(|p| p.unwrap_or([0.0, 0.0]))
             .collect();
-        let samples = self.sampler.sample(&current_paper_px, &valid)?;
-        let gamma = gamma(&samples, self.config.calibration.alpha);
-
-        // Contact: the local shear field after removing the pad's overall (affine) motion.
-        let field: Vec<FieldPoint> = valid
-            .iter()
-            .enumerate()
-            .filter(|(_, &ok)| ok)
-            .map(|(i, _)| FieldPoint {
-                position: self.reference_paper_px[i],
-                displacement: sub(current_paper_px[i], self.reference_paper_px[i]),
+        let compensated_paper_px: Vec<Point2> = (0..valid.len())
+            .map(|i| {
+                let at = [self.rest.corners_mm[i][0] + motion.displacement[2 * i], self.rest.corners_mm[i][1] + motion.displacement[2 * i + 1]];
+                let p = if valid[i] { self.rest.mapping.mm_to_undistorted(at) } else { None };
+                p.map(|p| self.rest.mapping.to_paper(p)).unwrap_or([0.0, 0.0])
             })
             .collect();
-        let motion = fit_affine_motion(&field).unwrap_or(AffineMotion::ZERO);
-        let residuals: Vec<Point2> = field.iter().map(|p| motion.residual(p)).collect();
-        let mut residual_mm: Vec<f64> = field
-            .iter()
-            .zip(&residuals)
-            .map(|(p, r)| self.paper_shift_to_mm(p.position, *r).unwrap_or(0.0))
-            .collect();
-        residual_mm.sort_unstable_by(|a, b| b.total_cmp(a));
-        let contact_score_mm = residual_mm.get(CONTACT_SUPPORT - 1).copied().unwrap_or(0.0);
-        let contact = contact_score_mm > self.config.thresholds.contact_shear_mm;
+        let samples = self.rest.sampler.sample(&compensated_paper_px, &valid)?;
+        let gamma_compensated = gamma(&samples, self.config.calibration.alpha);
+        let uncompensated = self.rest.sampler.sample(&uncompensated_paper_px, &valid)?;
+        let gamma_uncompensated = gamma(&uncompensated, self.config.calibration.alpha);
+        let line = force(&self.config.calibration, gamma_compensated);
 
-        let (mut contact_px, mut contact_undistorted_px, mut contact_mm) = (None, None, None);
-        let mut edge = EdgeEstimate::NONE;
-        if contact {
-            if let Some(centre) = divergence_centre(&field, &residuals) {
-                let undistorted = self.mapping.from_paper(centre);
-                contact_undistorted_px = Some(undistorted);
-                contact_px = self.mapping.distort(undistorted);
-                contact_mm = self.mapping.undistorted_to_mm(undistorted);
-            }
-            let sheared: Vec<(Point2, f64)> = self
-                .sampler
-                .reference_samples()
-                .iter()
-                .zip(&samples.displacement)
-                .zip(&samples.valid)
-                .filter(|(_, &ok)| ok)
-                .filter_map(|((&at, &d), _)| {
-                    let local = norm(sub(d, motion.predict(at)));
-                    let mm = self.mapping.undistorted_to_mm(self.mapping.from_paper(at))?;
-                    Some((mm, local))
-                })
-                .collect();
-            let thresholds = &self.config.thresholds;
-            edge = edge_direction(&sheared, thresholds.edge_sample_fraction, thresholds.edge_min_confidence);
-            let coverage = self.coverage(&registration.corners, edge.region_centre_mm, edge.region_radius_mm);
-            edge = edge.with_coverage(coverage, MIN_EDGE_COVERAGE, thresholds.edge_min_confidence);
-        }
-        let force = force(&self.config.calibration, gamma, contact);
+        let mut local: Vec<f64> = (0..valid.len())
+            .filter(|&i| valid[i])
+            .map(|i| motion.displacement[2 * i].hypot(motion.displacement[2 * i + 1]))
+            .collect();
+        local.sort_unstable_by(|a, b| b.total_cmp(a));
+        let contact_score_mm = local.get(CONTACT_SUPPORT - 1).copied().unwrap_or(0.0);
+
+        let (touch, pressure_map) = if self.mode == Mode::Inverse {
+            self.inverse_touch(&motion, &valid, &outcome)
+        } else {
+            let field = PaperField { compensated_paper_px: &compensated_paper_px, samples: &samples };
+            (self.line_touch(&field, &valid, &outcome, line.model_n, registration), None)
+        };
         let shear_field = registration
             .corners
             .iter()
-            .map(|c| ShearVector {
+            .enumerate()
+            .map(|(i, c)| ShearVector {
                 index: c.index,
                 reference_px: c.reference_raw,
                 current_px: c.current_raw,
-                displacement_mm: c.displacement_mm,
+                displacement_mm: c
+                    .displacement_mm
+                    .map(|_| [motion.displacement[2 * i], motion.displacement[2 * i + 1]])
+                    .filter(|_| valid[i]),
                 valid: c.valid,
             })
             .collect();
         let reading = Reading {
-            contact,
-            contact_px,
-            contact_undistorted_px,
-            contact_mm,
-            gamma,
-            force_n: force.force_n,
-            force_model_n: force.model_n,
-            edge_angle_deg: edge.angle_deg,
-            edge_confidence: edge.confidence,
-            points_detected: lattice.corners_found(),
-            points_expected: self.config.pad.corner_count(),
-            squares_detected: lattice.squares_found(),
-            squares_expected: self.config.pad.yellow_count(),
-            points_valid: registration.valid_count(),
-            points_implausible: registration.implausible,
-            samples_used: samples.used(),
-            samples_total: samples.total(),
+            mode: self.mode,
+            touch,
+            test: ContactTest {
+                statistic: outcome.statistic,
+                threshold: outcome.threshold,
+                p_value: outcome.p_value,
+                noise_mm: outcome.noise_mm,
+                detection_floor_n: outcome.detection_floor_n,
+            },
+            camera_motion: motion.reported,
+            gamma: GammaReading {
+                gamma: gamma_compensated,
+                gamma_uncompensated,
+                samples_used: samples.used(),
+                samples_total: samples.total(),
+            },
+            force_model_n: line.model_n,
             contact_score_mm,
+            pressure_map,
+            counts: LatticeCounts {
+                points_detected: lattice.corners_found(),
+                points_expected: self.config.pad.corner_count(),
+                squares_detected: lattice.squares_found(),
+                squares_expected: self.config.pad.yellow_count(),
+                points_valid: registration.valid_count(),
+                points_implausible: registration.implausible,
+            },
             recovered: false,
+            retared: false,
+            retare_count: self.retare_count,
             shear_field,
             elapsed_ms: 0.0,
         };
-        if !reading_is_finite(&reading) {
+        if reading.numbers().iter().any(|v| !v.is_finite()) {
             return Err(EstimateError::NoPattern { reason: "the measurement is not finite (degenerate lattice)".into() });
         }
-        Ok(reading)
+        Ok((reading, motion.largest_mm))
+    }
+
+    /// Camera motion fitted jointly with the tractions, then removed: a first pass on the raw displacements gives
+    /// the motion, the frame's corners are mapped back through it, and a second pass refines it (the deformation is
+    /// then measured in the rest frame's pad axes, not turned with the camera).
+    fn remove_motion(&self, current_mm: &[Option<Point2>], valid: &[bool]) -> Result<Compensated, EstimateError> {
+        let rest = &self.rest.corners_mm;
+        let raw: Vec<f64> = current_mm
+            .iter()
+            .zip(rest)
+            .flat_map(|(c, r)| c.map_or([0.0, 0.0], |c| [c[0] - r[0], c[1] - r[1]]))
+            .collect();
+        let first = self.model.stage1(&raw, valid);
+        let degenerate = || EstimateError::NoPattern { reason: "the pad's motion is degenerate".into() };
+        let coarse = Homography::from_matrix(self.model.motion_homography(&first.motion)).ok_or_else(degenerate)?;
+        let back = coarse.inverse().ok_or_else(degenerate)?;
+        let compensated: Vec<f64> = current_mm
+            .iter()
+            .zip(rest)
+            .flat_map(|(c, r)| c.and_then(|c| back.apply(c)).map_or([0.0, 0.0], |c| [c[0] - r[0], c[1] - r[1]]))
+            .collect();
+        let stage = self.model.stage1(&compensated, valid);
+        let fine = Homography::from_matrix(self.model.motion_homography(&stage.motion)).ok_or_else(degenerate)?;
+        let total = coarse.after(&fine);
+        let mut displacement = compensated.clone();
+        for (i, r) in rest.iter().enumerate() {
+            let m = self.model.motion_field(&stage.motion, *r);
+            displacement[2 * i] -= m[0];
+            displacement[2 * i + 1] -= m[1];
+        }
+        let reported = camera_motion(&total, rest, &self.rest.mapping);
+        let largest_mm = largest_displacement_mm(&total, rest);
+        Ok(Compensated { data: compensated, displacement, stage, reported, largest_mm })
+    }
+
+    /// Contact from the traction inverse.
+    fn inverse_touch(&self, motion: &Compensated, valid: &[bool], outcome: &TestOutcome) -> (Option<Touch>, Option<PressureMap>) {
+        let cells = self.model.cells();
+        let zero_map = self.pressure_map(&vec![0.0; 3 * cells.len()]);
+        if !outcome.contact {
+            return (None, Some(zero_map));
+        }
+        let Stage2 { regions: kept, tractions, .. } =
+            self.model.stage2(&motion.data, valid, &motion.stage, outcome.noise_mm, outcome.detection_floor_n);
+        let Some(first) = kept.first() else { return (None, Some(zero_map)) };
+        let contacts: Vec<ContactRegion> = kept.iter().filter_map(|r| self.region_at(r)).collect();
+        if contacts.is_empty() {
+            return (None, Some(zero_map));
+        }
+        let force: [f64; 3] = std::array::from_fn(|k| kept.iter().map(|r| r.force_vector_n[k]).sum());
+        let centre = [
+            kept.iter().map(|r| r.force_vector_n[2] * r.centre_mm[0]).sum::<f64>() / force[2],
+            kept.iter().map(|r| r.force_vector_n[2] * r.centre_mm[1]).sum::<f64>() / force[2],
+        ];
+        let torque = kept
+            .iter()
+            .flat_map(|r| &r.cells)
+            .map(|(j, f)| {
+                let p = cells[*j].centre_mm;
+                (p[0] - centre[0]) * f[1] - (p[1] - centre[1]) * f[0]
+            })
+            .sum();
+        let moments = self.model.moments(first, self.config.thresholds.edge_min_confidence);
+        let mut contacts = contacts.into_iter();
+        let strongest = contacts.next().expect("checked non-empty above");
+        let touch = Touch {
+            strongest,
+            others: contacts.collect(),
+            force_n: force[2],
+            force_vector_n: Some(force),
+            torque_nmm: Some(torque),
+            edge: EdgeReading { angle_deg: moments.angle_deg, confidence: moments.confidence },
+        };
+        (Some(touch), Some(self.pressure_map(&tractions)))
+    }
+
+    fn region_at(&self, region: &crate::inverse::Region) -> Option<ContactRegion> {
+        let undistorted = self.rest.mapping.mm_to_undistorted(region.centre_mm)?;
+        Some(ContactRegion {
+            centre_px: self.rest.mapping.distort(undistorted)?,
+            centre_undistorted_px: undistorted,
+            centre_mm: region.centre_mm,
+            force_n: region.force_vector_n[2],
+            force_vector_n: Some(region.force_vector_n),
+            torque_nmm: Some(region.torque_nmm),
+            area_mm2: Some(region.area_mm2),
+        })
+    }
+
+    fn pressure_map(&self, tractions: &[f64]) -> PressureMap {
+        let pad = &self.config.pad;
+        PressureMap {
+            origin_mm: self.model.cells()[0].centre_mm,
+            step_mm: [pad.pitch_x_mm(), pad.pitch_y_mm()],
+            cols: usize::from(pad.cols),
+            rows: usize::from(pad.rows),
+            kpa: self.model.pressure_kpa(tractions),
+        }
+    }
+
+    /// Contact from the paper's gamma line (modes `fast` and `paper`): the force is the line's value, located where
+    /// the shear field diverges from. Below the detection floor (which the line's offset b reaches for light
+    /// presses) there is no contact, never a negative force.
+    fn line_touch(
+        &self,
+        field: &PaperField,
+        valid: &[bool],
+        outcome: &TestOutcome,
+        line_n: f64,
+        registration: &Registration,
+    ) -> Option<Touch> {
+        if !outcome.contact || !(line_n >= outcome.detection_floor_n) {
+            return None;
+        }
+        let points: Vec<FieldPoint> = (0..valid.len())
+            .filter(|&i| valid[i])
+            .map(|i| FieldPoint {
+                position: self.rest.paper_px[i],
+                displacement: sub(field.compensated_paper_px[i], self.rest.paper_px[i]),
+            })
+            .collect();
+        let affine = fit_affine_motion(&points).unwrap_or(AffineMotion::ZERO);
+        let residuals: Vec<Point2> = points.iter().map(|p| affine.residual(p)).collect();
+        let centre = divergence_centre(&points, &residuals)?;
+        let undistorted = self.rest.mapping.from_paper(centre);
+        let strongest = ContactRegion {
+            centre_px: self.rest.mapping.distort(undistorted)?,
+            centre_undistorted_px: undistorted,
+            centre_mm: self.rest.mapping.undistorted_to_mm(undistorted)?,
+            force_n: line_n,
+            force_vector_n: None,
+            torque_nmm: None,
+            area_mm2: None,
+        };
+        let edge = self.shear_edge(field.samples, &affine, registration);
+        Some(Touch {
+            strongest,
+            others: Vec::new(),
+            force_n: line_n,
+            force_vector_n: None,
+            torque_nmm: None,
+            edge: EdgeReading { angle_deg: edge.angle_deg, confidence: edge.confidence },
+        })
+    }
+
+    /// The shear field's principal axis (modes `fast` and `paper`).
+    fn shear_edge(&self, samples: &ShearSamples, affine: &AffineMotion, registration: &Registration) -> EdgeEstimate {
+        let sheared: Vec<(Point2, f64)> = self
+            .rest
+            .sampler
+            .reference_samples()
+            .iter()
+            .zip(&samples.displacement)
+            .zip(&samples.valid)
+            .filter(|(_, &ok)| ok)
+            .filter_map(|((&at, &d), _)| {
+                let local = norm(sub(d, affine.predict(at)));
+                let mm = self.rest.mapping.undistorted_to_mm(self.rest.mapping.from_paper(at))?;
+                Some((mm, local))
+            })
+            .collect();
+        let thresholds = &self.config.thresholds;
+        let edge = edge_direction(&sheared, thresholds.edge_sample_fraction, thresholds.edge_min_confidence);
+        let coverage = self.coverage(&registration.corners, edge.region_centre_mm, edge.region_radius_mm);
+        edge.with_coverage(coverage, MIN_EDGE_COVERAGE, thresholds.edge_min_confidence)
     }
 
     /// Fraction of the corners within `radius_mm` (plus one cell) of `centre_mm` that are valid, judged on the
@@ -354,11 +497,81 @@ impl Estimator {
         }
     }
 
-    /// Length in mm of a shift `d` (paper px) at `at` (paper px).
-    fn paper_shift_to_mm(&self, at: Point2, d: Point2) -> Option<f64> {
-        let a = self.mapping.undistorted_to_mm(self.mapping.from_paper(at))?;
-        let b = self.mapping.undistorted_to_mm(self.mapping.from_paper([at[0] + d[0], at[1] + d[1]]))?;
-        Some(norm(sub(b, a)))
+    /// Counts frames of persistent motion without contact and re-tares after `retare.frames` of them: the frame
+    /// just measured becomes the rest frame. Returns whether it did.
+    fn follow_motion(&mut self, reading: &Reading, moved: f64, lattice: &Lattice) -> Result<bool, EstimateError> {
+        if reading.is_contact() || moved <= self.config.retare.motion_mm {
+            self.moved_frames = 0;
+            return Ok(false);
+        }
+        self.moved_frames += 1;
+        if self.moved_frames < self.config.retare.frames {
+            return Ok(false);
+        }
+        let squares: Vec<Option<Point2>> = lattice.squares.iter().map(|s| s.raw_px).collect();
+        let corners: Vec<Option<Point2>> = lattice.corners.iter().map(|c| c.raw_px).collect();
+        if let Detector::Fast(tracker) = &mut self.detector {
+            tracker.adopt_last_frame_as_reference()?;
+        }
+        self.rest = Rest::new(&self.config, *self.rest.mapping.camera(), squares, &corners)?;
+        self.moved_frames = 0;
+        self.retare_count += 1;
+        tracing::info!(
+            retares = self.retare_count,
+            rotation_deg = reading.camera_motion.rotation_deg,
+            shift_px = ?reading.camera_motion.shift_px,
+            "the pad moved against the camera and stayed without contact: new rest frame"
+        );
+        Ok(true)
+    }
+}
+
+/// The displacements with the camera motion removed, and the motion.
+struct Compensated {
+    /// Displacements after the first pass's motion is removed (stage 1's input), 2 per corner, mm.
+    data: Vec<f64>,
+    /// The pad's own displacement (second pass's motion removed as well), 2 per corner, mm.
+    displacement: Vec<f64>,
+    stage: Stage1,
+    reported: CameraMotion,
+    /// The largest displacement the motion gives a corner, mm.
+    largest_mm: f64,
+}
+
+/// The compensated shear field in the paper's units, for the gamma-line modes.
+struct PaperField<'a> {
+    compensated_paper_px: &'a [Point2],
+    samples: &'a ShearSamples,
+}
+
+impl Rest {
+    fn new(
+        config: &SensorConfig,
+        camera: nusense_geometry::FisheyeCamera,
+        squares: Vec<Option<Point2>>,
+        corners: &[Option<Point2>],
+    ) -> Result<Self, EstimateError> {
+        let pad = config.pad;
+        let undistorted: Vec<Option<Point2>> = corners.iter().map(|c| c.and_then(|p| camera.undistort_px(p))).collect();
+        let mapping = PadMapping::fit(camera, &pad, &undistorted, config.pad_map.as_ref())?;
+        let lattice = build_lattice(config, &mapping, squares, corners);
+        let needed = min_valid(config);
+        if lattice.corners_found() < needed {
+            return Err(EstimateError::TooFewPoints { found: lattice.corners_found(), needed });
+        }
+        let corners_mm: Vec<Point2> =
+            lattice.corners.iter().map(|c| c.mm.unwrap_or_else(|| pad.corner_mm(c.index))).collect();
+        let paper_px: Vec<Point2> =
+            lattice.corners.iter().map(|c| c.undistorted_px.map(|p| mapping.to_paper(p)).unwrap_or([0.0, 0.0])).collect();
+        let valid: Vec<bool> = lattice.corners.iter().map(|c| c.undistorted_px.is_some()).collect();
+        let sampler = ShearSampler::new(
+            usize::from(pad.corner_rows()),
+            usize::from(pad.corner_cols()),
+            &config.surface,
+            &paper_px,
+            &valid,
+        )?;
+        Ok(Self { lattice, mapping, corners_mm, paper_px, sampler })
     }
 }
 
@@ -367,24 +580,7 @@ fn sub(a: Point2, b: Point2) -> Point2 {
 }
 
 fn min_valid(config: &SensorConfig) -> usize {
-    ((config.pad.corner_count() as f64 * MIN_VALID_FRACTION).ceil() as usize).max(8)
-}
-
-fn finite(p: &Option<Point2>) -> bool {
-    p.is_none_or(|p| p[0].is_finite() && p[1].is_finite())
-}
-
-fn reading_is_finite(r: &Reading) -> bool {
-    r.gamma.is_finite()
-        && r.force_n.is_finite()
-        && r.force_model_n.is_finite()
-        && r.edge_confidence.is_finite()
-        && r.contact_score_mm.is_finite()
-        && r.edge_angle_deg.is_none_or(f64::is_finite)
-        && finite(&r.contact_px)
-        && finite(&r.contact_undistorted_px)
-        && finite(&r.contact_mm)
-        && r.shear_field.iter().all(|s| finite(&s.reference_px) && finite(&s.current_px) && finite(&s.displacement_mm))
+    ((config.pad.corner_count() as f64 * MIN_VALID_FRACTION).ceil() as usize).max(MIN_VALID_CORNERS)
 }
 
 /// Squares and corners (raw px, by slot) from the published pipeline, and its count of quadrilaterals.
@@ -432,12 +628,7 @@ fn build_lattice(
             let mm = undistorted_px.and_then(|p| mapping.undistorted_to_mm(p));
             // A corner is found only if it makes it through every frame: raw, undistorted and pad.
             let found = mm.is_some();
-            CornerObservation {
-                index,
-                raw_px: raw_px.filter(|_| found),
-                undistorted_px: undistorted_px.filter(|_| found),
-                mm,
-            }
+            CornerObservation { index, raw_px: raw_px.filter(|_| found), undistorted_px: undistorted_px.filter(|_| found), mm }
         })
         .collect();
     Lattice { pad, squares, corners }

@@ -1,22 +1,20 @@
-//! Normal force from gamma through the sensor's linear calibration F = a * gamma + b.
+//! Normal force from gamma through the sensor's linear calibration F = a * gamma + b (the paper's line; modes `fast`
+//! and `paper`).
 //!
-//! Without contact the sensor carries no load, so the reported force is 0 N; the calibration line's own value
-//! (b is negative, so it is below zero near gamma = 0) stays visible as `force_model_n`. With contact the line's
-//! value is reported as it is, even if negative (outside the calibrated range): nothing is clamped silently.
+//! The line's value is always reported as `force_model_n`. As a force it only counts with contact and above the
+//! detection floor: b is negative, so for light presses the line goes below zero, and a force is never negative
+//! (see `Estimator::line_touch`).
 
 use crate::config::ForceCalibration;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ForceReading {
-    /// The reported force, N.
-    pub force_n: f64,
-    /// a * gamma + b, N, whether or not there is contact.
+    /// a * gamma + b, N.
     pub model_n: f64,
 }
 
-pub fn force(calibration: &ForceCalibration, gamma: f64, contact: bool) -> ForceReading {
-    let model_n = calibration.a * gamma + calibration.b;
-    ForceReading { force_n: if contact { model_n } else { 0.0 }, model_n }
+pub fn force(calibration: &ForceCalibration, gamma: f64) -> ForceReading {
+    ForceReading { model_n: calibration.a * gamma + calibration.b }
 }
 
 #[cfg(test)]
@@ -24,12 +22,9 @@ mod tests {
     use super::*;
 
     #[test]
-    fn follows_the_calibration_line_only_in_contact() {
+    fn follows_the_calibration_line() {
         let c = ForceCalibration::default();
-        let f = force(&c, 2.0, true);
-        assert!((f.force_n - (3.09 * 2.0 - 1.14)).abs() < 1e-12);
-        let none = force(&c, 0.01, false);
-        assert_eq!(none.force_n, 0.0);
-        assert!(none.model_n < 0.0);
+        assert!((force(&c, 2.0).model_n - (3.09 * 2.0 - 1.14)).abs() < 1e-12);
+        assert!(force(&c, 0.01).model_n < 0.0);
     }
 }

@@ -3,34 +3,11 @@
 
 use nusense_geometry::Point2;
 
+use crate::linalg::solve_small as solve;
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Homography {
     h: [[f64; 3]; 3],
-}
-
-/// Solves the n x n system `a x = b` by Gaussian elimination with partial pivoting; `None` if singular.
-pub fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
-    for col in 0..N {
-        let pivot = (col..N).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
-        if !(a[pivot][col].abs() > 1e-12) {
-            return None;
-        }
-        a.swap(col, pivot);
-        b.swap(col, pivot);
-        for row in col + 1..N {
-            let f = a[row][col] / a[col][col];
-            for k in col..N {
-                a[row][k] -= f * a[col][k];
-            }
-            b[row] -= f * b[col];
-        }
-    }
-    let mut x = [0.0; N];
-    for row in (0..N).rev() {
-        let s: f64 = (row + 1..N).map(|k| a[row][k] * x[k]).sum();
-        x[row] = (b[row] - s) / a[row][row];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 fn normaliser(points: &[Point2]) -> [[f64; 3]; 3] {
@@ -49,6 +26,11 @@ fn apply(m: &[[f64; 3]; 3], p: Point2) -> Option<Point2> {
     }
     let q = [(m[0][0] * p[0] + m[0][1] * p[1] + m[0][2]) / w, (m[1][0] * p[0] + m[1][1] * p[1] + m[1][2]) / w];
     (q[0].is_finite() && q[1].is_finite()).then_some(q)
+}
+
+fn determinant(h: &[[f64; 3]; 3]) -> f64 {
+    h[0][0] * (h[1][1] * h[2][2] - h[1][2] * h[2][1]) - h[0][1] * (h[1][0] * h[2][2] - h[1][2] * h[2][0])
+        + h[0][2] * (h[1][0] * h[2][1] - h[1][1] * h[2][0])
 }
 
 fn mul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
@@ -99,6 +81,44 @@ impl Homography {
 
     pub fn apply(&self, p: Point2) -> Option<Point2> {
         apply(&self.h, p)
+    }
+
+    /// Row-major, scaled so that the last entry is 1.
+    pub fn matrix(&self) -> [f64; 9] {
+        let s = self.h[2][2];
+        let s = if s.abs() > 1e-300 { s } else { 1.0 };
+        let mut m = [0.0; 9];
+        for (k, v) in m.iter_mut().enumerate() {
+            *v = self.h[k / 3][k % 3] / s;
+        }
+        m
+    }
+
+    /// From a row-major matrix; `None` if it is not finite or not invertible.
+    pub fn from_matrix(m: [f64; 9]) -> Option<Self> {
+        let h = [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]];
+        let valid = m.iter().all(|v| v.is_finite()) && determinant(&h).abs() > 1e-300;
+        valid.then_some(Self { h })
+    }
+
+    pub fn inverse(&self) -> Option<Self> {
+        let h = &self.h;
+        let det = determinant(h);
+        if !(det.abs() > 1e-300) {
+            return None;
+        }
+        let cofactor = |r0: usize, r1: usize, c0: usize, c1: usize| h[r0][c0] * h[r1][c1] - h[r0][c1] * h[r1][c0];
+        let inv = [
+            [cofactor(1, 2, 1, 2) / det, -cofactor(0, 2, 1, 2) / det, cofactor(0, 1, 1, 2) / det],
+            [-cofactor(1, 2, 0, 2) / det, cofactor(0, 2, 0, 2) / det, -cofactor(0, 1, 0, 2) / det],
+            [cofactor(1, 2, 0, 1) / det, -cofactor(0, 2, 0, 1) / det, cofactor(0, 1, 0, 1) / det],
+        ];
+        Self::from_matrix([inv[0][0], inv[0][1], inv[0][2], inv[1][0], inv[1][1], inv[1][2], inv[2][0], inv[2][1], inv[2][2]])
+    }
+
+    /// `self` after `first`: p -> self(first(p)).
+    pub fn after(&self, first: &Self) -> Self {
+        Self { h: mul(&self.h, &first.h) }
     }
 }
 

@@ -2,12 +2,13 @@
 //! `width_mm x height_mm` (the real pad: 12 x 16 cells, 53 x 40 mm; cell (0, 0), top-left as the camera sees it,
 //! is yellow). Control points are the interior corners, where four cells meet.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::Point2;
 
 /// Index of a cell of the checkerboard: `row` in `0..rows`, `col` in `0..cols`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, JsonSchema)]
 pub struct SquareIndex {
     pub row: u16,
     pub col: u16,
@@ -15,13 +16,13 @@ pub struct SquareIndex {
 
 /// Index of an interior corner: `row` in `0..rows-1`, `col` in `0..cols-1`; corner (r, c) is the point shared by
 /// cells (r, c), (r, c+1), (r+1, c) and (r+1, c+1).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, JsonSchema)]
 pub struct CornerIndex {
     pub row: u16,
     pub col: u16,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PadGeometry {
     /// Cells along y (down).

@@ -83,6 +83,8 @@ pub struct FastTracker {
     stride: usize,
     squares: Vec<SquareModel>,
     previous: Vec<Option<Point2>>,
+    /// Yellow area of each square in the last frame (for a re-tare).
+    previous_area: Vec<Option<f64>>,
     thresholds: Thresholds,
 }
 
@@ -131,7 +133,7 @@ impl FastTracker {
             })
             .collect();
         let mut tracker =
-            Self { pad, width, height, stride, squares, previous: coarse.clone(), thresholds };
+            Self { pad, width, height, stride, squares, previous: coarse.clone(), previous_area: Vec::new(), thresholds };
         let measured = tracker.measure(frame, &coarse, None)?;
         let mut squares_px = Vec::with_capacity(measured.len());
         for (model, m) in tracker.squares.iter_mut().zip(&measured) {
@@ -147,8 +149,27 @@ impl FastTracker {
             }
         }
         tracker.previous = squares_px.clone();
+        tracker.previous_area = measured.iter().map(|m| m.map(|(_, a)| a)).collect();
         let corners = corners_from_squares(&pad, &squares_px);
         Ok((tracker, Detection { squares: squares_px, corners, recovered: false }))
+    }
+
+    /// Makes the last tracked frame the reference: squares found there keep their new position and area (and the
+    /// cells follow them); squares it missed keep the old reference.
+    pub fn adopt_last_frame_as_reference(&mut self) -> Result<(), EstimateError> {
+        for ((model, p), a) in self.squares.iter_mut().zip(&self.previous).zip(&self.previous_area) {
+            if let (Some(p), Some(a)) = (p, a) {
+                model.reference = Some(*p);
+                model.reference_area = *a;
+            }
+        }
+        let squares: Vec<Option<Point2>> = self.squares.iter().map(|m| m.reference).collect();
+        for (model, cell) in self.squares.iter_mut().zip(local_cells(&self.pad, &squares)?) {
+            if let Some(cell) = cell {
+                model.cell = cell;
+            }
+        }
+        Ok(())
     }
 
     pub fn frame_size(&self) -> (u32, u32) {
@@ -170,6 +191,7 @@ impl FastTracker {
         }
         let squares: Vec<Option<Point2>> = measured.iter().map(|m| m.map(|(p, _)| p)).collect();
         self.previous = squares.clone();
+        self.previous_area = measured.iter().map(|m| m.map(|(_, a)| a)).collect();
         let corners = corners_from_squares(&self.pad, &squares);
         Ok(Detection { squares, corners, recovered })
     }

@@ -1,0 +1,973 @@
+//! Tractions from displacements: the model-based inverse (GelSlim 2.0's inverse-FEM idea, with an analytic kernel
+//! of the bonded layer in place of a mesh).
+//!
+//! The pattern's in-plane displacement d (pad mm, two per corner) is linear in the tractions on the pad's surface:
+//! d = B m + A t + e. t holds the force (fx, fy, fz; N) on each cell of a coarse grid (the pattern's own cells,
+//! 3.3 mm), A is the elastic response ([`crate::elastic`]), m the camera/pad motion left after compensation (a
+//! linearised homography, unpenalised: B's columns are the rigid, affine and perspective displacement fields) and e
+//! the corners' noise (sigma per axis).
+//!
+//! **Stage 1, every frame, a fixed linear operator.** With a Gaussian prior t ~ N(0, tau^2) per component the MAP
+//! estimate is universal kriging: [C B; Bᵀ 0] [y; m] = [d; 0] with C = A Aᵀ + lambda I, then t = Aᵀ y. The
+//! regularisation rule is that prior: lambda = (noise / tau)^2, both from the sensor config (never per frame). The
+//! system's inverse is precomputed once per sensor config, so a frame costs two matrix-vector products; corners
+//! missing from a frame are handled exactly by a capacitance correction on the rows they leave (the solution is
+//! forced to vanish there), not by refactoring.
+//!
+//! **The contact test.** "Rigid motion and noise only" (H0: t = 0) against "tractions present": the statistic is
+//! the fit's improvement E = RSS0 - RSS1 in units of the noise. Under H0, E / sigma^2 = eᵀ Q e / sigma^2 with Q
+//! known from the operator, a weighted sum of chi-squares, taken as g chi^2_h (Satterthwaite: matching mean and
+//! variance); contact when it exceeds that distribution's 1 - alpha quantile. sigma is this frame's own noise,
+//! estimated robustly from the corners' residuals (each divided by its expected share under H0), never below the
+//! configured floor. The detection floor in N follows from the same threshold: the force of a press at the pad's
+//! centre whose expected E equals it.
+//!
+//! **Stage 2, only when the test says contact.** Friction acts only where something touches, and pressure only
+//! pushes: the tractions are re-estimated on the cells where stage 1 finds pressure above its own noise (and a ring
+//! around them), with normal pressure >= 0 (an active-set solve of the small problem, from precomputed Gram
+//! blocks). Contacts are the watershed regions of that pressure; force vectors, torque, centres, areas and the edge
+//! direction (second moments of the pressure) come from it.
+
+use std::sync::{Arc, Mutex};
+
+use nalgebra::{DMatrix, DVector};
+use nusense_geometry::{PadGeometry, Point2};
+
+use crate::config::{ElasticModel, SensorConfig};
+use crate::elastic::{Cell, ElasticError, PadResponse, PointKernel};
+use crate::linalg::{dot, Dense};
+
+/// Columns of the motion basis: translation (2), linear (4), perspective (2).
+pub const MOTION_PARAMETERS: usize = 8;
+/// Stage 1 pressure above this many of its own noise sigmas marks a cell as loaded.
+const SUPPORT_SIGMAS: f64 = 3.0;
+/// Most active-set iterations of stage 2 (it converges in a few).
+const MAX_ACTIVE_SET_ITERATIONS: usize = 50;
+/// A local maximum of pressure starts its own contact only if the saddle towards a higher one dips below this
+/// fraction of its peak (otherwise it is a bump of the same contact).
+const SADDLE_FRACTION: f64 = 0.6;
+/// The noise estimate leaves out this fraction of the corners with the largest residuals...
+const NOISE_TRIM: f64 = 0.05;
+/// ...which lowers the mean of the rest to this fraction of the full mean (for chi-square with 1 or 2 degrees of
+/// freedom: 0.81 and 0.84; a corner's 2-D residual lies between the two).
+const TRIMMED_MEAN_RATIO: f64 = 0.83;
+/// Fewer corners than this do not make a noise estimate.
+const MIN_NOISE_CORNERS: usize = 10;
+
+/// Everything precomputed for one sensor config.
+#[derive(Debug)]
+pub struct InverseModel {
+    pad: PadGeometry,
+    cells: Vec<Cell>,
+    /// Observations: 2 per corner (x, y) at the corners' nominal positions, `corner_slot` order.
+    observations: usize,
+    /// A (obs x 3 cells) and its transpose, row-major.
+    a: Dense,
+    a_t: Dense,
+    /// B (obs x P) and its transpose.
+    b: Dense,
+    b_t: Dense,
+    /// The first `observations` columns of the kriging system's inverse, (obs + P) x obs.
+    s: Dense,
+    lambda: f64,
+    /// AᵀA, AᵀB, BᵀB over all observations (stage 2 subtracts missing rows).
+    gram_aa: Dense,
+    gram_ab: Dense,
+    gram_bb: Dense,
+    /// Expected share of each corner's residual |e|^2 under H0, per sigma^2.
+    residual_share: Vec<f64>,
+    /// Noise (per sigma) of each cell's stage 1 pressure.
+    pressure_noise: Vec<f64>,
+    /// Satterthwaite parameters of E / sigma^2 under H0.
+    test_scale: f64,
+    test_dof: f64,
+    /// E per sigma^2 of a 1 N press on the central cells (E scales with the force squared).
+    reference_explained: f64,
+    /// Normalisation length of the motion basis, mm.
+    motion_length_mm: f64,
+    false_alarm_probability: f64,
+}
+
+/// Stage 1's result for one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Stage1 {
+    /// (fx, fy, fz) per cell, N.
+    pub tractions: Vec<f64>,
+    /// Motion parameters (see [`InverseModel::motion_field`]).
+    pub motion: [f64; MOTION_PARAMETERS],
+    /// Per corner: residual after the fit (mm), `None` where the corner was not used.
+    pub residuals: Vec<Option<Point2>>,
+    /// Residual sums of squares of the rigid-only and the traction fit, mm^2.
+    pub rss_rigid: f64,
+    pub rss_full: f64,
+}
+
+/// The contact test's verdict.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TestOutcome {
+    /// E / sigma^2.
+    pub statistic: f64,
+    /// The 1 - alpha quantile of its distribution under "no contact".
+    pub threshold: f64,
+    /// Probability of a statistic at least this large without contact.
+    pub p_value: f64,
+    /// The noise used, mm (1 sigma per axis per corner).
+    pub noise_mm: f64,
+    /// Normal force at the pad's centre whose expected statistic equals the threshold, N.
+    pub detection_floor_n: f64,
+    pub contact: bool,
+}
+
+/// One contact region from stage 2.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Region {
+    pub centre_mm: Point2,
+    pub force_vector_n: [f64; 3],
+    /// About `centre_mm`, from +x towards +y, N mm.
+    pub torque_nmm: f64,
+    pub area_mm2: f64,
+    /// Cells and their (fx, fy, fz).
+    pub cells: Vec<(usize, [f64; 3])>,
+}
+
+/// Stage 2's result.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Stage2 {
+    /// (fx, fy, fz) per cell of the whole grid, N (zero off the support).
+    pub tractions: Vec<f64>,
+    pub motion: [f64; MOTION_PARAMETERS],
+    /// Strongest (largest normal force) first.
+    pub regions: Vec<Region>,
+}
+
+/// Second moments of a pressure distribution.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Moments {
+    /// Degrees from +x towards +y, in [0, 180); `None` when round (confidence below the minimum).
+    pub angle_deg: Option<f64>,
+    /// 1 - minor / major.
+    pub confidence: f64,
+}
+
+static CACHE: Mutex<Vec<(String, Arc<InverseModel>)>> = Mutex::new(Vec::new());
+/// Models kept for reuse (a daemon re-tares often; tests build many estimators of a few configs).
+const CACHE_SIZE: usize = 4;
+
+impl InverseModel {
+    /// The model for `config`, built once per distinct pad, elastic and inverse configuration in this process.
+    pub fn shared(config: &SensorConfig) -> Result<Arc<Self>, ElasticError> {
+        let key = format!("{:?}|{:?}|{:?}", config.pad, config.elastic, config.inverse);
+        let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, model)) = cache.iter().find(|(k, _)| *k == key) {
+            return Ok(model.clone());
+        }
+        let model = Arc::new(Self::new(config)?);
+        if cache.len() >= CACHE_SIZE {
+            cache.remove(0);
+        }
+        cache.push((key, model.clone()));
+        Ok(model)
+    }
+
+    pub fn new(config: &SensorConfig) -> Result<Self, ElasticError> {
+        let pad = config.pad;
+        let kernel = PointKernel::new(&config.elastic)?;
+        let corners: Vec<Point2> = pad.corners().map(|c| pad.corner_mm(c)).collect();
+        let size = [pad.pitch_x_mm(), pad.pitch_y_mm()];
+        let cells: Vec<Cell> = (0..pad.rows)
+            .flat_map(|row| (0..pad.cols).map(move |col| nusense_geometry::SquareIndex { row, col }))
+            .map(|cell| Cell { centre_mm: pad.square_centre_mm(cell), size_mm: size })
+            .collect();
+        let border = (config.elastic.model == ElasticModel::BondedLayer && config.elastic.bonded_border).then(|| {
+            [pad.width_mm / 2.0 + config.elastic.border_margin_mm, pad.height_mm / 2.0 + config.elastic.border_margin_mm]
+        });
+        let a = PadResponse::new(&kernel, &corners, &cells, border)?.matrix;
+        let observations = a.nrows();
+        let motion_length_mm = (pad.width_mm.max(pad.height_mm)) / 2.0;
+        let b = motion_basis(&corners, motion_length_mm);
+        let lambda = (config.inverse.noise_mm / config.inverse.traction_prior_n).powi(2);
+
+        let mut k = DMatrix::zeros(observations + MOTION_PARAMETERS, observations + MOTION_PARAMETERS);
+        let c = &a * a.transpose();
+        k.view_mut((0, 0), (observations, observations)).copy_from(&c);
+        for i in 0..observations {
+            k[(i, i)] += lambda;
+        }
+        k.view_mut((0, observations), (observations, MOTION_PARAMETERS)).copy_from(&b);
+        k.view_mut((observations, 0), (MOTION_PARAMETERS, observations)).copy_from(&b.transpose());
+        let inverse = k.try_inverse().ok_or(ElasticError::Degenerate("the kriging system is singular"))?;
+        let s = inverse.columns(0, observations).into_owned();
+        let s11 = s.rows(0, observations).into_owned();
+
+        // The test: Q = P0 - lambda^2 S11^2 with P0 the projection off the motion basis.
+        let btb = b.transpose() * &b;
+        let btb_inv = btb.clone().try_inverse().ok_or(ElasticError::Degenerate("the motion basis is degenerate"))?;
+        let p0 = DMatrix::identity(observations, observations) - &b * &btb_inv * b.transpose();
+        let s11_sq = &s11 * &s11;
+        let q = &p0 - &s11_sq * (lambda * lambda);
+        let trace = q.trace();
+        let trace_sq = q.iter().map(|v| v * v).sum::<f64>();
+        if !(trace > 0.0 && trace_sq > 0.0) {
+            return Err(ElasticError::Degenerate("the tractions explain nothing beyond the motion"));
+        }
+        let residual_share = (0..observations / 2)
+            .map(|i| lambda * lambda * (s11_sq[(2 * i, 2 * i)] + s11_sq[(2 * i + 1, 2 * i + 1)]))
+            .collect();
+        let operator = a.transpose() * &s11;
+        let pressure_noise = (0..cells.len()).map(|j| operator.row(3 * j + 2).norm()).collect();
+
+        let mut model = Self {
+            pad,
+            a_t: Dense::from_nalgebra(&a.transpose()),
+            b_t: Dense::from_nalgebra(&b.transpose()),
+            gram_aa: Dense::from_nalgebra(&(a.transpose() * &a)),
+            gram_ab: Dense::from_nalgebra(&(a.transpose() * &b)),
+            gram_bb: Dense::from_nalgebra(&btb),
+            a: Dense::from_nalgebra(&a),
+            b: Dense::from_nalgebra(&b),
+            s: Dense::from_nalgebra(&s),
+            cells,
+            observations,
+            lambda,
+            residual_share,
+            pressure_noise,
+            test_scale: trace_sq / trace,
+            test_dof: trace * trace / trace_sq,
+            reference_explained: 0.0,
+            motion_length_mm,
+            false_alarm_probability: config.inverse.false_alarm_probability,
+        };
+        // A 1 N press spread over the cells nearest the centre, noise-free.
+        let central = model.central_cells();
+        let mut press = vec![0.0; 3 * model.cells.len()];
+        for &j in &central {
+            press[3 * j + 2] = 1.0 / central.len() as f64;
+        }
+        let mut d = vec![0.0; observations];
+        model.a.mul_vec(&press, &mut d);
+        let stage = model.stage1(&d, &vec![true; observations / 2]);
+        model.reference_explained = stage.rss_rigid - stage.rss_full;
+        if !(model.reference_explained > 0.0) {
+            return Err(ElasticError::Degenerate("a press at the centre explains nothing"));
+        }
+        Ok(model)
+    }
+
+    pub fn cells(&self) -> &[Cell] {
+        &self.cells
+    }
+
+    pub fn pad(&self) -> &PadGeometry {
+        &self.pad
+    }
+
+    /// The cells whose centres are nearest the pad's centre (four on an even grid).
+    fn central_cells(&self) -> Vec<usize> {
+        let distance = |c: &Cell| c.centre_mm[0].hypot(c.centre_mm[1]);
+        let nearest = self.cells.iter().map(distance).fold(f64::MAX, f64::min);
+        (0..self.cells.len()).filter(|&j| distance(&self.cells[j]) <= nearest + 1e-9).collect()
+    }
+
+    /// Displacement (mm) that motion parameters `m` give the pad point `p` (mm).
+    pub fn motion_field(&self, m: &[f64; MOTION_PARAMETERS], p: Point2) -> Point2 {
+        let row = motion_rows(p, self.motion_length_mm);
+        [dot(&row[0], m), dot(&row[1], m)]
+    }
+
+    /// The motion as a homography of pad mm (its linearisation is `motion_field`), row-major.
+    pub fn motion_homography(&self, m: &[f64; MOTION_PARAMETERS]) -> [f64; 9] {
+        let l = self.motion_length_mm;
+        // x' = x + m0 + m2 x + m3 y - (m6 x + m7 y) x (in units of l), y' likewise: a homography with perspective
+        // row (m6 / l, m7 / l) to first order.
+        [1.0 + m[2], m[3], m[0], m[4], 1.0 + m[5], m[1], m[6] / l, m[7] / l, 1.0]
+    }
+
+    /// Stage 1 (see the module notes). `d`: 2 per corner, mm; `valid`: per corner.
+    pub fn stage1(&self, d: &[f64], valid: &[bool]) -> Stage1 {
+        let n = self.observations;
+        let mut d0 = d.to_vec();
+        let missing: Vec<usize> = (0..n).filter(|&r| !valid[r / 2]).collect();
+        for &r in &missing {
+            d0[r] = 0.0;
+        }
+        let mut x = vec![0.0; n + MOTION_PARAMETERS];
+        self.s.mul_vec(&d0, &mut x);
+        if !missing.is_empty() {
+            // Capacitance correction: find z on the missing rows so that the solution vanishes there.
+            let k = missing.len();
+            let s_mm = DMatrix::from_fn(k, k, |i, j| self.s.at(missing[i], missing[j]));
+            let rhs = DVector::from_fn(k, |i, _| -x[missing[i]]);
+            if let Some(z) = s_mm.lu().solve(&rhs) {
+                for (j, &col) in missing.iter().enumerate() {
+                    for (row, xr) in x.iter_mut().enumerate() {
+                        *xr += self.s.at(row, col) * z[j];
+                    }
+                }
+            }
+            for &r in &missing {
+                x[r] = 0.0;
+            }
+        }
+        let (y, m) = x.split_at(n);
+        let mut tractions = vec![0.0; self.a_t.rows];
+        self.a_t.mul_vec(y, &mut tractions);
+        let motion: [f64; MOTION_PARAMETERS] = std::array::from_fn(|i| m[i]);
+        let residuals: Vec<Option<Point2>> = (0..n / 2)
+            .map(|i| valid[i].then(|| [self.lambda * y[2 * i], self.lambda * y[2 * i + 1]]))
+            .collect();
+        let rss_full: f64 = residuals.iter().flatten().map(|r| r[0] * r[0] + r[1] * r[1]).sum();
+        Stage1 { tractions, motion, residuals, rss_rigid: self.rigid_rss(&d0, valid), rss_full }
+    }
+
+    /// Residual sum of squares of the motion basis alone, over valid corners.
+    fn rigid_rss(&self, d0: &[f64], valid: &[bool]) -> f64 {
+        let mut btb = self.gram_bb_nalgebra();
+        for r in (0..self.observations).filter(|&r| !valid[r / 2]) {
+            let row = self.b.row(r);
+            for i in 0..MOTION_PARAMETERS {
+                for j in 0..MOTION_PARAMETERS {
+                    btb[(i, j)] -= row[i] * row[j];
+                }
+            }
+        }
+        let mut btd = vec![0.0; MOTION_PARAMETERS];
+        self.b_t.mul_vec(d0, &mut btd);
+        let Some(m) = btb.cholesky().map(|c| c.solve(&DVector::from_column_slice(&btd))) else {
+            return d0.iter().map(|v| v * v).sum();
+        };
+        (0..self.observations)
+            .filter(|&r| valid[r / 2])
+            .map(|r| (d0[r] - dot(self.b.row(r), m.as_slice())).powi(2))
+            .sum()
+    }
+
+    fn gram_bb_nalgebra(&self) -> DMatrix<f64> {
+        DMatrix::from_row_slice(MOTION_PARAMETERS, MOTION_PARAMETERS, &self.gram_bb.data)
+    }
+
+    /// This frame's noise (mm per axis): the corners' residuals after stage 1, each against its expected share
+    /// under H0 (the fit absorbs part of the noise, more in some places than others), the largest 5 % trimmed (a
+    /// corner the tracker mis-placed), and, when stage 1 finds pressure, without the corners next to it (the model
+    /// is least exact there).
+    pub fn frame_noise_mm(&self, stage: &Stage1, floor_mm: f64) -> f64 {
+        let first = self.trimmed_noise(stage, &[]);
+        let groups = self.loaded_groups(stage, first.max(floor_mm));
+        if groups.is_empty() {
+            return first;
+        }
+        let near: Vec<Point2> = groups.iter().flatten().map(|&j| self.cells[j].centre_mm).collect();
+        let reach = 1.5 * self.pad.pitch_x_mm().max(self.pad.pitch_y_mm());
+        let excluded: Vec<usize> = self
+            .pad
+            .corners()
+            .enumerate()
+            .filter(|(_, c)| {
+                let p = self.pad.corner_mm(*c);
+                near.iter().any(|q| (p[0] - q[0]).hypot(p[1] - q[1]) <= reach)
+            })
+            .map(|(i, _)| i)
+            .collect();
+        self.trimmed_noise(stage, &excluded)
+    }
+
+    fn trimmed_noise(&self, stage: &Stage1, excluded: &[usize]) -> f64 {
+        let mut normalised: Vec<(f64, f64)> = stage
+            .residuals
+            .iter()
+            .zip(&self.residual_share)
+            .enumerate()
+            .filter(|(i, _)| excluded.binary_search(i).is_err())
+            .filter_map(|(_, (r, &share))| r.map(|r| (r[0] * r[0] + r[1] * r[1], share)))
+            .collect();
+        if normalised.len() < MIN_NOISE_CORNERS {
+            return 0.0;
+        }
+        normalised.sort_unstable_by(|a, b| (a.0 / a.1.max(1e-300)).total_cmp(&(b.0 / b.1.max(1e-300))));
+        let keep = ((normalised.len() as f64) * (1.0 - NOISE_TRIM)).ceil() as usize;
+        let (sum, share) = normalised[..keep].iter().fold((0.0, 0.0), |(s, g), (r, share)| (s + r, g + share));
+        if !(share > 0.0) {
+            return 0.0;
+        }
+        (sum / share / TRIMMED_MEAN_RATIO).sqrt()
+    }
+
+    /// The contact test for a stage 1 result, at noise `noise_mm`.
+    pub fn test(&self, stage: &Stage1, noise_mm: f64) -> TestOutcome {
+        let sigma2 = (noise_mm * noise_mm).max(1e-24);
+        let explained = (stage.rss_rigid - stage.rss_full).max(0.0);
+        let statistic = explained / sigma2;
+        let z = normal_quantile(1.0 - self.false_alarm_probability);
+        let threshold = self.test_scale * chi_square_quantile(self.test_dof, z);
+        let p_value = chi_square_upper_tail(self.test_dof, statistic / self.test_scale);
+        let detection_floor_n = (threshold / (self.reference_explained / sigma2)).sqrt();
+        TestOutcome {
+            statistic,
+            threshold,
+            p_value,
+            noise_mm,
+            detection_floor_n,
+            contact: statistic > threshold && statistic.is_finite(),
+        }
+    }
+
+    /// Stage 2 (see the module notes), seeded by a stage 1 result at noise `noise_mm`; regions carrying less normal
+    /// force than `min_force_n` (the detection floor) are not contacts.
+    pub fn stage2(&self, d: &[f64], valid: &[bool], seed: &Stage1, noise_mm: f64, min_force_n: f64) -> Stage2 {
+        let cells = self.cells.len();
+        let empty = Stage2 { tractions: vec![0.0; 3 * cells], motion: seed.motion, regions: Vec::new() };
+        let groups = self.loaded_groups(seed, noise_mm);
+        if groups.is_empty() {
+            return empty;
+        }
+        let Some((tractions, motion)) = self.constrained_solve(d, valid, seed, &groups) else { return empty };
+        let mut support: Vec<usize> = groups.iter().flatten().copied().collect();
+        support.sort_unstable();
+        let regions: Vec<Region> =
+            self.regions(&tractions, &support).into_iter().filter(|r| r.force_vector_n[2] >= min_force_n).collect();
+        // Tractions outside the contacts are not reported (they are below the floor).
+        let mut kept = vec![0.0; 3 * cells];
+        for (j, f) in regions.iter().flat_map(|r| &r.cells) {
+            kept[3 * j..3 * j + 3].copy_from_slice(f);
+        }
+        Stage2 { tractions: kept, motion, regions }
+    }
+
+    /// Cells where stage 1 finds pressure above its noise, with a ring around them, as connected groups.
+    fn loaded_groups(&self, seed: &Stage1, noise_mm: f64) -> Vec<Vec<usize>> {
+        let cells = self.cells.len();
+        let (cols, rows) = (usize::from(self.pad.cols), usize::from(self.pad.rows));
+        let loaded: Vec<bool> =
+            (0..cells).map(|j| seed.tractions[3 * j + 2] > SUPPORT_SIGMAS * noise_mm * self.pressure_noise[j]).collect();
+        let support: Vec<bool> = (0..cells)
+            .map(|j| {
+                let (r, c) = ((j / cols) as isize, (j % cols) as isize);
+                neighbourhood(r, c, rows, cols).any(|(nr, nc)| loaded[nr * cols + nc])
+            })
+            .collect();
+        let mut seen = vec![false; cells];
+        let mut groups = Vec::new();
+        for start in 0..cells {
+            if !support[start] || seen[start] {
+                continue;
+            }
+            let (mut group, mut stack) = (Vec::new(), vec![start]);
+            seen[start] = true;
+            while let Some(j) = stack.pop() {
+                group.push(j);
+                let (r, c) = ((j / cols) as isize, (j % cols) as isize);
+                for (nr, nc) in neighbourhood(r, c, rows, cols) {
+                    let k = nr * cols + nc;
+                    if support[k] && !seen[k] {
+                        seen[k] = true;
+                        stack.push(k);
+                    }
+                }
+            }
+            group.sort_unstable();
+            groups.push(group);
+        }
+        groups
+    }
+
+    /// Least squares on the groups with pressure >= 0. Unknowns: each cell's pressure; per group the total
+    /// tangential force (x, y) and the twisting moment, carried by the cells in proportion to stage 1's pressure
+    /// (friction follows pressure; left free per cell, a ring of inward shear plus extra pressure would mimic a
+    /// plain press); and the motion. An active-set solve started from the clamped unconstrained solution.
+    #[allow(clippy::type_complexity)]
+    fn constrained_solve(
+        &self,
+        d: &[f64],
+        valid: &[bool],
+        seed: &Stage1,
+        groups: &[Vec<usize>],
+    ) -> Option<(Vec<f64>, [f64; MOTION_PARAMETERS])> {
+        let cells = self.cells.len();
+        // Each unknown as a combination of traction components: (component index, weight).
+        let mut unknowns: Vec<Vec<(usize, f64)>> = Vec::new();
+        let mut prior_scale: Vec<f64> = Vec::new();
+        let prior = (self.lambda).sqrt().recip();
+        for group in groups {
+            for &j in group {
+                unknowns.push(vec![(3 * j + 2, 1.0)]);
+                prior_scale.push(1.0);
+            }
+        }
+        let pressures = unknowns.len();
+        for group in groups {
+            let raw: Vec<f64> = group.iter().map(|&j| seed.tractions[3 * j + 2].max(0.0)).collect();
+            let total: f64 = raw.iter().sum();
+            let weights: Vec<f64> = if total > 0.0 {
+                raw.iter().map(|w| w / total).collect()
+            } else {
+                vec![1.0 / group.len() as f64; group.len()]
+            };
+            let centre = [
+                group.iter().zip(&weights).map(|(&j, w)| w * self.cells[j].centre_mm[0]).sum::<f64>(),
+                group.iter().zip(&weights).map(|(&j, w)| w * self.cells[j].centre_mm[1]).sum::<f64>(),
+            ];
+            let arm = |j: usize| [self.cells[j].centre_mm[0] - centre[0], self.cells[j].centre_mm[1] - centre[1]];
+            let inertia: f64 = group.iter().zip(&weights).map(|(&j, w)| w * (arm(j)[0].powi(2) + arm(j)[1].powi(2))).sum();
+            unknowns.push(group.iter().zip(&weights).map(|(&j, &w)| (3 * j, w)).collect());
+            unknowns.push(group.iter().zip(&weights).map(|(&j, &w)| (3 * j + 1, w)).collect());
+            let n = group.len() as f64;
+            prior_scale.push(n);
+            prior_scale.push(n);
+            if inertia > 1e-9 {
+                let twist = group
+                    .iter()
+                    .zip(&weights)
+                    .flat_map(|(&j, &w)| [(3 * j, -w * arm(j)[1] / inertia), (3 * j + 1, w * arm(j)[0] / inertia)])
+                    .collect();
+                unknowns.push(twist);
+                prior_scale.push(n * inertia.sqrt());
+            }
+        }
+        let nt = unknowns.len();
+        let n = nt + MOTION_PARAMETERS;
+        // Columns of the reduced design matrix, masked rows zeroed.
+        let rows = self.observations;
+        let mut design = DMatrix::zeros(rows, n);
+        for (k, combination) in unknowns.iter().enumerate() {
+            for &(component, weight) in combination {
+                let column = self.a_t.row(component);
+                for r in 0..rows {
+                    design[(r, k)] += weight * column[r];
+                }
+            }
+        }
+        for p in 0..MOTION_PARAMETERS {
+            let column = self.b_t.row(p);
+            for r in 0..rows {
+                design[(r, nt + p)] = column[r];
+            }
+        }
+        let mut data = DVector::from_column_slice(d);
+        for r in (0..rows).filter(|&r| !valid[r / 2]) {
+            design.row_mut(r).fill(0.0);
+            data[r] = 0.0;
+        }
+        let mut h = design.tr_mul(&design);
+        for (k, scale) in prior_scale.iter().enumerate() {
+            h[(k, k)] += (1.0 / (prior * scale)).powi(2) * 1.0;
+        }
+        let g = design.tr_mul(&data);
+        let constrained: Vec<bool> = (0..n).map(|i| i < pressures).collect();
+        let x = active_set(&h, &g, &constrained)?;
+        let mut tractions = vec![0.0; 3 * cells];
+        for (k, combination) in unknowns.iter().enumerate() {
+            for &(component, weight) in combination {
+                tractions[component] += weight * x[k];
+            }
+        }
+        let motion = std::array::from_fn(|p| x[nt + p]);
+        Some((tractions, motion))
+    }
+
+    /// Watershed of the pressure over the support: each cell climbs to its highest neighbour until a local
+    /// maximum; maxima joined by a high saddle are merged.
+    fn regions(&self, tractions: &[f64], support: &[usize]) -> Vec<Region> {
+        let (cols, rows) = (usize::from(self.pad.cols), usize::from(self.pad.rows));
+        let pressure = |j: usize| tractions[3 * j + 2];
+        let in_support = |j: usize| support.binary_search(&j).is_ok();
+        let climb = |mut j: usize| loop {
+            let (r, c) = ((j / cols) as isize, (j % cols) as isize);
+            let best = neighbourhood(r, c, rows, cols)
+                .map(|(nr, nc)| nr * cols + nc)
+                .filter(|&k| in_support(k))
+                .max_by(|&a, &b| pressure(a).total_cmp(&pressure(b)).then(b.cmp(&a)))
+                .unwrap_or(j);
+            if best == j || pressure(best) <= pressure(j) {
+                break j;
+            }
+            j = best;
+        };
+        let mut label: Vec<Option<usize>> = vec![None; rows * cols];
+        let mut peaks: Vec<usize> = Vec::new();
+        for &j in support.iter().filter(|&&j| pressure(j) > 0.0) {
+            let peak = climb(j);
+            let id = peaks.iter().position(|&p| p == peak).unwrap_or_else(|| {
+                peaks.push(peak);
+                peaks.len() - 1
+            });
+            label[j] = Some(id);
+        }
+        // Merge basins whose shared border is high relative to the lower peak.
+        let mut parent: Vec<usize> = (0..peaks.len()).collect();
+        fn root(parent: &mut [usize], mut i: usize) -> usize {
+            while parent[i] != i {
+                parent[i] = parent[parent[i]];
+                i = parent[i];
+            }
+            i
+        }
+        let mut saddle = vec![vec![0.0f64; peaks.len()]; peaks.len()];
+        for &j in support {
+            let Some(a) = label[j] else { continue };
+            let (r, c) = ((j / cols) as isize, (j % cols) as isize);
+            for (nr, nc) in neighbourhood(r, c, rows, cols) {
+                if let Some(b) = label[nr * cols + nc] {
+                    if a != b {
+                        let level = pressure(j).min(pressure(nr * cols + nc));
+                        saddle[a][b] = saddle[a][b].max(level);
+                    }
+                }
+            }
+        }
+        for a in 0..peaks.len() {
+            for b in 0..peaks.len() {
+                let lower = pressure(peaks[a]).min(pressure(peaks[b]));
+                if a != b && saddle[a][b] > SADDLE_FRACTION * lower {
+                    let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+                    parent[ra] = rb;
+                }
+            }
+        }
+        let mut members: Vec<Vec<usize>> = vec![Vec::new(); peaks.len()];
+        for &j in support {
+            if let Some(a) = label[j] {
+                let r = root(&mut parent, a);
+                members[r].push(j);
+            }
+        }
+        let cell_area = self.pad.pitch_x_mm() * self.pad.pitch_y_mm();
+        let mut regions: Vec<Region> = members
+            .into_iter()
+            .filter(|m| !m.is_empty())
+            .map(|m| {
+                let cells: Vec<(usize, [f64; 3])> =
+                    m.iter().map(|&j| (j, [tractions[3 * j], tractions[3 * j + 1], tractions[3 * j + 2]])).collect();
+                let force: [f64; 3] = std::array::from_fn(|k| cells.iter().map(|c| c.1[k]).sum());
+                let fz = force[2].max(1e-300);
+                let centre = [
+                    cells.iter().map(|(j, f)| f[2] * self.cells[*j].centre_mm[0]).sum::<f64>() / fz,
+                    cells.iter().map(|(j, f)| f[2] * self.cells[*j].centre_mm[1]).sum::<f64>() / fz,
+                ];
+                let torque = cells
+                    .iter()
+                    .map(|(j, f)| {
+                        let p = self.cells[*j].centre_mm;
+                        (p[0] - centre[0]) * f[1] - (p[1] - centre[1]) * f[0]
+                    })
+                    .sum();
+                let squares: f64 = cells.iter().map(|c| c.1[2] * c.1[2]).sum();
+                let area_mm2 = if squares > 0.0 { force[2] * force[2] / squares * cell_area } else { 0.0 };
+                Region { centre_mm: centre, force_vector_n: force, torque_nmm: torque, area_mm2, cells }
+            })
+            .collect();
+        regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
+        regions
+    }
+
+    /// Second moments of a region's pressure: direction of the major axis and its contrast.
+    pub fn moments(&self, region: &Region, min_confidence: f64) -> Moments {
+        let weight: f64 = region.cells.iter().map(|c| c.1[2].max(0.0)).sum();
+        if !(weight > 0.0) || region.cells.len() < 3 {
+            return Moments { angle_deg: None, confidence: 0.0 };
+        }
+        let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+        for (j, f) in &region.cells {
+            let w = f[2].max(0.0) / weight;
+            let p = self.cells[*j].centre_mm;
+            let (dx, dy) = (p[0] - region.centre_mm[0], p[1] - region.centre_mm[1]);
+            sxx += w * dx * dx;
+            syy += w * dy * dy;
+            sxy += w * dx * dy;
+        }
+        // Each cell spreads its pressure over its own area.
+        sxx += self.pad.pitch_x_mm().powi(2) / 12.0;
+        syy += self.pad.pitch_y_mm().powi(2) / 12.0;
+        let half_trace = 0.5 * (sxx + syy);
+        let root = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
+        let (major, minor) = (half_trace + root, half_trace - root);
+        if !(major > 0.0) {
+            return Moments { angle_deg: None, confidence: 0.0 };
+        }
+        let confidence = (1.0 - minor.max(0.0) / major).clamp(0.0, 1.0);
+        let angle = (0.5 * (2.0 * sxy).atan2(sxx - syy)).to_degrees().rem_euclid(180.0);
+        let angle = if angle >= 180.0 { 0.0 } else { angle };
+        Moments { angle_deg: (confidence >= min_confidence).then_some(angle), confidence }
+    }
+
+    /// Pressure in kPa on the cell grid (row-major), from tractions.
+    pub fn pressure_kpa(&self, tractions: &[f64]) -> Vec<f64> {
+        let area = self.pad.pitch_x_mm() * self.pad.pitch_y_mm();
+        (0..self.cells.len()).map(|j| tractions[3 * j + 2] / area * 1e3).collect()
+    }
+}
+
+/// The 3 x 3 block around (r, c) inside the grid, the cell itself included.
+fn neighbourhood(r: isize, c: isize, rows: usize, cols: usize) -> impl Iterator<Item = (usize, usize)> {
+    (-1..=1).flat_map(move |dr| (-1..=1).map(move |dc| (r + dr, c + dc))).filter_map(move |(nr, nc)| {
+        (nr >= 0 && nc >= 0 && (nr as usize) < rows && (nc as usize) < cols).then_some((nr as usize, nc as usize))
+    })
+}
+
+fn motion_rows(p: Point2, length: f64) -> [[f64; MOTION_PARAMETERS]; 2] {
+    let (x, y) = (p[0] / length, p[1] / length);
+    [[1.0, 0.0, x * length, y * length, 0.0, 0.0, -x * x * length, -x * y * length], [
+        0.0,
+        1.0,
+        0.0,
+        0.0,
+        x * length,
+        y * length,
+        -x * y * length,
+        -y * y * length,
+    ]]
+}
+
+fn motion_basis(points: &[Point2], length: f64) -> DMatrix<f64> {
+    let mut b = DMatrix::zeros(2 * points.len(), MOTION_PARAMETERS);
+    for (i, &p) in points.iter().enumerate() {
+        let rows = motion_rows(p, length);
+        for k in 0..MOTION_PARAMETERS {
+            b[(2 * i, k)] = rows[0][k];
+            b[(2 * i + 1, k)] = rows[1][k];
+        }
+    }
+    b
+}
+
+/// min ½ xᵀ H x - gᵀ x with x_i >= 0 where `constrained[i]`.
+fn active_set(h: &DMatrix<f64>, g: &DVector<f64>, constrained: &[bool]) -> Option<DVector<f64>> {
+    let n = g.len();
+    let solve_free = |free: &[bool]| -> Option<DVector<f64>> {
+        let index: Vec<usize> = (0..n).filter(|&i| free[i]).collect();
+        let hf = DMatrix::from_fn(index.len(), index.len(), |i, j| h[(index[i], index[j])]);
+        let gf = DVector::from_fn(index.len(), |i, _| g[index[i]]);
+        let xf = hf.cholesky()?.solve(&gf);
+        let mut x = DVector::zeros(n);
+        for (k, &i) in index.iter().enumerate() {
+            x[i] = xf[k];
+        }
+        Some(x)
+    };
+    let all = vec![true; n];
+    let unconstrained = solve_free(&all)?;
+    if (0..n).all(|i| !constrained[i] || unconstrained[i] >= 0.0) {
+        return Some(unconstrained);
+    }
+    // Start from the clamped solution: feasible, and usually close.
+    let mut free: Vec<bool> = (0..n).map(|i| !constrained[i] || unconstrained[i] > 0.0).collect();
+    let mut x = unconstrained.map(|v| v.max(0.0));
+    for i in 0..n {
+        if !constrained[i] {
+            x[i] = unconstrained[i];
+        }
+    }
+    for _ in 0..MAX_ACTIVE_SET_ITERATIONS {
+        let z = solve_free(&free)?;
+        let infeasible: Vec<usize> = (0..n).filter(|&i| constrained[i] && free[i] && z[i] < 0.0).collect();
+        if infeasible.is_empty() {
+            x = z;
+            // Optimal unless some held pressure would lower the objective by growing.
+            let gradient = g - h * &x;
+            let best = (0..n)
+                .filter(|&i| constrained[i] && !free[i] && gradient[i] > 1e-12 * g.amax().max(1e-300))
+                .max_by(|&a, &b| gradient[a].total_cmp(&gradient[b]));
+            match best {
+                Some(i) => free[i] = true,
+                None => return Some(x),
+            }
+        } else {
+            let step = infeasible.iter().map(|&i| x[i] / (x[i] - z[i])).fold(1.0, f64::min).clamp(0.0, 1.0);
+            x = &x + (&z - &x) * step;
+            for i in 0..n {
+                if constrained[i] && free[i] && x[i] <= 1e-12 {
+                    x[i] = 0.0;
+                    free[i] = false;
+                }
+            }
+        }
+    }
+    Some(x)
+}
+
+/// Standard normal quantile (Acklam's rational approximation, relative error below 1.2e-9).
+pub fn normal_quantile(p: f64) -> f64 {
+    const A: [f64; 6] = [-3.969_683_028_665_376e1, 2.209_460_984_245_205e2, -2.759_285_104_469_687e2, 1.383_577_518_672_69e2, -3.066_479_806_614_716e1, 2.506_628_277_459_239];
+    const B: [f64; 5] = [-5.447_609_879_822_406e1, 1.615_858_368_580_409e2, -1.556_989_798_598_866e2, 6.680_131_188_771_972e1, -1.328_068_155_288_572e1];
+    const C: [f64; 6] = [-7.784_894_002_430_293e-3, -3.223_964_580_411_365e-1, -2.400_758_277_161_838, -2.549_732_539_343_734, 4.374_664_141_464_968, 2.938_163_982_698_783];
+    const D: [f64; 4] = [7.784_695_709_041_462e-3, 3.224_671_290_700_398e-1, 2.445_134_137_142_996, 3.754_408_661_907_416];
+    let p = p.clamp(1e-300, 1.0 - 1e-16);
+    let low = 0.024_25;
+    if p < low {
+        let q = (-2.0 * p.ln()).sqrt();
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5]) / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    } else if p <= 1.0 - low {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+    } else {
+        -normal_quantile(1.0 - p)
+    }
+}
+
+/// Chi-square quantile with `dof` degrees of freedom at standard normal quantile `z` (Wilson-Hilferty).
+pub fn chi_square_quantile(dof: f64, z: f64) -> f64 {
+    let v = 2.0 / (9.0 * dof);
+    dof * (1.0 - v + z * v.sqrt()).max(0.0).powi(3)
+}
+
+/// Upper tail probability of chi-square (Wilson-Hilferty).
+pub fn chi_square_upper_tail(dof: f64, x: f64) -> f64 {
+    if !(x > 0.0) {
+        return 1.0;
+    }
+    let v = 2.0 / (9.0 * dof);
+    let z = ((x / dof).cbrt() - (1.0 - v)) / v.sqrt();
+    0.5 * libm::erfc(z / std::f64::consts::SQRT_2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn model() -> Arc<InverseModel> {
+        InverseModel::shared(&SensorConfig::default()).unwrap()
+    }
+
+    /// Displacements of `forces` (per cell), plus a camera motion.
+    fn field(model: &InverseModel, forces: &[(usize, [f64; 3])], motion: [f64; MOTION_PARAMETERS]) -> Vec<f64> {
+        let mut t = vec![0.0; 3 * model.cells.len()];
+        for (j, f) in forces {
+            t[3 * j..3 * j + 3].copy_from_slice(f);
+        }
+        let mut d = vec![0.0; model.observations];
+        model.a.mul_vec(&t, &mut d);
+        let corners: Vec<Point2> = model.pad.corners().map(|c| model.pad.corner_mm(c)).collect();
+        for (i, p) in corners.iter().enumerate() {
+            let m = model.motion_field(&motion, *p);
+            d[2 * i] += m[0];
+            d[2 * i + 1] += m[1];
+        }
+        d
+    }
+
+    fn cell_at(model: &InverseModel, p: Point2) -> usize {
+        (0..model.cells.len())
+            .min_by(|&a, &b| {
+                let da = (model.cells[a].centre_mm[0] - p[0]).hypot(model.cells[a].centre_mm[1] - p[1]);
+                let db = (model.cells[b].centre_mm[0] - p[0]).hypot(model.cells[b].centre_mm[1] - p[1]);
+                da.total_cmp(&db)
+            })
+            .unwrap()
+    }
+
+    #[test]
+    fn quantiles_match_tables() {
+        assert!((normal_quantile(0.975) - 1.959_964).abs() < 1e-6);
+        assert!((normal_quantile(1.0 - 1e-6) - 4.753_424).abs() < 1e-5);
+        assert!((chi_square_quantile(10.0, normal_quantile(0.95)) - 18.307).abs() < 0.05);
+        assert!((chi_square_upper_tail(10.0, 18.307) - 0.05).abs() < 0.003);
+    }
+
+    #[test]
+    fn recovers_a_press_with_shear_under_camera_motion_exactly_without_noise() {
+        let model = model();
+        let centre = cell_at(&model, [5.0, -3.0]);
+        let cols = usize::from(model.pad.cols);
+        let press = [
+            (centre, [0.4, -0.2, 2.0]),
+            (centre + 1, [0.2, -0.1, 1.0]),
+            (centre + cols, [0.2, -0.1, 1.0]),
+            (centre + cols + 1, [0.1, 0.0, 0.5]),
+        ];
+        let motion = [0.3, -0.2, 0.01, 0.05, -0.05, 0.01, 0.002, -0.001];
+        let d = field(&model, &press, motion);
+        let valid = vec![true; model.observations / 2];
+        let stage = model.stage1(&d, &valid);
+        let outcome = model.test(&stage, 0.002);
+        assert!(outcome.contact, "{outcome:?}");
+        let stage2 = model.stage2(&d, &valid, &stage, 0.002, 0.1);
+        assert_eq!(stage2.regions.len(), 1, "{:?}", stage2.regions);
+        let total: [f64; 3] = std::array::from_fn(|k| press.iter().map(|p| p.1[k]).sum());
+        let found = stage2.regions[0].force_vector_n;
+        for k in 0..3 {
+            assert!((found[k] - total[k]).abs() < 0.02 * total[2], "{found:?} vs {total:?}");
+        }
+        for k in 0..MOTION_PARAMETERS {
+            assert!((stage2.motion[k] - motion[k]).abs() < 1e-3, "{:?} vs {motion:?}", stage2.motion);
+        }
+        // A missing corner under the press changes little.
+        let mut holes = valid.clone();
+        holes[80] = false;
+        holes[81] = false;
+        let stage = model.stage1(&d, &holes);
+        assert_eq!(stage.residuals[80], None);
+        let stage2 = model.stage2(&d, &holes, &stage, 0.002, 0.1);
+        assert!((stage2.regions[0].force_vector_n[2] - total[2]).abs() < 0.05 * total[2], "{:?}", stage2.regions);
+    }
+
+    #[test]
+    fn motion_alone_is_not_a_contact_and_the_noise_estimate_is_unbiased() {
+        let model = model();
+        let motion = [1.0, -0.5, 0.02, 0.08, -0.08, 0.02, 0.004, 0.003];
+        let mut d = field(&model, &[], motion);
+        // Deterministic pseudo-noise, sigma 0.01 mm.
+        let mut state = 12345u64;
+        let mut gauss = || {
+            let mut sum = 0.0;
+            for _ in 0..12 {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                sum += (state >> 11) as f64 / (1u64 << 53) as f64;
+            }
+            sum - 6.0
+        };
+        for v in d.iter_mut() {
+            *v += 0.01 * gauss();
+        }
+        let valid = vec![true; model.observations / 2];
+        let stage = model.stage1(&d, &valid);
+        let noise = model.frame_noise_mm(&stage, 0.0);
+        let mean = (stage.rss_full / model.residual_share.iter().sum::<f64>()).sqrt();
+        assert!((noise / 0.01 - 1.0).abs() < 0.25, "{noise} (mean-based {mean})");
+        let outcome = model.test(&stage, noise);
+        assert!(!outcome.contact && outcome.p_value > 1e-4, "{outcome:?}");
+        // The floor scales with the noise.
+        let quieter = model.test(&stage, noise / 5.0);
+        assert!((quieter.detection_floor_n * 5.0 / outcome.detection_floor_n - 1.0).abs() < 1e-9, "{outcome:?}");
+    }
+
+    #[test]
+    fn two_presses_apart_are_two_regions_and_an_edge_has_a_direction() {
+        let model = model();
+        let (a, b) = (cell_at(&model, [-8.0, 0.0]), cell_at(&model, [8.0, 0.0]));
+        let d = field(&model, &[(a, [0.0, 0.0, 3.0]), (b, [0.0, 0.0, 2.0])], [0.0; MOTION_PARAMETERS]);
+        let valid = vec![true; model.observations / 2];
+        let stage = model.stage1(&d, &valid);
+        let stage2 = model.stage2(&d, &valid, &stage, 0.002, 0.1);
+        assert_eq!(stage2.regions.len(), 2, "{:?}", stage2.regions);
+        assert!((stage2.regions[0].force_vector_n[2] - 3.0).abs() < 0.1 && (stage2.regions[1].force_vector_n[2] - 2.0).abs() < 0.1);
+        // A line of cells along a diagonal.
+        let cols = usize::from(model.pad.cols);
+        let line: Vec<(usize, [f64; 3])> = (0..7).map(|k| ((2 + k) * cols + 4 + k, [0.0, 0.0, 1.0])).collect();
+        let d = field(&model, &line, [0.0; MOTION_PARAMETERS]);
+        let stage = model.stage1(&d, &valid);
+        let stage2 = model.stage2(&d, &valid, &stage, 0.002, 0.1);
+        assert_eq!(stage2.regions.len(), 1, "{:?}", stage2.regions);
+        let moments = model.moments(&stage2.regions[0], 0.35);
+        let angle = moments.angle_deg.expect("a line has a direction");
+        let truth = (3.333f64).atan2(3.3125).to_degrees();
+        assert!((angle - truth).abs() < 1.5, "{angle} vs {truth}: {moments:?} {:?}", stage2.regions[0].cells);
+    }
+
+    #[test]
+    fn degenerate_inputs_give_finite_outputs() {
+        let model = model();
+        let valid = vec![false; model.observations / 2];
+        let d = vec![0.0; model.observations];
+        let stage = model.stage1(&d, &valid);
+        assert!(stage.tractions.iter().all(|v| v.is_finite()));
+        let outcome = model.test(&stage, 0.0);
+        assert!(!outcome.contact);
+        for v in [outcome.statistic, outcome.threshold, outcome.p_value, outcome.detection_floor_n] {
+            assert!(v.is_finite(), "{outcome:?}");
+        }
+        let stage2 = model.stage2(&d, &valid, &stage, 0.0, 0.1);
+        assert!(stage2.regions.is_empty());
+    }
+}
