@@ -31,6 +31,11 @@ const CORRECTION_TERMS: usize = 7;
 pub const MIN_MAP_POINTS: usize = 30;
 /// Gauss-Newton steps of the joint fit (it converges in three or four from the homography alone).
 const FIT_ITERATIONS: usize = 8;
+/// Newton steps and tolerance (in units of the normalisation scale) of the correction's inverse.
+const INVERT_ITERATIONS: usize = 20;
+const INVERT_TOLERANCE: f64 = 1e-12;
+/// Halvings of a Gauss-Newton step tried before the fit stops where it is.
+const STEP_HALVINGS: usize = 30;
 /// Corners further than this many robust sigmas from the fit are left out of it (a corner mis-found at tare)...
 const OUTLIER_SIGMAS: f64 = 5.0;
 /// ...and never closer than this, mm (a printed pattern is not more exact than this).
@@ -71,14 +76,35 @@ impl LensCorrection {
         [p[0] + dx * self.scale_px, p[1] + dy * self.scale_px]
     }
 
-    /// Corrected px back to undistorted px (fixed point: the warp is a small, smooth shift).
-    pub fn invert(&self, q: Point2) -> Point2 {
+    /// Corrected px back to undistorted px, by Newton's method from `q` itself (the warp is a small, smooth
+    /// shift); `None` where it does not converge (far outside the region the warp was fitted on).
+    pub fn invert(&self, q: Point2) -> Option<Point2> {
         let mut p = q;
-        for _ in 0..6 {
+        for _ in 0..INVERT_ITERATIONS {
             let a = self.apply(p);
-            p = [p[0] + q[0] - a[0], p[1] + q[1] - a[1]];
+            let (ex, ey) = (a[0] - q[0], a[1] - q[1]);
+            if ex.hypot(ey) <= INVERT_TOLERANCE * self.scale_px {
+                return Some(p);
+            }
+            let [x, y] = self.normalise(p);
+            let d_dx = [2.0 * x, y, 0.0, 3.0 * x * x, 2.0 * x * y, y * y, 0.0];
+            let d_dy = [0.0, x, 2.0 * y, 0.0, x * x, 2.0 * x * y, 3.0 * y * y];
+            let along = |coefficients: &[f64; CORRECTION_TERMS], d: &[f64; CORRECTION_TERMS]| -> f64 {
+                coefficients.iter().zip(d).map(|(c, d)| c * d).sum()
+            };
+            let (j00, j01) = (1.0 + along(&self.x, &d_dx), along(&self.x, &d_dy));
+            let (j10, j11) = (along(&self.y, &d_dx), 1.0 + along(&self.y, &d_dy));
+            let det = j00 * j11 - j01 * j10;
+            if !(det.abs() > 1e-12) {
+                return None;
+            }
+            p = [p[0] - (j11 * ex - j01 * ey) / det, p[1] - (j00 * ey - j10 * ex) / det];
+            if !(p[0].is_finite() && p[1].is_finite()) {
+                return None;
+            }
         }
-        p
+        let a = self.apply(p);
+        ((a[0] - q[0]).hypot(a[1] - q[1]) <= INVERT_TOLERANCE * self.scale_px).then_some(p)
     }
 
     /// The same warp for a frame `factor` times as wide (the lens scaled with the frame).
@@ -245,7 +271,7 @@ impl PadMapping {
     }
 
     pub fn mm_to_undistorted(&self, p: Point2) -> Option<Point2> {
-        let q = self.correction.invert(self.to_corrected.apply(p)?);
+        let q = self.correction.invert(self.to_corrected.apply(p)?)?;
         (q[0].is_finite() && q[1].is_finite()).then_some(q)
     }
 
@@ -357,16 +383,34 @@ fn fit_joint(from: &[Point2], to: &[Point2]) -> Option<(LensCorrection, Homograp
         let svd = jacobian.svd(true, true);
         let largest = svd.singular_values.max();
         let step = svd.solve(&(-&r0), 1e-10 * largest).ok()?;
-        let mut hh = h.matrix();
-        for k in 0..8 {
-            hh[k] += step[k];
+        // Gauss-Newton overshoots when the start is far off (a coarse frame, a few poorly placed corners): take the
+        // longest halving of the step that lowers the residual, so the fit never ends worse than the homography
+        // it starts from.
+        let cost = r0.norm_squared();
+        let mut accepted = None;
+        let mut length = 1.0;
+        for _ in 0..STEP_HALVINGS {
+            let mut hh = h.matrix();
+            for k in 0..8 {
+                hh[k] += length * step[k];
+            }
+            let mut c = correction;
+            for k in 0..CORRECTION_TERMS {
+                c.x[k] += length * step[8 + k];
+                c.y[k] += length * step[8 + CORRECTION_TERMS + k];
+            }
+            if let Some(candidate) = Homography::from_matrix(hh) {
+                if residual(&c, &candidate).is_some_and(|r| r.norm_squared() < cost) {
+                    accepted = Some((c, candidate));
+                    break;
+                }
+            }
+            length *= 0.5;
         }
-        for k in 0..CORRECTION_TERMS {
-            correction.x[k] += step[8 + k];
-            correction.y[k] += step[8 + CORRECTION_TERMS + k];
-        }
-        h = Homography::from_matrix(hh)?;
-        if step.norm() < 1e-12 {
+        let Some((c, candidate)) = accepted else { break };
+        correction = c;
+        h = candidate;
+        if length * step.norm() < 1e-12 {
             break;
         }
     }
