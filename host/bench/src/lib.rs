@@ -395,7 +395,7 @@ fn measure_variant(variant: &Variant, data: &Dataset, repeats: usize) -> Variant
     let mut location_errors = Vec::new();
     for (frame, truth) in &data.positions {
         let reading = estimator.estimate(frame);
-        let found = reading.as_ref().ok().filter(|r| r.contact).and_then(|r| r.contact_mm);
+        let found = reading.as_ref().ok().and_then(|r| r.contact_mm());
         match (found, truth.contacts.first()) {
             (Some(at), Some(contact)) => location_errors.push(distance(at, contact.centre_mm)),
             _ => result.localisation_misses += 1,
@@ -420,7 +420,7 @@ fn measure_variant(variant: &Variant, data: &Dataset, repeats: usize) -> Variant
             nusense_sim::Indenter::Edge { .. } => "edge",
         };
         let sample = CalibrationSample {
-            gamma: reading.gamma,
+            gamma: reading.gamma.gamma,
             force_n: truth.total_force_n,
         };
         match by_indenter.iter_mut().find(|(k, _)| *k == kind) {
@@ -438,7 +438,7 @@ fn measure_variant(variant: &Variant, data: &Dataset, repeats: usize) -> Variant
     for (frame, truth) in &data.edges {
         let reading = estimator.estimate(frame);
         failed += usize::from(reading.is_err());
-        let found = reading.as_ref().ok().and_then(|r| r.edge_angle_deg);
+        let found = reading.as_ref().ok().and_then(|r| r.edge_angle_deg());
         match (found, truth.contacts.first().and_then(|c| c.edge_angle_deg)) {
             (Some(found), Some(angle)) => angle_errors.push(edge_angle_error_deg(found, angle)),
             _ => result.edge_misses += 1,
@@ -472,8 +472,8 @@ fn measure_real(variant: &Variant, real: &RealPair, size: (u32, u32), repeats: u
             result.reference_corners = estimator.reference_lattice().corners_found();
             match estimator.estimate(&touch) {
                 Ok(reading) => {
-                    result.touch_corners = Some(reading.points_detected);
-                    result.gamma = Some(reading.gamma);
+                    result.touch_corners = Some(reading.counts.points_detected);
+                    result.gamma = Some(reading.gamma.gamma);
                     // Alternate rest and touch, so the tracker's prediction is exercised as in live use.
                     let mut times_ms = Vec::new();
                     for _ in 0..repeats.max(1) {

@@ -224,13 +224,24 @@ pub struct InverseConfig {
     pub traction_prior_n: f64,
     /// The contact test never assumes less noise than this, mm (identical frames would otherwise have none).
     pub noise_floor_mm: f64,
+    /// ...nor less than this many px of the frame (converted to mm by the pad map at the pad's centre): the
+    /// detector's sub-pixel limit. Lighting changes and JPEG blocks shift neighbouring corners together (a corner
+    /// rests on the squares around it), a smooth error the per-corner residuals cannot see but the tractions can
+    /// explain; below this floor such a frame would read as a light press.
+    pub noise_floor_px: f64,
     /// Probability that the contact test calls a rest frame a contact.
     pub false_alarm_probability: f64,
 }
 
 impl Default for InverseConfig {
     fn default() -> Self {
-        Self { noise_mm: 0.01, traction_prior_n: 1.0, noise_floor_mm: 0.002, false_alarm_probability: 1e-6 }
+        Self {
+            noise_mm: 0.01,
+            traction_prior_n: 1.0,
+            noise_floor_mm: 0.002,
+            noise_floor_px: 0.08,
+            false_alarm_probability: 1e-6,
+        }
     }
 }
 
@@ -422,6 +433,7 @@ impl SensorConfig {
         finite_positive("inverse.noise_mm", i.noise_mm)?;
         finite_positive("inverse.traction_prior_n", i.traction_prior_n)?;
         finite_positive("inverse.noise_floor_mm", i.noise_floor_mm)?;
+        finite_positive("inverse.noise_floor_px", i.noise_floor_px)?;
         if !(i.false_alarm_probability.is_finite() && i.false_alarm_probability > 0.0 && i.false_alarm_probability < 0.5)
         {
             return Err(invalid("inverse.false_alarm_probability", i.false_alarm_probability, "strictly between 0 and 0.5"));

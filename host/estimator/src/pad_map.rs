@@ -275,6 +275,15 @@ impl PadMapping {
         (q[0].is_finite() && q[1].is_finite()).then_some(q)
     }
 
+    /// Pad mm per raw px at the pad's centre (the mean of the two axes).
+    pub fn mm_per_px_at_centre(&self) -> Option<f64> {
+        let centre = self.mm_to_raw([0.0, 0.0])?;
+        let at = |dx: f64, dy: f64| self.raw_to_mm([centre[0] + dx, centre[1] + dy]);
+        let (o, x, y) = (at(0.0, 0.0)?, at(1.0, 0.0)?, at(0.0, 1.0)?);
+        let scale = 0.5 * ((x[0] - o[0]).hypot(x[1] - o[1]) + (y[0] - o[0]).hypot(y[1] - o[1]));
+        (scale.is_finite() && scale > 0.0).then_some(scale)
+    }
+
     pub fn raw_to_mm(&self, raw: Point2) -> Option<Point2> {
         self.undistorted_to_mm(self.undistort(raw)?)
     }

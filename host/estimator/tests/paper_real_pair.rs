@@ -181,23 +181,23 @@ fn paper_mode_estimator_reads_the_touch_with_masked_gaps() {
     println!(
         "paper mode reading: contact {} at {:?} undistorted px, gamma {:.4}, force {:.2} N, {} of {} points, {} valid, \
          {} of {} samples (rest frame against itself: gamma {:.4}, contact {})",
-        reading.contact,
-        reading.contact_undistorted_px,
-        reading.gamma,
-        reading.force_n,
-        reading.points_detected,
-        reading.points_expected,
-        reading.points_valid,
-        reading.samples_used,
-        reading.samples_total,
-        rest.gamma,
-        rest.contact
+        reading.is_contact(),
+        reading.strongest().map(|c| c.centre_undistorted_px),
+        reading.gamma.gamma,
+        reading.force_n(),
+        reading.counts.points_detected,
+        reading.counts.points_expected,
+        reading.counts.points_valid,
+        reading.gamma.samples_used,
+        reading.gamma.samples_total,
+        rest.gamma.gamma,
+        rest.is_contact()
     );
-    assert_eq!(reading.points_expected, 165);
-    assert!(reading.points_detected < 165 && reading.points_valid <= reading.points_detected);
-    assert!(reading.samples_used < reading.samples_total, "samples resting on missing corners must be left out");
-    assert!(!rest.contact && rest.gamma.abs() < 1e-9);
-    assert!(reading.contact && reading.gamma > 0.0);
-    let c = reading.contact_undistorted_px.expect("a contact has a location");
+    assert_eq!(reading.counts.points_expected, 165);
+    assert!(reading.counts.points_detected < 165 && reading.counts.points_valid <= reading.counts.points_detected);
+    assert!(reading.gamma.samples_used < reading.gamma.samples_total, "samples resting on missing corners must be left out");
+    assert!(!rest.is_contact() && rest.gamma.gamma.abs() < 1e-9);
+    assert!(reading.is_contact() && reading.gamma.gamma > 0.0);
+    let c = reading.strongest().map(|c| c.centre_undistorted_px).expect("a contact has a location");
     assert!((c[0] - 1000.0).abs() <= 40.0 && (c[1] - 750.0).abs() <= 40.0, "contact at {c:?}");
 }

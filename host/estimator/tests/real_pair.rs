@@ -31,38 +31,38 @@ fn fast_mode_finds_every_square_and_corner_on_both_frames() {
     assert_eq!(rest.squares_found(), 96);
     assert_eq!(rest.corners_found(), 165);
     let reading = estimator.estimate(touch()).unwrap();
-    assert_eq!(reading.squares_detected, 96);
-    assert_eq!(reading.points_detected, 165);
-    assert_eq!(reading.points_expected, 165);
-    assert_eq!(reading.points_valid, 165, "no corner of the real touch frame is implausible");
+    assert_eq!(reading.counts.squares_detected, 96);
+    assert_eq!(reading.counts.points_detected, 165);
+    assert_eq!(reading.counts.points_expected, 165);
+    assert_eq!(reading.counts.points_valid, 165, "no corner of the real touch frame is implausible");
 }
 
 #[test]
 fn fast_mode_finds_the_contact_near_the_published_centre() {
     let mut estimator = Estimator::new(SensorConfig::default(), Mode::Fast, reference()).unwrap();
     let reading = estimator.estimate(touch()).unwrap();
-    assert!(reading.contact, "{reading:?}");
-    let [x, y] = reading.contact_undistorted_px.unwrap();
+    assert!(reading.is_contact(), "{reading:?}");
+    let [x, y] = reading.strongest().unwrap().centre_undistorted_px;
     assert!((x - 1000.0).abs() <= 40.0 && (y - 750.0).abs() <= 40.0, "contact at ({x}, {y}) undistorted px");
-    assert!(reading.gamma > 0.0 && reading.force_n > 0.0, "{} {}", reading.gamma, reading.force_n);
+    assert!(reading.gamma.gamma > 0.0 && reading.force_n() > 0.0, "{} {}", reading.gamma.gamma, reading.force_n());
     // The contact in mm lies on the pad, near its centre (the press was "near the centre of the pad").
-    let [mx, my] = reading.contact_mm.unwrap();
+    let [mx, my] = reading.contact_mm().unwrap();
     assert!(mx.abs() < 10.0 && my.abs() < 10.0, "({mx}, {my}) mm");
-    assert_eq!(reading.samples_total, 67 * 67);
-    assert_eq!(reading.samples_used, 67 * 67);
+    assert_eq!(reading.gamma.samples_total, 67 * 67);
+    assert_eq!(reading.gamma.samples_used, 67 * 67);
 }
 
 #[test]
 fn the_rest_frame_against_itself_is_no_contact() {
     let mut estimator = Estimator::new(SensorConfig::default(), Mode::Fast, reference()).unwrap();
     let reading = estimator.estimate(reference()).unwrap();
-    assert!(!reading.contact);
+    assert!(!reading.is_contact());
     // The same pixels give the same centroids up to where the search window starts (1e-3 of gamma is about
     // 0.003 N, far below anything a touch produces).
-    assert!(reading.gamma.abs() < 1e-3, "gamma {}", reading.gamma);
-    assert_eq!(reading.force_n, 0.0);
-    assert_eq!(reading.contact_px, None);
-    assert_eq!(reading.edge_angle_deg, None);
+    assert!(reading.gamma.gamma.abs() < 1e-3, "gamma {}", reading.gamma.gamma);
+    assert_eq!(reading.force_n(), 0.0);
+    assert_eq!(reading.contact_px(), None);
+    assert_eq!(reading.edge_angle_deg(), None);
 }
 
 #[test]
@@ -71,10 +71,10 @@ fn paper_mode_finds_the_same_contact_with_the_published_pipeline() {
     let rest = estimator.reference_lattice().corners_found();
     let reading = estimator.estimate(touch()).unwrap();
     // The published method misses squares and corners on this pair; whatever it misses is masked and counted.
-    assert!(rest <= 165 && reading.points_detected <= 165 && reading.points_valid <= reading.points_detected);
-    assert!(reading.samples_used <= reading.samples_total);
-    assert!(reading.contact);
-    let [x, y] = reading.contact_undistorted_px.unwrap();
+    assert!(rest <= 165 && reading.counts.points_detected <= 165 && reading.counts.points_valid <= reading.counts.points_detected);
+    assert!(reading.gamma.samples_used <= reading.gamma.samples_total);
+    assert!(reading.is_contact());
+    let [x, y] = reading.strongest().unwrap().centre_undistorted_px;
     assert!((x - 1000.0).abs() <= 40.0 && (y - 750.0).abs() <= 40.0, "contact at ({x}, {y}) undistorted px");
-    assert!(reading.gamma > 0.0);
+    assert!(reading.gamma.gamma > 0.0);
 }

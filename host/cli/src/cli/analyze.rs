@@ -1,4 +1,4 @@
-//! `nusense analyze --reference REF FRAME... [--config FILE] [--mode fast|paper] [--json]`
+//! `nusense analyze --reference REF FRAME... [--config FILE] [--mode inverse|fast|paper] [--json]`
 //!
 //! Measures every frame against the reference frame. With `--json`, one JSON object per frame per line (fields
 //! below); a frame that cannot be read or measured gets `ok: false` and its `error`, and the others still run.
@@ -10,7 +10,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use nusense_capture::read_image_file;
-use nusense_estimator::{Estimator, Mode, Reading};
+use nusense_estimator::{CameraMotion, ContactRegion, ContactTest, Estimator, Mode, Reading, ReadingJson};
 
 use super::common::load_config;
 use serde::Serialize;
@@ -26,8 +26,9 @@ pub struct Args {
     /// Sensor config (TOML); every value defaults to the real sensor.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
-    /// Estimator variant (fast or paper).
-    #[arg(long, default_value = "fast")]
+    /// Estimator variant: inverse (the traction inverse: force vector, every contact), fast or paper (the paper's
+    /// gamma line).
+    #[arg(long, default_value_t = Mode::default())]
     mode: Mode,
     /// One JSON object per frame per line.
     #[arg(long)]
@@ -58,6 +59,12 @@ struct FrameReport {
     samples_used: Option<usize>,
     samples_total: Option<usize>,
     elapsed_ms: Option<f64>,
+    gamma_uncompensated: Option<f64>,
+    force_vector_n: Option<[f64; 3]>,
+    torque_nmm: Option<f64>,
+    contacts: Option<Vec<ContactRegion>>,
+    camera_motion: Option<CameraMotion>,
+    contact_test: Option<ContactTest>,
 }
 
 impl FrameReport {
@@ -84,10 +91,17 @@ impl FrameReport {
             samples_used: None,
             samples_total: None,
             elapsed_ms: None,
+            gamma_uncompensated: None,
+            force_vector_n: None,
+            torque_nmm: None,
+            contacts: None,
+            camera_motion: None,
+            contact_test: None,
         }
     }
 
     fn measured(frame: &Path, mode: Mode, r: &Reading) -> Self {
+        let r = ReadingJson::from(r.clone());
         Self {
             frame: frame.display().to_string(),
             ok: true,
@@ -110,6 +124,12 @@ impl FrameReport {
             samples_used: Some(r.samples_used),
             samples_total: Some(r.samples_total),
             elapsed_ms: Some(r.elapsed_ms),
+            gamma_uncompensated: Some(r.gamma_uncompensated),
+            force_vector_n: r.force_vector_n,
+            torque_nmm: r.torque_nmm,
+            contacts: Some(r.contacts),
+            camera_motion: Some(r.camera_motion),
+            contact_test: Some(r.contact_test),
         }
     }
 

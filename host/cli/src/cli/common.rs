@@ -29,8 +29,8 @@ pub struct SourceArgs {
     /// Sensor configuration (TOML); the default fits the real sensor.
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
-    /// Estimator variant (fast or paper).
-    #[arg(long, default_value = "fast")]
+    /// Estimator variant: inverse (the traction inverse), fast or paper (the paper's gamma line).
+    #[arg(long, default_value_t = Mode::default())]
     pub mode: Mode,
     /// Frame width and height for the camera or the simulator.
     #[arg(long, default_value_t = SIM_DEFAULT_WIDTH)]

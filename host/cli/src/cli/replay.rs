@@ -19,8 +19,8 @@ pub struct Args {
     /// Sensor configuration (TOML).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
-    /// Estimator variant (fast or paper).
-    #[arg(long, default_value = "fast")]
+    /// Estimator variant: inverse (the traction inverse), fast or paper (the paper's gamma line).
+    #[arg(long, default_value_t = Mode::default())]
     pub mode: Mode,
     /// One JSON object per frame instead of a table.
     #[arg(long)]
@@ -73,17 +73,17 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             Ok(r) => println!(
                 "{:>6} {:>8} {:>9.3} {:>10.5} {:>16} {:>8} {:>4}/{:<4}",
                 index,
-                if r.contact { "yes" } else { "no" },
-                r.force_n,
-                r.gamma,
-                r.contact_mm
+                if r.is_contact() { "yes" } else { "no" },
+                r.force_n(),
+                r.gamma.gamma,
+                r.contact_mm()
                     .map(|c| format!("{:.1}, {:.1}", c[0], c[1]))
                     .unwrap_or_else(|| "-".into()),
-                r.edge_angle_deg
+                r.edge_angle_deg()
                     .map(|a| format!("{a:.1}"))
                     .unwrap_or_else(|| "-".into()),
-                r.points_detected,
-                r.points_expected
+                r.counts.points_detected,
+                r.counts.points_expected
             ),
             Err(error) => {
                 failures += 1;

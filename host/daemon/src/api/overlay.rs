@@ -32,7 +32,7 @@ pub fn draw_overlay(image: &mut RgbImage, reading: &Reading) {
         let tip = [r[0] + ARROW_GAIN * (c[0] - r[0]), r[1] + ARROW_GAIN * (c[1] - r[1])];
         draw_line(image, r, tip, SHEAR);
     }
-    if let (true, Some(c)) = (reading.contact, reading.contact_px) {
+    if let Some(c) = reading.contact_px() {
         let arm = (image.width().min(image.height()) as f64 / 30.0).max(4.0);
         draw_line(image, [c[0] - arm, c[1]], [c[0] + arm, c[1]], CONTACT);
         draw_line(image, [c[0], c[1] - arm], [c[0], c[1] + arm], CONTACT);
