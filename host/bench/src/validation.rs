@@ -19,10 +19,10 @@ use crate::BenchError;
 /// Every mode the estimator offers. The match is exhaustive on purpose: a new `Mode` does not compile here until
 /// it is listed, so no mode can miss the table.
 pub fn estimator_modes() -> Vec<Mode> {
-    let modes = vec![Mode::Fast, Mode::Paper];
+    let modes = vec![Mode::Fast, Mode::Paper, Mode::Inverse];
     for mode in &modes {
         match mode {
-            Mode::Fast | Mode::Paper => {}
+            Mode::Fast | Mode::Paper | Mode::Inverse => {}
         }
     }
     modes
@@ -682,7 +682,7 @@ mod tests {
 
     #[test]
     fn every_mode_is_listed() {
-        assert_eq!(estimator_modes(), [Mode::Fast, Mode::Paper]);
+        assert_eq!(estimator_modes(), [Mode::Fast, Mode::Paper, Mode::Inverse]);
     }
 
     #[test]
