@@ -69,7 +69,7 @@ fn localisation_on_the_position_grid() {
     let mut squared = Vec::new();
     for s in &scored {
         let truth = s.truth.contacts[0].centre_mm;
-        let found = s.reading.as_ref().and_then(|r| r.contact_mm);
+        let found = s.reading.as_ref().and_then(|r| r.contact_mm());
         match found {
             Some(p) => squared.push((p[0] - truth[0]).powi(2) + (p[1] - truth[1]).powi(2)),
             None => println!("no contact found at {truth:?}"),
@@ -111,7 +111,7 @@ fn gamma_is_linear_in_force_and_calibrates() {
         let scored = run_sweep(&frames, Mode::Fast);
         let (force, gamma): (Vec<f64>, Vec<f64>) = scored
             .iter()
-            .filter_map(|s| s.reading.as_ref().map(|r| (s.truth.total_force_n, r.gamma)))
+            .filter_map(|s| s.reading.as_ref().map(|r| (s.truth.total_force_n, r.gamma.gamma)))
             .unzip();
         assert_eq!(force.len(), scored.len(), "{label}: every frame is measured");
         let r2 = r_squared(&force, &gamma);
@@ -131,7 +131,7 @@ fn edge_angles() {
     let mut errors = Vec::new();
     for s in &scored {
         let truth = s.truth.contacts[0].edge_angle_deg.expect("edge sweep");
-        let found = s.reading.as_ref().and_then(|r| r.edge_angle_deg);
+        let found = s.reading.as_ref().and_then(|r| r.edge_angle_deg());
         match found {
             Some(angle) => {
                 let d = (angle - truth).rem_euclid(180.0);
