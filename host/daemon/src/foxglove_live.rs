@@ -132,14 +132,15 @@ async fn publish(
             Err(RecvError::Lagged(_)) => continue,
             Err(RecvError::Closed) => return,
         };
-        if let Some(frame) = pipeline.latest_frame().filter(|f| Some(f.frame_id) != last_frame) {
+        if let Some(frame) = pipeline.latest_processed().filter(|f| Some(f.frame_id) != last_frame) {
             last_frame = Some(frame.frame_id);
+            let capture_time_us = frame.reading.message.capture_time_us;
             let (width, height) = frame.image.dimensions();
             let resend = calibration_wanted.swap(false, Ordering::Relaxed);
             if resend || calibrated_size != Some((width, height)) {
                 calibrated_size = Some((width, height));
-                let calibration = messages::calibration(frame.capture_time_us, &config, width, height);
-                log(Kind::Calibration, &calibration, frame.capture_time_us);
+                let calibration = messages::calibration(capture_time_us, &config, width, height);
+                log(Kind::Calibration, &calibration, capture_time_us);
             }
             let jpeg = match frame.jpeg {
                 Some(jpeg) => jpeg,
@@ -154,11 +155,11 @@ async fn publish(
             };
             log(
                 Kind::Frame,
-                &messages::frame(frame.capture_time_us, &jpeg),
-                frame.capture_time_us,
+                &messages::frame(capture_time_us, &jpeg),
+                capture_time_us,
             );
         }
-        let time_us = published.reading.capture_time_us;
+        let time_us = published.message.capture_time_us;
         if let Some(annotations) = messages::annotations(&published) {
             log(Kind::Annotations, &annotations, time_us);
         }

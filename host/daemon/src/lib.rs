@@ -2,10 +2,14 @@
 //! LED board kept in step, published over HTTP/WebSocket with a dashboard, and recorded to MCAP.
 //!
 //! [`pipeline`] runs capture, estimation and publication; [`api`] serves them (and the dashboard); [`record`]
-//! writes and reads recordings.
+//! writes and reads recordings; [`reading`] is the one reading message all of them (and `nusense analyze`)
+//! speak.
 
 pub mod api;
 mod dashboard;
 pub mod foxglove_live;
 pub mod pipeline;
+pub mod reading;
 pub mod record;
+
+pub use reading::{ReadingMessage, SCHEMA_VERSION};

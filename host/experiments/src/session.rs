@@ -10,7 +10,9 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
-use nusense_daemon::pipeline::DaemonReading;
+use nusense_daemon::pipeline::PublishedReading;
+use nusense_daemon::reading::SCHEMA_VERSION;
+use nusense_daemon::ReadingMessage;
 use nusense_daemon::record::{encode_jpeg, RecordError, RecordItem, Recorder, RecorderOptions};
 use nusense_estimator::{EstimateError, Estimator, Mode, SensorConfig};
 use nusense_sim::{Contact, Damage, ModelError, RenderError, Renderer, Scene, SensorModel};
@@ -523,8 +525,10 @@ fn record(
             },
         };
         let elapsed_us = started.elapsed().as_micros() as u64;
-        let reading = DaemonReading {
+        let message = ReadingMessage {
+            schema_version: SCHEMA_VERSION,
             frame_id: frame.frame_id,
+            file: None,
             capture_time_us,
             processed_time_us: capture_time_us + elapsed_us,
             latency_ms: elapsed_us as f64 * 1e-3,
@@ -540,12 +544,8 @@ fn record(
             image: Arc::new(image),
             jpeg: Some(Arc::new(jpeg)),
         });
-        let json = serde_json::to_string(&reading).expect("a reading serialises");
-        recorder.record(RecordItem::Reading {
-            frame_id: frame.frame_id,
-            time_us: capture_time_us,
-            json: json.into(),
-        });
+        let json = serde_json::to_string(&message).expect("a reading serialises");
+        recorder.record(RecordItem::Reading(Arc::new(PublishedReading { message, json })));
         on_frame(index);
     }
     recorder.finish()?;

@@ -4,8 +4,10 @@
 //! - `--pairs FILE.csv`: (gamma, force) pairs; a header naming `gamma` and `force` (or `force_n`), or no header
 //!   and those two columns in that order.
 //! - `--readings FILE.jsonl --ft-log FILE.csv`: a recorded session. Readings are JSON lines (as `nusense analyze
-//!   --json` prints them, plus a time field: `timestamp_s`, `time_s`, `t`, `timestamp_ms` or `timestamp_us`);
-//!   lines with `ok: false` are skipped. The force/torque log is CSV with a time column (`timestamp`, `time`,
+//!   --json`, `nusense replay --json`, the daemon's stream and recordings write them: `estimate.gamma` at
+//!   `capture_time_us`; lines without an estimate are skipped). Flat lines with `gamma` and a time field
+//!   (`timestamp_s`, `time_s`, `t`, `timestamp_ms` or `timestamp_us`) are read too; those with `ok: false` are
+//!   skipped. The force/torque log is CSV with a time column (`timestamp`, `time`,
 //!   `t`, optional `_s`/`_ms`/`_us` suffix) and `fx, fy, fz`. Each reading takes the force interpolated at its
 //!   time when a force sample lies within `--max-skew-ms`; others are dropped and counted.
 //!
@@ -187,6 +189,26 @@ fn parse_readings(text: &str) -> anyhow::Result<(Vec<TimedGamma>, usize)> {
         let n = i + 1;
         let value: serde_json::Value =
             serde_json::from_str(line).with_context(|| format!("line {n} is not a JSON object"))?;
+        if value.get("schema_version").is_some() {
+            // A reading message: the estimate (if any) and the capture time.
+            let Some(estimate) = value.get("estimate").filter(|e| e.is_object()) else {
+                skipped += 1;
+                continue;
+            };
+            let gamma = estimate
+                .get("gamma")
+                .and_then(serde_json::Value::as_f64)
+                .with_context(|| format!("line {n}: the estimate has no numeric `gamma`"))?;
+            let time_us = value
+                .get("capture_time_us")
+                .and_then(serde_json::Value::as_f64)
+                .with_context(|| format!("line {n} has no `capture_time_us`"))?;
+            readings.push(TimedGamma {
+                time_s: time_us * 1e-6,
+                gamma,
+            });
+            continue;
+        }
         if value.get("ok").and_then(serde_json::Value::as_bool) == Some(false) {
             skipped += 1;
             continue;
@@ -274,6 +296,18 @@ mod tests {
                     gamma: 0.75
                 }
             ]
+        );
+        let messages = r#"{"schema_version":1,"frame_id":0,"capture_time_us":2500000,"estimate":{"gamma":0.25}}
+{"schema_version":1,"frame_id":1,"capture_time_us":2600000,"estimate":null,"error":"no pattern"}
+"#;
+        let (readings, skipped) = parse_readings(messages).unwrap();
+        assert_eq!(skipped, 1);
+        assert_eq!(
+            readings,
+            vec![TimedGamma {
+                time_s: 2.5,
+                gamma: 0.25
+            }]
         );
         let err = parse_readings(r#"{"ok":true,"gamma":1.0}"#).unwrap_err();
         assert!(format!("{err:#}").contains("line 1 has no time field"), "{err:#}");

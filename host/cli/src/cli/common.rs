@@ -10,13 +10,16 @@ use nusense_capture::{
 use nusense_daemon::pipeline::{BoardChoice, FrameChoice};
 use nusense_estimator::{Mode, SensorConfig};
 
+/// Exit code of `analyze` and `replay` when some frames could not be measured (the others were).
+pub const EXIT_SOME_FRAMES_FAILED: u8 = 2;
+
 /// Where frames and LED control come from, and how they are estimated (shared with `nusense record`).
 #[derive(clap::Args, Debug)]
 pub struct SourceArgs {
     /// Serial device of the LED board (e.g. /dev/ttyACM0, /dev/serial/by-id/...). Without it: the virtual board
     /// on the simulator, no board with --camera or --replay.
     #[arg(long, value_name = "PATH")]
-    pub port: Option<String>,
+    pub board: Option<String>,
     /// Camera: a V4L2 device path or the camera's USB serial number.
     #[arg(long, value_name = "DEVICE|SERIAL", conflicts_with_all = ["replay", "sim"])]
     pub camera: Option<String>,
@@ -76,7 +79,7 @@ pub fn frame_choice(args: &SourceArgs) -> FrameChoice {
 }
 
 pub fn board_choice(args: &SourceArgs, frames: &FrameChoice) -> BoardChoice {
-    match (&args.port, frames) {
+    match (&args.board, frames) {
         (Some(port), _) => BoardChoice::Port(port.clone()),
         (None, FrameChoice::Simulator { .. }) => BoardChoice::Virtual,
         (None, _) => BoardChoice::None,

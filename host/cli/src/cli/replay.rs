@@ -1,16 +1,18 @@
 //! `nusense replay IN.mcap|DIR`: runs recorded frames (or a folder of images) through the estimator, as fast
-//! as it goes; the first frame is the rest frame. Prints a table, or one JSON reading per line with --json.
+//! as it goes; the first frame is the rest frame. Prints a table, or with --json one reading message per line
+//! (`nusense_daemon::ReadingMessage`, as the daemon and `analyze --json` write them).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Context;
-use nusense_capture::{CaptureError, FrameSource, ImageFolder};
+use nusense_capture::{unix_time_us, CaptureError, FrameSource, ImageFolder};
 use nusense_daemon::record::McapReplay;
+use nusense_daemon::{ReadingMessage, SCHEMA_VERSION};
 use nusense_estimator::{Estimator, Mode};
 
-use super::common::load_config;
+use super::common::{load_config, EXIT_SOME_FRAMES_FAILED};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -68,8 +70,35 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let Some(estimator) = estimator.as_mut() else {
             continue;
         };
-        match estimator.estimate(&frame.image) {
-            Ok(reading) if args.json => println!("{}", serde_json::json!({ "frame": index, "estimate": reading })),
+        let result = estimator.estimate(&frame.image);
+        if args.json {
+            let (estimate, error) = match result {
+                Ok(reading) => (Some(reading), None),
+                Err(error) => {
+                    failures += 1;
+                    (None, Some(error.to_string()))
+                }
+            };
+            let message = ReadingMessage {
+                schema_version: SCHEMA_VERSION,
+                frame_id: index as u64,
+                file: None,
+                capture_time_us: frame.capture_time_us,
+                processed_time_us: unix_time_us(),
+                latency_ms: frame.captured_at.elapsed().as_secs_f64() * 1e3,
+                queue_ms: 0.0,
+                reference_frame_id: Some(0),
+                estimate,
+                error,
+                led: None,
+            };
+            println!(
+                "{}",
+                serde_json::to_string(&message).context("cannot write a reading as JSON")?
+            );
+            continue;
+        }
+        match result {
             Ok(r) => println!(
                 "{:>6} {:>8} {:>9.3} {:>10.5} {:>16} {:>8} {:>4}/{:<4}",
                 index,
@@ -87,11 +116,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             ),
             Err(error) => {
                 failures += 1;
-                if args.json {
-                    println!("{}", serde_json::json!({ "frame": index, "error": error.to_string() }));
-                } else {
-                    println!("{index:>6} error: {error}");
-                }
+                println!("{index:>6} error: {error}");
             }
         }
     }
@@ -105,6 +130,6 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     Ok(if failures == 0 {
         ExitCode::SUCCESS
     } else {
-        ExitCode::from(2)
+        ExitCode::from(EXIT_SOME_FRAMES_FAILED)
     })
 }

@@ -1,14 +1,16 @@
 //! `nusense serve`: the daemon. With no options it runs on the simulator (a virtual LED board and the
-//! simulated camera) and says so.
+//! simulated camera) and says so. SIGINT, SIGTERM and SIGHUP stop it cleanly: WebSocket clients are told, the
+//! recording is finished (summary and footer written), the board is left as it is, and the exit code is 0.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{bail, Context};
-use nusense_daemon::api::{self, AppState};
+use nusense_daemon::api::{self, AccessPolicy, AppState, RecordingsDir};
 use nusense_daemon::foxglove_live::FoxgloveLive;
 use nusense_daemon::pipeline::{open_sources, Pipeline, PipelineOptions};
+use tokio::signal::unix::{signal, SignalKind};
 
 use super::common::{board_choice, describe_start, frame_choice, init_logging, load_config, SourceArgs};
 
@@ -18,13 +20,19 @@ pub const DEFAULT_PORT: u16 = 8750;
 pub struct Args {
     #[command(flatten)]
     pub source: SourceArgs,
-    /// Address to listen on. Anything but loopback requires a token.
-    #[arg(long, value_name = "ADDR")]
-    pub listen: Option<SocketAddr>,
-    /// Token every request must carry (Authorization: Bearer, or ?token=); required with a non-loopback --listen.
+    /// Address (and TCP port) to listen on; port 0 picks a free one. Anything but loopback requires a token.
+    #[arg(long, value_name = "ADDR:PORT", default_value_t = SocketAddr::from(([127, 0, 0, 1], DEFAULT_PORT)))]
+    pub listen: SocketAddr,
+    /// Another name the daemon answers to in the Host header (besides the address it listens on, and localhost
+    /// on loopback), e.g. a reverse proxy's or this machine's DNS name. Repeatable.
+    #[arg(long, value_name = "NAME")]
+    pub allow_host: Vec<String>,
+    /// Token every request must carry (Authorization: Bearer, ?token=, or the dashboard's cookie after opening
+    /// /?token=...); required with a non-loopback --listen.
     #[arg(long, env = "NUSENSE_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
-    /// Folder for recordings started from the API without a path.
+    /// Folder the API records into; recording names are relative to it [default: $XDG_DATA_HOME/nusense/recordings,
+    /// i.e. ~/.local/share/nusense/recordings].
     #[arg(long, value_name = "DIR")]
     pub recordings: Option<PathBuf>,
     /// Also serve the sensor to the Foxglove app (Foxglove WebSocket protocol) on ADDR, 127.0.0.1:8765 when
@@ -35,55 +43,98 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     init_logging();
-    let listen = args
-        .listen
-        .unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], DEFAULT_PORT)));
     let token = args.token.clone().filter(|t| !t.is_empty());
-    if !listen.ip().is_loopback() && token.is_none() {
-        bail!("listening on {listen} (beyond this machine) requires a token: pass --token or set NUSENSE_TOKEN");
+    if !args.listen.ip().is_loopback() && token.is_none() {
+        bail!(
+            "listening on {} (beyond this machine) requires a token: pass --token or set NUSENSE_TOKEN",
+            args.listen
+        );
     }
     if let Some(addr) = args.foxglove.filter(|a| !a.ip().is_loopback()) {
         bail!("--foxglove {addr}: the Foxglove server has no authentication, so it listens on loopback only");
     }
+    let recordings_dir = match args.recordings.clone() {
+        Some(dir) => dir,
+        None => RecordingsDir::default_location()
+            .context("no folder for recordings: neither XDG_DATA_HOME nor HOME is set; pass --recordings DIR")?,
+    };
     let config = load_config(args.source.config.as_ref())?;
     let frames = frame_choice(&args.source);
     let board = board_choice(&args.source, &frames);
     eprintln!("{}", describe_start(&frames, &board));
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    // Signals are caught from here on, before anything needs finishing: a SIGTERM during start-up is a clean stop.
+    let stop = runtime.block_on(async { StopSignals::install() })?;
     let sources = open_sources(&frames, &board).context("opening the frame source and LED board")?;
     let pipeline = Pipeline::start(
         sources.frames,
         sources.board,
         PipelineOptions::new(config.clone(), args.source.mode),
     )?;
-    let pipeline_handle = pipeline.handle();
-    let mut state = AppState::new(pipeline.handle(), sources.scene, token);
-    if let Some(dir) = &args.recordings {
-        state.recordings_dir = dir.clone();
-    }
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
+    let handle = pipeline.handle();
     runtime.block_on(async move {
-        let listener = tokio::net::TcpListener::bind(listen)
+        let listener = tokio::net::TcpListener::bind(args.listen)
             .await
-            .with_context(|| format!("listening on {listen}"))?;
+            .with_context(|| format!("listening on {}", args.listen))?;
         let local = listener.local_addr()?;
         let _foxglove = match args.foxglove {
             Some(addr) => {
-                let live = FoxgloveLive::start(pipeline_handle, config, addr).await?;
+                let live = FoxgloveLive::start(handle.clone(), config, addr).await?;
                 eprintln!("nusense serve: Foxglove WebSocket at ws://{}/", live.addr());
                 Some(live)
             }
             None => None,
         };
-        eprintln!("nusense serve: dashboard at http://{local}/  (API under /api/, stop with Ctrl-C)");
-        api::serve(listener, state, async {
-            let _ = tokio::signal::ctrl_c().await;
+        let access = AccessPolicy::new(local, &args.allow_host, token.as_deref());
+        let state = AppState::new(
+            handle,
+            sources.scene,
+            access,
+            RecordingsDir::new(recordings_dir.clone()),
+        );
+        eprintln!(
+            "nusense serve: dashboard at http://{local}/  (API under /api/v1/, recordings in {}; stop with Ctrl-C)",
+            recordings_dir.display()
+        );
+        api::serve(listener, state, async move {
+            let name = stop.wait().await;
+            eprintln!("nusense serve: {name}: stopping");
         })
         .await
         .context("serving HTTP")
     })?;
+    // Stops capture and estimation and finishes the recording (its summary and footer).
     drop(pipeline);
+    eprintln!("nusense serve: stopped");
     Ok(ExitCode::SUCCESS)
+}
+
+/// The signals that ask a daemon to stop: Ctrl-C, `systemctl stop` / `kill`, and a closed terminal.
+struct StopSignals {
+    interrupt: tokio::signal::unix::Signal,
+    terminate: tokio::signal::unix::Signal,
+    hangup: tokio::signal::unix::Signal,
+}
+
+impl StopSignals {
+    fn install() -> anyhow::Result<Self> {
+        let install = |kind: SignalKind, name: &str| signal(kind).with_context(|| format!("catching {name}"));
+        Ok(Self {
+            interrupt: install(SignalKind::interrupt(), "SIGINT")?,
+            terminate: install(SignalKind::terminate(), "SIGTERM")?,
+            hangup: install(SignalKind::hangup(), "SIGHUP")?,
+        })
+    }
+
+    /// The name of the first signal that arrives.
+    async fn wait(mut self) -> &'static str {
+        tokio::select! {
+            _ = self.interrupt.recv() => "SIGINT",
+            _ = self.terminate.recv() => "SIGTERM",
+            _ = self.hangup.recv() => "SIGHUP",
+        }
+    }
 }

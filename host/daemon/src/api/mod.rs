@@ -1,29 +1,44 @@
-//! The daemon's HTTP/WebSocket API and the dashboard it serves.
+//! The daemon's HTTP/WebSocket API (version 1, under `/api/v1/`) and the dashboard it serves.
 //!
-//! Every error is a JSON body `{"error": "..."}` with a 4xx/5xx status that says whose fault it was.
+//! Every JSON message carries `schema_version` ([`crate::SCHEMA_VERSION`]). Errors are `{"schema_version": 1,
+//! "error": "..."}` with a 4xx/5xx status that says whose fault it was. The first paths, without `v1/`,
+//! redirect (308, method and body kept) to their `/api/v1/` equivalent. [`guard`] decides who may ask.
 
-mod auth;
+mod guard;
 mod overlay;
+mod recordings;
 mod stream;
 
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, PoisonError};
 
 use axum::body::Body;
 use axum::extract::rejection::{JsonRejection, QueryRejection};
-use axum::extract::{Query, State};
-use axum::http::{header, StatusCode};
-use axum::response::{IntoResponse, Response};
-use axum::routing::{get, post, put};
+use axum::extract::{Path as UrlPath, Query, State};
+use axum::http::{header, StatusCode, Uri};
+use axum::response::{IntoResponse, Redirect, Response};
+use axum::routing::{any, get, post, put};
 use axum::{Json, Router};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
-use crate::pipeline::{BoardError, LedCommand, PipelineError, PipelineHandle};
-use crate::record::{encode_jpeg, RecorderOptions};
-use nusense_capture::SceneControl;
+use crate::pipeline::{
+    error_chain, BoardError, BoardStatus, LedCommand, PipelineError, PipelineHandle, PipelineStatus, ProcessedFrame,
+};
+use crate::record::{encode_jpeg, RecordSummary, RecorderOptions};
+use crate::SCHEMA_VERSION;
+use nusense_capture::{SceneControl, SourceInfo};
 
+pub use guard::AccessPolicy;
 pub use overlay::draw_overlay;
-pub use stream::{StreamStats, StreamStatsSnapshot};
+pub use recordings::{RecordingPathError, RecordingsDir};
+pub use stream::{StreamOptions, StreamStats, StreamStatsSnapshot};
+
+/// The frame id of `/api/v1/frame.jpg`'s picture (the overlay and the reading of the same id describe it).
+pub const FRAME_ID_HEADER: &str = "x-nusense-frame-id";
+/// Its capture time, microseconds since the Unix epoch.
+pub const CAPTURE_TIME_HEADER: &str = "x-nusense-capture-time-us";
+/// Quality of the frames the API encodes itself (sources without a JPEG of their own, overlays): for viewing.
+const VIEW_JPEG_QUALITY: u8 = 85;
 
 /// What the handlers share.
 #[derive(Clone)]
@@ -31,43 +46,79 @@ pub struct AppState {
     pub pipeline: PipelineHandle,
     /// Present when the frames come from the simulator: the API can then change the simulated contact.
     pub scene: Option<SceneControl>,
-    /// Required on every request when set (the daemon listens beyond loopback).
-    pub token: Option<Arc<str>>,
-    /// Where `POST /api/record` puts recordings that are not given a path.
-    pub recordings_dir: PathBuf,
+    pub access: Arc<AccessPolicy>,
+    pub recordings: RecordingsDir,
     pub stream: Arc<StreamStats>,
-    pub stream_options: stream::StreamOptions,
+    pub stream_options: StreamOptions,
+    /// The last picture encoded for `/api/v1/frame.jpg`, per overlay setting, so that clients asking for the same
+    /// frame share one encoding.
+    encoded: Arc<Mutex<[Option<EncodedFrame>; 2]>>,
+    /// Set once when the daemon stops: WebSocket clients are told goodbye instead of waiting on a dead stream.
+    closing: tokio::sync::watch::Sender<bool>,
+}
+
+#[derive(Clone)]
+struct EncodedFrame {
+    frame_id: u64,
+    jpeg: Arc<Vec<u8>>,
 }
 
 impl AppState {
-    pub fn new(pipeline: PipelineHandle, scene: Option<SceneControl>, token: Option<String>) -> Self {
+    pub fn new(
+        pipeline: PipelineHandle,
+        scene: Option<SceneControl>,
+        access: AccessPolicy,
+        recordings: RecordingsDir,
+    ) -> Self {
         Self {
             pipeline,
             scene,
-            token: token.map(Into::into),
-            recordings_dir: std::env::temp_dir(),
+            access: Arc::new(access),
+            recordings,
             stream: Arc::new(StreamStats::default()),
-            stream_options: stream::StreamOptions::default(),
+            stream_options: StreamOptions::default(),
+            encoded: Arc::default(),
+            closing: tokio::sync::watch::Sender::new(false),
         }
     }
 }
 
 pub fn router(state: AppState) -> Router {
+    let v1 = Router::new()
+        .route("/status", get(status))
+        .route("/reading", get(reading))
+        .route("/stream", get(stream::upgrade))
+        .route("/tare", post(tare))
+        .route("/led", put(set_led))
+        .route("/frame.jpg", get(frame_jpeg))
+        .route("/record", post(record))
+        .route("/schema", get(schema))
+        .route("/sim/scene", get(get_scene).put(put_scene))
+        .fallback(|| async { ApiError::new(StatusCode::NOT_FOUND, "no such endpoint; see GET /api/v1/status") });
     Router::new()
         .route("/", get(crate::dashboard::index))
         .route("/dashboard.js", get(crate::dashboard::script))
         .route("/dashboard.css", get(crate::dashboard::style))
-        .route("/api/status", get(status))
-        .route("/api/reading", get(reading))
-        .route("/api/stream", get(stream::upgrade))
-        .route("/api/tare", post(tare))
-        .route("/api/led", put(set_led))
-        .route("/api/frame.jpg", get(frame_jpeg))
-        .route("/api/record", post(record))
-        .route("/api/sim/scene", get(get_scene).put(put_scene))
-        .fallback(|| async { ApiError::new(StatusCode::NOT_FOUND, "no such endpoint; see GET /api/status") })
-        .layer(axum::middleware::from_fn_with_state(state.clone(), auth::require_token))
+        .nest("/api/v1", v1)
+        .route("/api/{*rest}", any(redirect_to_v1))
+        .fallback(|| async { ApiError::new(StatusCode::NOT_FOUND, "no such page; the API is under /api/v1/") })
+        .layer(axum::middleware::from_fn_with_state(state.clone(), guard::guard))
         .with_state(state)
+}
+
+/// A JSON reply: the message's own fields beside `schema_version`.
+#[derive(Serialize)]
+pub struct Versioned<T> {
+    schema_version: u32,
+    #[serde(flatten)]
+    body: T,
+}
+
+fn reply<T: Serialize>(body: T) -> Json<Versioned<T>> {
+    Json(Versioned {
+        schema_version: SCHEMA_VERSION,
+        body,
+    })
 }
 
 #[derive(Debug)]
@@ -83,11 +134,19 @@ impl ApiError {
             message: message.into(),
         }
     }
+
+    fn internal(error: impl std::fmt::Display) -> Self {
+        Self::new(StatusCode::INTERNAL_SERVER_ERROR, error.to_string())
+    }
 }
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        (self.status, Json(serde_json::json!({ "error": self.message }))).into_response()
+        #[derive(Serialize)]
+        struct ErrorMessage {
+            error: String,
+        }
+        (self.status, reply(ErrorMessage { error: self.message })).into_response()
     }
 }
 
@@ -103,17 +162,88 @@ impl From<QueryRejection> for ApiError {
     }
 }
 
-async fn status(State(state): State<AppState>) -> Json<serde_json::Value> {
+/// `/api/<path>` was the API before it had versions: the same request, under `/api/v1/`.
+async fn redirect_to_v1(UrlPath(rest): UrlPath<String>, uri: Uri) -> Result<Redirect, ApiError> {
+    if rest == "v1" || rest.starts_with("v1/") {
+        return Err(ApiError::new(
+            StatusCode::NOT_FOUND,
+            "no such endpoint; see GET /api/v1/status",
+        ));
+    }
+    let query = uri.query().map(|q| format!("?{q}")).unwrap_or_default();
+    Ok(Redirect::permanent(&format!("/api/v1/{rest}{query}")))
+}
+
+/// `GET /api/v1/status`.
+#[derive(Serialize)]
+pub struct StatusMessage {
+    pub version: &'static str,
+    pub protocol_version: u16,
+    pub simulator: bool,
+    pub camera: SourceInfo,
+    pub pipeline: PipelineStatus,
+    pub board: BoardStatus,
+    pub websocket: StreamStatsSnapshot,
+    /// Where `POST /api/v1/record` writes; names are relative to it.
+    pub recordings_dir: String,
+    pub token_required: bool,
+    /// What is wrong now, in words (empty when all is well): what the dashboard shows in red.
+    pub problems: Vec<String>,
+}
+
+async fn status(State(state): State<AppState>) -> Json<Versioned<StatusMessage>> {
     let pipeline = state.pipeline.status();
-    Json(serde_json::json!({
-        "version": env!("CARGO_PKG_VERSION"),
-        "protocol_version": nusense_protocol::PROTOCOL_VERSION,
-        "simulator": state.scene.is_some(),
-        "camera": pipeline.source,
-        "pipeline": pipeline,
-        "board": state.pipeline.board().status(),
-        "websocket": state.stream.snapshot(),
-    }))
+    let board = state.pipeline.board().status();
+    let latest_error = state.pipeline.latest_reading().and_then(|r| r.message.error.clone());
+    reply(StatusMessage {
+        version: env!("CARGO_PKG_VERSION"),
+        protocol_version: nusense_protocol::PROTOCOL_VERSION,
+        simulator: state.scene.is_some(),
+        camera: pipeline.source.clone(),
+        problems: problems(&pipeline, &board, latest_error),
+        pipeline,
+        board,
+        websocket: state.stream.snapshot(),
+        recordings_dir: state.recordings.root().display().to_string(),
+        token_required: state.access.token_required(),
+    })
+}
+
+fn problems(pipeline: &PipelineStatus, board: &BoardStatus, latest_error: Option<String>) -> Vec<String> {
+    let mut problems = Vec::new();
+    if let Some(failure) = &pipeline.recording_failure {
+        problems.push(if failure.disk_full {
+            format!("recording stopped: the disk is full ({})", failure.path)
+        } else {
+            format!("recording stopped: {}", failure.error)
+        });
+    }
+    if !pipeline.capture_running && !pipeline.capture_finished {
+        let why = pipeline.capture_error.as_deref().unwrap_or("no frames");
+        problems.push(format!("camera: {why}"));
+    }
+    if pipeline.capture_finished {
+        problems.push("the replay has ended: no new frames".into());
+    }
+    let link = board.link.as_ref();
+    if !board.connected && link.is_some() {
+        let why = link
+            .and_then(|l| l.last_error.as_deref())
+            .unwrap_or("not connected yet");
+        problems.push(format!("LED board: {why}"));
+    }
+    if let Some(led) = link.and_then(|l| l.telemetry.as_ref()).filter(|_| board.connected) {
+        let faulty = crate::pipeline::LedState::from_telemetry(led);
+        for (side, faults) in ["top", "right", "bottom", "left"].iter().zip(&faulty.faults) {
+            if !faults.is_empty() {
+                problems.push(format!("LED string {side}: {}", faults.join(", ").replace('_', " ")));
+            }
+        }
+    }
+    if let Some(error) = latest_error {
+        problems.push(format!("estimator: {error}"));
+    }
+    problems
 }
 
 async fn reading(State(state): State<AppState>) -> Result<Response, ApiError> {
@@ -126,15 +256,24 @@ async fn reading(State(state): State<AppState>) -> Result<Response, ApiError> {
     Ok(([(header::CONTENT_TYPE, "application/json")], latest.json.clone()).into_response())
 }
 
-async fn tare(State(state): State<AppState>) -> (StatusCode, Json<serde_json::Value>) {
+/// `GET /api/v1/schema`: the reading message's JSON Schema.
+async fn schema() -> Response {
+    (
+        [(header::CONTENT_TYPE, "application/schema+json")],
+        crate::reading::reading_schema_json(),
+    )
+        .into_response()
+}
+
+async fn tare(State(state): State<AppState>) -> (StatusCode, Json<Versioned<serde_json::Value>>) {
     state.pipeline.request_tare();
     (
         StatusCode::ACCEPTED,
-        Json(serde_json::json!({ "tare": "the next frame becomes the rest frame" })),
+        reply(serde_json::json!({ "tare": "the next frame becomes the rest frame" })),
     )
 }
 
-/// `PUT /api/led`: currents in mA per side, or `all`; `enabled` switches the addressed channels.
+/// `PUT /api/v1/led`: currents in mA per side, or `all`; `enabled` switches the addressed channels.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct LedBody {
@@ -146,10 +285,15 @@ struct LedBody {
     enabled: Option<bool>,
 }
 
+#[derive(Serialize)]
+struct BoardReply {
+    board: BoardStatus,
+}
+
 async fn set_led(
     State(state): State<AppState>,
     body: Result<Json<LedBody>, JsonRejection>,
-) -> Result<Json<serde_json::Value>, ApiError> {
+) -> Result<Json<Versioned<BoardReply>>, ApiError> {
     let Json(body) = body?;
     let per_side = [body.top, body.right, body.bottom, body.left];
     let current_ma = match body.all {
@@ -159,7 +303,7 @@ async fn set_led(
                 "give either `all` or per-side currents, not both",
             ))
         }
-        Some(all) => [Some(all); 4],
+        Some(all) => [Some(all); nusense_protocol::CHANNEL_COUNT],
         None => per_side,
     };
     if current_ma.iter().all(Option::is_none) && body.enabled.is_none() {
@@ -178,12 +322,14 @@ async fn set_led(
     let board = state.pipeline.board().clone();
     let result = tokio::task::spawn_blocking(move || board.set_leds(&command))
         .await
-        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?;
+        .map_err(ApiError::internal)?;
     match result {
-        Ok(()) => Ok(Json(serde_json::json!({ "board": state.pipeline.board().status() }))),
+        Ok(()) => Ok(reply(BoardReply {
+            board: state.pipeline.board().status(),
+        })),
         Err(e @ BoardError::AboveLimit { .. }) => Err(ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, e.to_string())),
         Err(e @ BoardError::NoBoard) => Err(ApiError::new(StatusCode::SERVICE_UNAVAILABLE, e.to_string())),
-        Err(e @ BoardError::Link(_)) => Err(ApiError::new(StatusCode::BAD_GATEWAY, e.to_string())),
+        Err(e @ BoardError::Link(_)) => Err(ApiError::new(StatusCode::BAD_GATEWAY, error_chain(&e))),
     }
 }
 
@@ -192,8 +338,13 @@ async fn set_led(
 struct FrameQuery {
     #[serde(default)]
     overlay: Option<u8>,
+    /// Accepted so that token-carrying URLs parse; the guard checks it.
+    #[allow(dead_code)]
+    token: Option<String>,
 }
 
+/// `GET /api/v1/frame.jpg[?overlay=1]`: the newest frame that has its reading, as JPEG; with `overlay=1` that
+/// reading's lattice, shear and contact drawn on it. The frame's id is in the `x-nusense-frame-id` header.
 async fn frame_jpeg(
     State(state): State<AppState>,
     query: Result<Query<FrameQuery>, QueryRejection>,
@@ -211,29 +362,50 @@ async fn frame_jpeg(
     };
     let frame = state
         .pipeline
-        .latest_frame()
+        .latest_processed()
         .ok_or_else(|| ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "no frame yet"))?;
-    let reading = if overlay { state.pipeline.latest_reading() } else { None };
-    let bytes = tokio::task::spawn_blocking(move || match (&frame.jpeg, overlay) {
-        (Some(jpeg), false) => jpeg.as_ref().clone(),
+    let frame_id = frame.frame_id;
+    let capture_time_us = frame.reading.message.capture_time_us;
+    let jpeg = encoded_frame(&state, frame, overlay).await?;
+    Ok((
+        [
+            (header::CONTENT_TYPE, "image/jpeg".to_string()),
+            (header::CACHE_CONTROL, "no-store".to_string()),
+            (header::HeaderName::from_static(FRAME_ID_HEADER), frame_id.to_string()),
+            (
+                header::HeaderName::from_static(CAPTURE_TIME_HEADER),
+                capture_time_us.to_string(),
+            ),
+        ],
+        Body::from(jpeg.as_ref().clone()),
+    )
+        .into_response())
+}
+
+async fn encoded_frame(state: &AppState, frame: ProcessedFrame, overlay: bool) -> Result<Arc<Vec<u8>>, ApiError> {
+    let slot = usize::from(overlay);
+    let cached = state.encoded.lock().unwrap_or_else(PoisonError::into_inner)[slot].clone();
+    if let Some(cached) = cached.filter(|c| c.frame_id == frame.frame_id) {
+        return Ok(cached.jpeg);
+    }
+    let frame_id = frame.frame_id;
+    let jpeg = tokio::task::spawn_blocking(move || match (&frame.jpeg, overlay) {
+        (Some(jpeg), false) => jpeg.clone(),
         _ => {
             let mut image = frame.image.as_ref().clone();
-            if let Some(estimate) = reading.as_ref().and_then(|r| r.reading.estimate.as_ref()) {
+            if let (true, Some(estimate)) = (overlay, frame.reading.message.estimate.as_ref()) {
                 draw_overlay(&mut image, estimate);
             }
-            encode_jpeg(&image, 85)
+            Arc::new(encode_jpeg(&image, VIEW_JPEG_QUALITY))
         }
     })
     .await
-    .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?;
-    Ok((
-        [
-            (header::CONTENT_TYPE, "image/jpeg"),
-            (header::CACHE_CONTROL, "no-store"),
-        ],
-        Body::from(bytes),
-    )
-        .into_response())
+    .map_err(ApiError::internal)?;
+    state.encoded.lock().unwrap_or_else(PoisonError::into_inner)[slot] = Some(EncodedFrame {
+        frame_id,
+        jpeg: jpeg.clone(),
+    });
+    Ok(jpeg)
 }
 
 #[derive(Debug, Deserialize)]
@@ -247,46 +419,80 @@ enum RecordAction {
 #[serde(deny_unknown_fields)]
 struct RecordBody {
     action: RecordAction,
-    /// File name for `start`; relative names go into the daemon's recordings folder.
+    /// File name for `start`, relative to the recordings folder (default: `nusense-<unix ms>.mcap`).
     path: Option<PathBuf>,
+    /// Replace an existing recording of that name.
+    #[serde(default)]
+    overwrite: bool,
+}
+
+#[derive(Serialize)]
+#[serde(rename_all = "lowercase")]
+enum RecordReply {
+    Recording { path: String, file: String },
+    Recorded(RecordSummary),
 }
 
 async fn record(
     State(state): State<AppState>,
     body: Result<Json<RecordBody>, JsonRejection>,
-) -> Result<Json<serde_json::Value>, ApiError> {
+) -> Result<Json<Versioned<RecordReply>>, ApiError> {
     let Json(body) = body?;
     let pipeline = state.pipeline.clone();
     match body.action {
         RecordAction::Start => {
-            let path = match body.path {
-                Some(path) if path.is_absolute() => path,
-                Some(path) => state.recordings_dir.join(path),
-                None => state
-                    .recordings_dir
-                    .join(format!("nusense-{}.mcap", nusense_capture::unix_time_us() / 1000)),
-            };
-            if path.extension().and_then(|e| e.to_str()) != Some("mcap") {
+            if let Some(running) = pipeline.recording_path() {
                 return Err(ApiError::new(
-                    StatusCode::UNPROCESSABLE_ENTITY,
-                    "the recording's file name must end in .mcap",
+                    StatusCode::CONFLICT,
+                    format!("a recording is already running ({})", running.display()),
                 ));
             }
-            let started = path.clone();
-            tokio::task::spawn_blocking(move || pipeline.start_recording(&path, RecorderOptions::default()))
-                .await
-                .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?
-                .map_err(pipeline_error)?;
-            Ok(Json(serde_json::json!({ "recording": started })))
+            let name = body
+                .path
+                .unwrap_or_else(|| PathBuf::from(format!("nusense-{}.mcap", nusense_capture::unix_time_us() / 1000)));
+            let recordings = state.recordings.clone();
+            let overwrite = body.overwrite;
+            let started_name = name.display().to_string();
+            let file = tokio::task::spawn_blocking(move || -> Result<PathBuf, ApiError> {
+                let file = recordings.create(&name, overwrite).map_err(recording_path_error)?;
+                if let Err(error) = pipeline.start_recording(&file, RecorderOptions::default()) {
+                    // The empty file is ours (created just now, or truncated on request): leave nothing behind.
+                    let _ = std::fs::remove_file(&file);
+                    return Err(pipeline_error(error));
+                }
+                Ok(file)
+            })
+            .await
+            .map_err(ApiError::internal)??;
+            Ok(reply(RecordReply::Recording {
+                path: started_name,
+                file: file.display().to_string(),
+            }))
         }
         RecordAction::Stop => {
             let summary = tokio::task::spawn_blocking(move || pipeline.stop_recording())
                 .await
-                .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?
+                .map_err(ApiError::internal)?
                 .map_err(pipeline_error)?;
-            Ok(Json(serde_json::json!({ "recorded": summary })))
+            Ok(reply(RecordReply::Recorded(summary)))
         }
     }
+}
+
+fn recording_path_error(error: RecordingPathError) -> ApiError {
+    let status = match &error {
+        RecordingPathError::Exists { .. } => StatusCode::CONFLICT,
+        RecordingPathError::Extension { .. } => StatusCode::UNPROCESSABLE_ENTITY,
+        RecordingPathError::Create { source, .. } if source.kind() == std::io::ErrorKind::StorageFull => {
+            StatusCode::INSUFFICIENT_STORAGE
+        }
+        RecordingPathError::Create { .. } => StatusCode::INTERNAL_SERVER_ERROR,
+        RecordingPathError::Absolute { .. }
+        | RecordingPathError::ParentDir { .. }
+        | RecordingPathError::Escapes { .. }
+        | RecordingPathError::Empty { .. } => StatusCode::BAD_REQUEST,
+    };
+    ApiError::new(status, error_chain(&error))
 }
 
 fn pipeline_error(error: PipelineError) -> ApiError {
@@ -295,7 +501,7 @@ fn pipeline_error(error: PipelineError) -> ApiError {
         PipelineError::Record(_) => StatusCode::UNPROCESSABLE_ENTITY,
         PipelineError::Thread(..) => StatusCode::INTERNAL_SERVER_ERROR,
     };
-    ApiError::new(status, error.to_string())
+    ApiError::new(status, error_chain(&error))
 }
 
 fn scene_control(state: &AppState) -> Result<&SceneControl, ApiError> {
@@ -307,29 +513,29 @@ fn scene_control(state: &AppState) -> Result<&SceneControl, ApiError> {
     })
 }
 
-async fn get_scene(State(state): State<AppState>) -> Result<Json<serde_json::Value>, ApiError> {
-    Ok(Json(scene_control(&state)?.describe()))
+async fn get_scene(State(state): State<AppState>) -> Result<Json<Versioned<serde_json::Value>>, ApiError> {
+    Ok(reply(scene_control(&state)?.describe()))
 }
 
 /// Body: `{"scene": <nusense_sim::Scene>}` holds that scene; `{"script": true}` resumes the demo animation.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct SceneBody {
-    scene: Option<serde_json::Value>,
+    scene: Option<nusense_sim::Scene>,
     script: Option<bool>,
 }
 
 async fn put_scene(
     State(state): State<AppState>,
     body: Result<Json<SceneBody>, JsonRejection>,
-) -> Result<Json<serde_json::Value>, ApiError> {
+) -> Result<Json<Versioned<serde_json::Value>>, ApiError> {
     let control = scene_control(&state)?;
     let Json(body) = body?;
     match (body.scene, body.script) {
         (Some(scene), None | Some(false)) => {
             control
-                .hold_json(scene)
-                .map_err(|e| ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, e))?;
+                .hold(scene)
+                .map_err(|e| ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, error_chain(&e)))?;
         }
         (None, Some(true)) => control.resume_script(),
         _ => {
@@ -339,10 +545,11 @@ async fn put_scene(
             ))
         }
     }
-    Ok(Json(control.describe()))
+    Ok(reply(control.describe()))
 }
 
-/// Serves the API on `listener` until `shutdown` resolves.
+/// Serves the API on `listener` until `shutdown` resolves; then WebSocket clients get a close frame and the
+/// server waits for requests in flight.
 pub async fn serve(
     listener: tokio::net::TcpListener,
     state: AppState,
@@ -356,7 +563,11 @@ pub async fn serve(
             tracing::warn!("could not disable Nagle's algorithm on a client socket: {error}");
         }
     });
+    let closing = state.closing.clone();
     axum::serve(listener, router(state))
-        .with_graceful_shutdown(shutdown)
+        .with_graceful_shutdown(async move {
+            shutdown.await;
+            closing.send_replace(true);
+        })
         .await
 }

@@ -1,15 +1,17 @@
-//! `WS /api/stream`: readings as JSON text messages, one per frame (or every N-th with `?every=N`).
+//! `WS /api/v1/stream`: reading messages ([`crate::ReadingMessage`]) as JSON text, one per frame (or every N-th
+//! with `?every=N`).
 //!
 //! Each client reads from its own cursor into the pipeline's bounded broadcast buffer. A client that cannot
 //! keep up misses the readings it fell behind by (counted per client and in total) and never holds up the
 //! pipeline or the other clients; one whose socket stays blocked past `send_timeout` is disconnected (counted).
+//! When the daemon stops, every client gets a close frame ("going away").
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
 use axum::extract::rejection::QueryRejection;
-use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
+use axum::extract::ws::{close_code, CloseFrame, Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{Query, State};
 use axum::http::StatusCode;
 use axum::response::Response;
@@ -93,7 +95,8 @@ pub async fn upgrade(
     let readings = state.pipeline.subscribe();
     let stats = state.stream.clone();
     let options = state.stream_options;
-    Ok(ws.on_upgrade(move |socket| serve_client(socket, readings, every, stats, options)))
+    let closing = state.closing.subscribe();
+    Ok(ws.on_upgrade(move |socket| serve_client(socket, readings, every, stats, options, closing)))
 }
 
 async fn serve_client(
@@ -102,6 +105,7 @@ async fn serve_client(
     every: u32,
     stats: Arc<StreamStats>,
     options: StreamOptions,
+    mut closing: tokio::sync::watch::Receiver<bool>,
 ) {
     stats.clients.fetch_add(1, Ordering::Relaxed);
     stats.connections.fetch_add(1, Ordering::Relaxed);
@@ -138,6 +142,14 @@ async fn serve_client(
                 Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
                 Some(Ok(_)) => {}
             },
+            _ = closing.changed() => {
+                let goodbye = Message::Close(Some(CloseFrame {
+                    code: close_code::AWAY,
+                    reason: "the daemon is stopping".into(),
+                }));
+                let _ = tokio::time::timeout(options.send_timeout, sink.send(goodbye)).await;
+                break;
+            }
         }
     }
     stats.clients.fetch_sub(1, Ordering::Relaxed);

@@ -1,10 +1,12 @@
 //! What the pipeline needs from the LED board: its LED state for each reading, LED commands from the API,
-//! a status for `/api/status` and telemetry for recordings. The board link (nusense-board) provides it;
+//! a status for `/api/v1/status` and telemetry for recordings. The board link (nusense-board) provides it;
 //! sources without a board (replay, a bare camera) use [`NoBoard`].
 
 use std::sync::mpsc::Receiver;
 
-use nusense_protocol::{Side, CHANNEL_COUNT};
+use nusense_board::{BoardEvent, BoardState};
+use nusense_protocol::{FaultFlags, Side, Telemetry, CHANNEL_COUNT};
+use schemars::JsonSchema;
 use serde::Serialize;
 
 /// Highest LED current the daemon will ask for, per channel: the board's own hard limit, so a request the
@@ -12,12 +14,84 @@ use serde::Serialize;
 pub use nusense_board::LED_LIMIT_MA;
 
 /// LED state attached to each reading; per channel in Side order: Top, Right, Bottom, Left.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, JsonSchema)]
 pub struct LedState {
+    /// Current asked of each string, mA.
     pub setpoint_ma: [u16; CHANNEL_COUNT],
+    /// Current measured through each string, mA.
     pub measured_ma: [f32; CHANNEL_COUNT],
     pub enabled: [bool; CHANNEL_COUNT],
+    /// What the board reports wrong with each string, by name (`open_string`, `over_current`,
+    /// `over_temperature`, `under_voltage`); empty when it is healthy.
+    pub faults: [Vec<String>; CHANNEL_COUNT],
     pub any_fault: bool,
+    /// Board temperature, degrees C.
+    pub temperature_c: f32,
+    /// Supply voltage at the board, mV.
+    pub supply_mv: u16,
+}
+
+impl LedState {
+    pub fn from_telemetry(telemetry: &Telemetry) -> Self {
+        let mut led = LedState {
+            temperature_c: finite_or_zero(telemetry.temperature_c),
+            supply_mv: telemetry.supply_mv,
+            ..Default::default()
+        };
+        for (i, channel) in telemetry.channels.iter().enumerate() {
+            led.setpoint_ma[i] = channel.setpoint_ma;
+            led.measured_ma[i] = finite_or_zero(channel.measured_ma);
+            led.enabled[i] = channel.enabled;
+            led.faults[i] = fault_names(&channel.faults);
+            led.any_fault |= channel.faults.any();
+        }
+        led
+    }
+}
+
+/// JSON has no NaN: a sensor reading that is not a number is shown as 0 (the fault flags say why).
+fn finite_or_zero(value: f32) -> f32 {
+    if value.is_finite() {
+        value
+    } else {
+        0.0
+    }
+}
+
+/// The names of the flags that are set, as the protocol's own serialisation spells them (one place for the
+/// names: the flag struct's field names).
+fn fault_names(flags: &FaultFlags) -> Vec<String> {
+    match serde_json::to_value(flags) {
+        Ok(serde_json::Value::Object(map)) => map
+            .into_iter()
+            .filter(|(_, set)| *set == serde_json::Value::Bool(true))
+            .map(|(name, _)| name)
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// What kind of board the daemon drives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BoardKind {
+    /// No board: the LEDs are not the daemon's to control.
+    None,
+    /// The virtual board (the firmware's logic with simulated LEDs) behind a pty.
+    Virtual,
+    /// A board on a serial port.
+    Serial,
+}
+
+/// The board part of `/api/v1/status`.
+#[derive(Clone, Debug, Serialize)]
+pub struct BoardStatus {
+    pub kind: BoardKind,
+    pub connected: bool,
+    /// Highest current the daemon accepts per string, mA.
+    pub led_limit_ma: u16,
+    /// The link's view: port, identity, latest telemetry, counters, reconnects, last error; none without a board.
+    pub link: Option<BoardState>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -30,8 +104,8 @@ pub enum BoardError {
         requested_ma: u16,
         limit_ma: u16,
     },
-    #[error("the LED board did not accept the command: {0}")]
-    Link(String),
+    #[error("the LED board did not accept the command")]
+    Link(#[from] nusense_board::LinkError),
 }
 
 /// One LED command: a current per side (None leaves that side as it is).
@@ -65,9 +139,9 @@ pub trait Board: Send + Sync {
     /// Currents through the LEDs now (what lights the pad); the simulated camera renders with them.
     fn led_currents_ma(&self) -> [f32; CHANNEL_COUNT];
     fn set_leds(&self, command: &LedCommand) -> Result<(), BoardError>;
-    fn status(&self) -> serde_json::Value;
-    /// Telemetry as it arrives (JSON), for recordings. None when the board has none.
-    fn telemetry(&self) -> Option<Receiver<String>>;
+    fn status(&self) -> BoardStatus;
+    /// The board's events (telemetry, connects, disconnects) as they happen, for recordings. None without a board.
+    fn events(&self) -> Option<Receiver<BoardEvent>>;
 }
 
 /// No board attached: LEDs are not the daemon's to control (replay, a camera with its own lighting).
@@ -84,10 +158,15 @@ impl Board for NoBoard {
         command.validate()?;
         Err(BoardError::NoBoard)
     }
-    fn status(&self) -> serde_json::Value {
-        serde_json::json!({ "connected": false, "kind": "none" })
+    fn status(&self) -> BoardStatus {
+        BoardStatus {
+            kind: BoardKind::None,
+            connected: false,
+            led_limit_ma: LED_LIMIT_MA,
+            link: None,
+        }
     }
-    fn telemetry(&self) -> Option<Receiver<String>> {
+    fn events(&self) -> Option<Receiver<BoardEvent>> {
         None
     }
 }
@@ -114,19 +193,12 @@ impl LinkedBoard {
 
 impl Board for LinkedBoard {
     fn led_state(&self) -> Option<LedState> {
-        let telemetry = self.link.state().telemetry?;
-        let mut led = LedState::default();
-        for (i, channel) in telemetry.channels.iter().enumerate() {
-            led.setpoint_ma[i] = channel.setpoint_ma;
-            led.measured_ma[i] = if channel.measured_ma.is_finite() {
-                channel.measured_ma
-            } else {
-                0.0
-            };
-            led.enabled[i] = channel.enabled;
-            led.any_fault |= channel.faults.any();
+        let state = self.link.state();
+        if !state.connected {
+            // Telemetry from before an unplug is history, not the LEDs' state now.
+            return None;
         }
-        Some(led)
+        Some(LedState::from_telemetry(state.telemetry.as_ref()?))
     }
 
     fn led_currents_ma(&self) -> [f32; CHANNEL_COUNT] {
@@ -145,14 +217,13 @@ impl Board for LinkedBoard {
         if !state.connected {
             return Err(BoardError::NoBoard);
         }
-        let link_error = |e: nusense_board::LinkError| BoardError::Link(e.to_string());
         let first = command.current_ma[0];
         if first.is_some() && command.current_ma.iter().all(|c| *c == first) {
             // One command for all four: they change in the same regulator step.
             return self
                 .link
                 .set_led(Channel::All, first.unwrap_or(0), command.enabled.unwrap_or(true))
-                .map_err(link_error);
+                .map_err(BoardError::from);
         }
         for side in Side::ALL {
             let i = side.index();
@@ -166,44 +237,27 @@ impl Board for LinkedBoard {
                 .or(state.telemetry.map(|t| t.channels[i].setpoint_ma))
                 .unwrap_or(0);
             self.link
-                .set_led(Channel::One(side), current_ma, command.enabled.unwrap_or(true))
-                .map_err(link_error)?;
+                .set_led(Channel::One(side), current_ma, command.enabled.unwrap_or(true))?;
         }
         Ok(())
     }
 
-    fn status(&self) -> serde_json::Value {
-        let kind = if self.virtual_board.is_some() {
-            "virtual"
-        } else {
-            "serial"
-        };
-        let mut status = serde_json::to_value(self.link.state()).unwrap_or_default();
-        if let Some(object) = status.as_object_mut() {
-            object.insert("kind".into(), kind.into());
-            object.insert("led_limit_ma".into(), LED_LIMIT_MA.into());
+    fn status(&self) -> BoardStatus {
+        let state = self.link.state();
+        BoardStatus {
+            kind: if self.virtual_board.is_some() {
+                BoardKind::Virtual
+            } else {
+                BoardKind::Serial
+            },
+            connected: state.connected,
+            led_limit_ma: LED_LIMIT_MA,
+            link: Some(state),
         }
-        status
     }
 
-    fn telemetry(&self) -> Option<Receiver<String>> {
-        let events = self.link.subscribe();
-        let (sender, receiver) = std::sync::mpsc::sync_channel(256);
-        std::thread::Builder::new()
-            .name("telemetry json".into())
-            .spawn(move || {
-                for event in events {
-                    if let nusense_board::BoardEvent::Telemetry(telemetry) = event {
-                        let json =
-                            serde_json::json!({ "time_us": nusense_capture::unix_time_us(), "telemetry": telemetry });
-                        if sender.send(json.to_string()).is_err() {
-                            return;
-                        }
-                    }
-                }
-            })
-            .ok()?;
-        Some(receiver)
+    fn events(&self) -> Option<Receiver<BoardEvent>> {
+        Some(self.link.subscribe())
     }
 }
 
@@ -228,5 +282,24 @@ mod tests {
             enabled: Some(true),
         };
         assert!(at_limit.validate().is_ok());
+    }
+
+    #[test]
+    fn telemetry_becomes_led_state_with_faults_named() {
+        let mut telemetry = Telemetry::default();
+        telemetry.channels[1].faults.open_string = true;
+        telemetry.channels[3].faults.over_current = true;
+        telemetry.channels[3].faults.under_voltage = true;
+        telemetry.channels[0].measured_ma = f32::NAN;
+        telemetry.channels[2].measured_ma = 99.5;
+        telemetry.supply_mv = 5010;
+        let led = LedState::from_telemetry(&telemetry);
+        assert!(led.any_fault);
+        assert_eq!(led.faults[0], Vec::<String>::new());
+        assert_eq!(led.faults[1], vec!["open_string"]);
+        assert_eq!(led.faults[3], vec!["over_current", "under_voltage"]);
+        assert_eq!(led.measured_ma, [0.0, 0.0, 99.5, 0.0]);
+        assert_eq!(led.supply_mv, 5010);
+        assert!(!LedState::from_telemetry(&Telemetry::default()).any_fault);
     }
 }

@@ -2,64 +2,67 @@
 //! into readings, and readings are published (latest value, a broadcast for WebSocket clients, the recorder).
 //!
 //! The first frame, and the first frame after a tare, is the rest frame the estimator measures against.
+//!
+//! A recording that fails (a full disk) stops by itself: the pipeline keeps running and publishing, and the
+//! failure stays in the status until the next recording starts.
 
 mod board;
 mod queue;
 mod sources;
 mod stats;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, RwLock};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError, RwLock};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use image::RgbImage;
-use nusense_estimator::{Estimator, Mode, Reading, SensorConfig};
+use nusense_board::BoardEvent;
+use nusense_estimator::{Estimator, Mode, SensorConfig};
 use serde::Serialize;
 use tokio::sync::broadcast;
 
+use crate::reading::{ReadingMessage, SCHEMA_VERSION};
 use crate::record::{RecordError, RecordFailure, RecordItem, RecordSummary, Recorder, RecorderOptions};
 use nusense_capture::{unix_time_us, CaptureError, FrameSource, SourceInfo};
 
-pub use board::{Board, BoardError, LedCommand, LedState, LinkedBoard, NoBoard, LED_LIMIT_MA};
+pub use board::{Board, BoardError, BoardKind, BoardStatus, LedCommand, LedState, LinkedBoard, NoBoard, LED_LIMIT_MA};
 pub use queue::DropOldestQueue;
 pub use sources::{open_sources, BoardChoice, FrameChoice, SourceError, Sources};
 pub use stats::{summarise, LatencySummary, LatencyWindow};
 
-/// One processed frame, as served by the API and recorded.
-#[derive(Clone, Debug, Serialize)]
-pub struct DaemonReading {
-    pub frame_id: u64,
-    /// Microseconds since the Unix epoch.
-    pub capture_time_us: u64,
-    pub processed_time_us: u64,
-    /// Capture to published reading.
-    pub latency_ms: f64,
-    /// Time the frame waited for the estimator.
-    pub queue_ms: f64,
-    /// The rest frame the estimate is measured against.
-    pub reference_frame_id: Option<u64>,
-    pub estimate: Option<Reading>,
-    /// Why there is no estimate for this frame.
-    pub error: Option<String>,
-    pub led: Option<LedState>,
-}
-
 /// A reading with its JSON, serialised once for every consumer.
 #[derive(Debug)]
 pub struct PublishedReading {
-    pub reading: DaemonReading,
+    pub message: ReadingMessage,
     pub json: String,
 }
 
-/// The most recent frame, for `/api/frame.jpg`.
+/// A frame the estimator has finished with and its reading: the picture and the numbers of the same instant,
+/// for `/api/v1/frame.jpg` and its overlay.
 #[derive(Clone, Debug)]
-pub struct FrameSnapshot {
+pub struct ProcessedFrame {
     pub frame_id: u64,
-    pub capture_time_us: u64,
     pub image: Arc<RgbImage>,
+    /// The camera's own JPEG of this frame, when it sent one.
     pub jpeg: Option<Arc<Vec<u8>>>,
+    pub reading: Arc<PublishedReading>,
+}
+
+/// Readings kept for the latency summary in `/api/v1/status`.
+const LATENCY_WINDOW: usize = 1024;
+/// First wait before reopening a source that vanished (a camera unplugged); doubles up to [`REOPEN_BACKOFF_MAX`].
+const REOPEN_BACKOFF_MIN: Duration = Duration::from_millis(250);
+/// Longest wait between attempts to reopen a source, so that a replugged camera is back within this long.
+const REOPEN_BACKOFF_MAX: Duration = Duration::from_secs(2);
+/// How long the estimator and telemetry threads wait for work before they look at the stop flag again.
+const POLL_INTERVAL: Duration = Duration::from_millis(50);
+
+/// A poisoned lock only says another thread panicked while holding it; what it guards is still the latest
+/// state we have, and a daemon that keeps serving is worth more than one that stops.
+fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 #[derive(Clone)]
@@ -85,8 +88,8 @@ impl PipelineOptions {
 
 #[derive(Debug, thiserror::Error)]
 pub enum PipelineError {
-    #[error("cannot start the {0} thread: {1}")]
-    Thread(&'static str, std::io::Error),
+    #[error("cannot start the {0} thread")]
+    Thread(&'static str, #[source] std::io::Error),
     #[error(transparent)]
     Record(#[from] RecordError),
     #[error("a recording is already running ({0})")]
@@ -113,21 +116,99 @@ struct CaptureState {
     reconnects: u64,
 }
 
+/// The recorder, and how the last recording ended when it ended by itself.
+#[derive(Default)]
+struct RecordingSlot {
+    active: Option<Recorder>,
+    failed: Option<RecordingFailure>,
+}
+
+/// Why a recording stopped without being asked to.
+#[derive(Clone, Debug, Serialize)]
+pub struct RecordingFailure {
+    pub path: String,
+    /// What went wrong, in words, with its causes.
+    pub error: String,
+    /// The disk (or the recordings folder's filesystem) is full.
+    pub disk_full: bool,
+    /// Microseconds since the Unix epoch.
+    pub time_us: u64,
+}
+
 struct Shared {
     source_info: Mutex<SourceInfo>,
     capture_state: Mutex<CaptureState>,
     queue: DropOldestQueue<QueuedFrame>,
     counters: Counters,
     latency: Mutex<LatencyWindow>,
-    latest_reading: RwLock<Option<Arc<PublishedReading>>>,
-    latest_frame: RwLock<Option<FrameSnapshot>>,
+    latest: RwLock<Option<ProcessedFrame>>,
     readings: broadcast::Sender<Arc<PublishedReading>>,
     tare_requested: AtomicBool,
     stop: AtomicBool,
-    recorder: Mutex<Option<Recorder>>,
+    recording: Mutex<RecordingSlot>,
     board: Arc<dyn Board>,
     mode: Mode,
     started: Instant,
+}
+
+impl Shared {
+    /// Hands an item to the recorder, if one runs. A recorder whose writer stopped (a full disk, an I/O error)
+    /// is finished here and its failure kept for the status: recording ends, the pipeline goes on.
+    fn record(&self, item: impl FnOnce() -> RecordItem) {
+        let mut slot = lock(&self.recording);
+        let Some(recorder) = slot.active.as_ref() else {
+            return;
+        };
+        if recorder.failure().is_none() {
+            recorder.record(item());
+            return;
+        }
+        let Some(recorder) = slot.active.take() else {
+            return;
+        };
+        let path = recorder.path().display().to_string();
+        let failure = match recorder.finish() {
+            Err(RecordError::Stopped(failure)) => RecordingFailure {
+                path,
+                disk_full: matches!(failure, RecordFailure::DiskFull { .. }),
+                error: failure.to_string(),
+                time_us: unix_time_us(),
+            },
+            Err(error) => RecordingFailure {
+                path,
+                disk_full: false,
+                error: error_chain(&error),
+                time_us: unix_time_us(),
+            },
+            Ok(_) => RecordingFailure {
+                path,
+                disk_full: false,
+                error: "the recorder stopped writing".into(),
+                time_us: unix_time_us(),
+            },
+        };
+        tracing::error!("recording {} stopped: {}", failure.path, failure.error);
+        slot.failed = Some(failure);
+    }
+
+    fn latest(&self) -> Option<ProcessedFrame> {
+        self.latest.read().unwrap_or_else(PoisonError::into_inner).clone()
+    }
+}
+
+/// An error and its causes, outermost first ("MCAP error in x.mcap: I/O error: No space left on device").
+pub fn error_chain(error: &(dyn std::error::Error + 'static)) -> String {
+    let mut text = error.to_string();
+    let mut source = error.source();
+    while let Some(cause) = source {
+        let cause_text = cause.to_string();
+        if !text.contains(&cause_text) {
+            text.push_str(": ");
+            text.push_str(&cause_text);
+        }
+        source = cause.source();
+    }
+    text
 }
 
 struct QueuedFrame {
@@ -135,6 +216,7 @@ struct QueuedFrame {
     captured_at: Instant,
     capture_time_us: u64,
     image: Arc<RgbImage>,
+    jpeg: Option<Arc<Vec<u8>>>,
 }
 
 /// Cheap to clone; what the API holds.
@@ -164,13 +246,12 @@ impl Pipeline {
             }),
             queue: DropOldestQueue::new(options.queue_len),
             counters: Counters::default(),
-            latency: Mutex::new(LatencyWindow::new(1024)),
-            latest_reading: RwLock::new(None),
-            latest_frame: RwLock::new(None),
+            latency: Mutex::new(LatencyWindow::new(LATENCY_WINDOW)),
+            latest: RwLock::new(None),
             readings,
             tare_requested: AtomicBool::new(false),
             stop: AtomicBool::new(false),
-            recorder: Mutex::new(None),
+            recording: Mutex::new(RecordingSlot::default()),
             board: board.clone(),
             mode: options.mode,
             started: Instant::now(),
@@ -190,12 +271,12 @@ impl Pipeline {
                 .spawn(move || estimate_loop(options.config, options.mode, &estimate_shared))
                 .map_err(|e| PipelineError::Thread("estimator", e))?,
         );
-        if let Some(telemetry) = board.telemetry() {
+        if let Some(events) = board.events() {
             let telemetry_shared = shared.clone();
             threads.push(
                 std::thread::Builder::new()
                     .name("telemetry".into())
-                    .spawn(move || telemetry_loop(telemetry, &telemetry_shared))
+                    .spawn(move || telemetry_loop(events, &telemetry_shared))
                     .map_err(|e| PipelineError::Thread("telemetry", e))?,
             );
         }
@@ -216,16 +297,16 @@ impl Drop for Pipeline {
         for thread in self.threads.drain(..) {
             let _ = thread.join();
         }
-        if let Some(recorder) = self
-            .handle
-            .shared
-            .recorder
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .take()
-        {
-            if let Err(error) = recorder.finish() {
-                tracing::warn!("recording did not finish cleanly: {error}");
+        let recorder = lock(&self.handle.shared.recording).active.take();
+        if let Some(recorder) = recorder {
+            match recorder.finish() {
+                Ok(summary) => tracing::info!(
+                    "recording {} finished: {} frames, {} readings",
+                    summary.path,
+                    summary.frames,
+                    summary.readings
+                ),
+                Err(error) => tracing::error!("recording did not finish cleanly: {}", error_chain(&error)),
             }
         }
     }
@@ -233,39 +314,32 @@ impl Drop for Pipeline {
 
 fn capture_loop(mut source: Box<dyn FrameSource>, shared: &Shared) {
     let mut next_id: u64 = 0;
-    let mut backoff = Duration::from_millis(250);
+    let mut backoff = REOPEN_BACKOFF_MIN;
     while !shared.stop.load(Ordering::Relaxed) {
         match source.next_frame() {
             Ok(frame) => {
-                backoff = Duration::from_millis(250);
+                backoff = REOPEN_BACKOFF_MIN;
                 let frame_id = next_id;
                 next_id += 1;
                 shared.counters.frames_captured.fetch_add(1, Ordering::Relaxed);
                 let image = Arc::new(frame.image);
                 let jpeg = frame.jpeg.map(Arc::new);
-                if let Some(recorder) = shared.recorder.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
-                    recorder.record(RecordItem::Frame {
-                        frame_id,
-                        capture_time_us: frame.capture_time_us,
-                        image: image.clone(),
-                        jpeg: jpeg.clone(),
-                    });
-                }
-                *shared.latest_frame.write().unwrap_or_else(|e| e.into_inner()) = Some(FrameSnapshot {
+                shared.record(|| RecordItem::Frame {
                     frame_id,
                     capture_time_us: frame.capture_time_us,
                     image: image.clone(),
-                    jpeg,
+                    jpeg: jpeg.clone(),
                 });
                 shared.queue.push(QueuedFrame {
                     frame_id,
                     captured_at: frame.captured_at,
                     capture_time_us: frame.capture_time_us,
                     image,
+                    jpeg,
                 });
             }
             Err(CaptureError::EndOfStream) => {
-                let mut state = shared.capture_state.lock().unwrap_or_else(|e| e.into_inner());
+                let mut state = lock(&shared.capture_state);
                 state.running = false;
                 state.finished = true;
                 tracing::info!("capture: the source has no more frames");
@@ -275,37 +349,29 @@ fn capture_loop(mut source: Box<dyn FrameSource>, shared: &Shared) {
                 shared.counters.capture_errors.fetch_add(1, Ordering::Relaxed);
                 tracing::warn!("capture: {error}; retrying in {} ms", backoff.as_millis());
                 {
-                    let mut state = shared.capture_state.lock().unwrap_or_else(|e| e.into_inner());
+                    let mut state = lock(&shared.capture_state);
                     state.running = false;
                     state.last_error = Some(error.to_string());
                 }
                 sleep_unless_stopped(backoff, shared);
-                backoff = (backoff * 2).min(Duration::from_secs(2));
+                backoff = (backoff * 2).min(REOPEN_BACKOFF_MAX);
                 match source.reopen() {
                     Ok(()) => {
-                        let mut state = shared.capture_state.lock().unwrap_or_else(|e| e.into_inner());
+                        let mut state = lock(&shared.capture_state);
                         state.running = true;
                         state.reconnects += 1;
-                        *shared.source_info.lock().unwrap_or_else(|e| e.into_inner()) = source.info();
+                        *lock(&shared.source_info) = source.info();
                         tracing::info!("capture: {} is back", source.info().name);
                     }
                     Err(error) => {
-                        shared
-                            .capture_state
-                            .lock()
-                            .unwrap_or_else(|e| e.into_inner())
-                            .last_error = Some(error.to_string());
+                        lock(&shared.capture_state).last_error = Some(error.to_string());
                     }
                 }
             }
             Err(error) => {
                 // A frame that does not decode is lost; the next one may be fine.
                 shared.counters.capture_errors.fetch_add(1, Ordering::Relaxed);
-                shared
-                    .capture_state
-                    .lock()
-                    .unwrap_or_else(|e| e.into_inner())
-                    .last_error = Some(error.to_string());
+                lock(&shared.capture_state).last_error = Some(error.to_string());
                 tracing::warn!("capture: {error}");
             }
         }
@@ -323,7 +389,7 @@ fn estimate_loop(config: SensorConfig, mode: Mode, shared: &Shared) {
     let mut estimator: Option<Estimator> = None;
     let mut reference_frame_id = None;
     while !shared.stop.load(Ordering::Relaxed) {
-        let Some(frame) = shared.queue.pop_timeout(Duration::from_millis(50)) else {
+        let Some(frame) = shared.queue.pop_timeout(POLL_INTERVAL) else {
             continue;
         };
         let dequeued_at = Instant::now();
@@ -354,8 +420,10 @@ fn estimate_loop(config: SensorConfig, mode: Mode, shared: &Shared) {
         }
         shared.counters.frames_processed.fetch_add(1, Ordering::Relaxed);
         let latency = frame.captured_at.elapsed();
-        let reading = DaemonReading {
+        let message = ReadingMessage {
+            schema_version: SCHEMA_VERSION,
             frame_id: frame.frame_id,
+            file: None,
             capture_time_us: frame.capture_time_us,
             processed_time_us: unix_time_us(),
             latency_ms: latency.as_secs_f64() * 1e3,
@@ -365,41 +433,58 @@ fn estimate_loop(config: SensorConfig, mode: Mode, shared: &Shared) {
             error,
             led: shared.board.led_state(),
         };
-        shared
-            .latency
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .push(reading.latency_ms);
-        publish(shared, reading);
+        lock(&shared.latency).push(message.latency_ms);
+        publish(shared, frame, message);
     }
 }
 
-fn publish(shared: &Shared, reading: DaemonReading) {
-    let json = serde_json::to_string(&reading).unwrap_or_else(|e| {
-        // Only a non-finite number could fail here, and the estimator promises none; say so rather than panic.
-        serde_json::json!({ "frame_id": reading.frame_id, "error": format!("reading not serialisable: {e}") })
-            .to_string()
+fn publish(shared: &Shared, frame: QueuedFrame, mut message: ReadingMessage) {
+    let json = match serde_json::to_string(&message) {
+        Ok(json) => json,
+        Err(error) => {
+            // Only a non-finite number could fail here, and the estimator promises none: publish the frame
+            // without its estimate, saying why, rather than nothing.
+            message.estimate = None;
+            message.error = Some(format!("the estimate could not be written as JSON: {error}"));
+            serde_json::to_string(&message).unwrap_or_default()
+        }
+    };
+    let published = Arc::new(PublishedReading { message, json });
+    shared.record(|| RecordItem::Reading(published.clone()));
+    *shared.latest.write().unwrap_or_else(PoisonError::into_inner) = Some(ProcessedFrame {
+        frame_id: frame.frame_id,
+        image: frame.image,
+        jpeg: frame.jpeg,
+        reading: published.clone(),
     });
-    let published = Arc::new(PublishedReading { reading, json });
-    if let Some(recorder) = shared.recorder.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
-        recorder.record(RecordItem::Reading(published.clone()));
-    }
-    *shared.latest_reading.write().unwrap_or_else(|e| e.into_inner()) = Some(published.clone());
     // No subscribers is fine: nobody is watching.
     let _ = shared.readings.send(published);
 }
 
-fn telemetry_loop(telemetry: std::sync::mpsc::Receiver<String>, shared: &Shared) {
+/// Board telemetry as it arrives, into the recording (typed, timestamped, serialised once here).
+fn telemetry_loop(events: std::sync::mpsc::Receiver<BoardEvent>, shared: &Shared) {
+    #[derive(Serialize)]
+    struct TimedTelemetry<'a> {
+        schema_version: u32,
+        time_us: u64,
+        telemetry: &'a nusense_protocol::Telemetry,
+    }
     while !shared.stop.load(Ordering::Relaxed) {
-        match telemetry.recv_timeout(Duration::from_millis(100)) {
-            Ok(json) => {
-                if let Some(recorder) = shared.recorder.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
-                    recorder.record(RecordItem::Telemetry {
-                        time_us: unix_time_us(),
-                        json: json.into(),
-                    });
-                }
+        match events.recv_timeout(POLL_INTERVAL) {
+            Ok(BoardEvent::Telemetry(telemetry)) => {
+                let time_us = unix_time_us();
+                shared.record(|| RecordItem::Telemetry {
+                    time_us,
+                    json: serde_json::to_string(&TimedTelemetry {
+                        schema_version: SCHEMA_VERSION,
+                        time_us,
+                        telemetry: &telemetry,
+                    })
+                    .unwrap_or_default()
+                    .into(),
+                });
             }
+            Ok(_) => {}
             Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
             Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return,
         }
@@ -424,7 +509,10 @@ pub struct PipelineStatus {
     pub estimate_errors: u64,
     pub tares: u64,
     pub latency_ms: LatencySummary,
+    /// The recording running now.
     pub recording: Option<RecordingStatus>,
+    /// How the last recording failed, when it stopped by itself (cleared when the next one starts).
+    pub recording_failure: Option<RecordingFailure>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -447,19 +535,12 @@ impl PipelineHandle {
     }
 
     pub fn latest_reading(&self) -> Option<Arc<PublishedReading>> {
-        self.shared
-            .latest_reading
-            .read()
-            .unwrap_or_else(|e| e.into_inner())
-            .clone()
+        self.shared.latest().map(|processed| processed.reading)
     }
 
-    pub fn latest_frame(&self) -> Option<FrameSnapshot> {
-        self.shared
-            .latest_frame
-            .read()
-            .unwrap_or_else(|e| e.into_inner())
-            .clone()
+    /// The newest frame that has its reading, with that reading.
+    pub fn latest_processed(&self) -> Option<ProcessedFrame> {
+        self.shared.latest()
     }
 
     /// The next frame becomes the rest frame.
@@ -480,41 +561,48 @@ impl PipelineHandle {
     }
 
     pub fn start_recording(&self, path: &Path, options: RecorderOptions) -> Result<(), PipelineError> {
-        let mut slot = self.shared.recorder.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(recorder) = slot.as_ref() {
+        let mut slot = lock(&self.shared.recording);
+        if let Some(recorder) = slot.active.as_ref() {
             return Err(PipelineError::AlreadyRecording(recorder.path().display().to_string()));
         }
-        *slot = Some(Recorder::create(path, options)?);
+        slot.active = Some(Recorder::create(path, options)?);
+        slot.failed = None;
         Ok(())
     }
 
     pub fn stop_recording(&self) -> Result<RecordSummary, PipelineError> {
-        let recorder = self.shared.recorder.lock().unwrap_or_else(|e| e.into_inner()).take();
+        let recorder = lock(&self.shared.recording).active.take();
         Ok(recorder.ok_or(PipelineError::NotRecording)?.finish()?)
+    }
+
+    /// The file being recorded to now.
+    pub fn recording_path(&self) -> Option<PathBuf> {
+        lock(&self.shared.recording)
+            .active
+            .as_ref()
+            .map(|recorder| recorder.path().to_path_buf())
     }
 
     pub fn status(&self) -> PipelineStatus {
         let shared = &self.shared;
-        let capture = shared.capture_state.lock().unwrap_or_else(|e| e.into_inner()).clone();
-        let recording = shared
-            .recorder
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .as_ref()
-            .map(|r| {
-                let stats = r.stats();
-                RecordingStatus {
-                    path: r.path().display().to_string(),
-                    frames: stats.frames.load(Ordering::Relaxed),
-                    readings: stats.readings.load(Ordering::Relaxed),
-                    telemetry: stats.telemetry.load(Ordering::Relaxed),
-                    dropped: stats.dropped.load(Ordering::Relaxed),
-                    queued_bytes: stats.queued_bytes.load(Ordering::Relaxed),
-                    failure: r.failure(),
-                }
-            });
+        let capture = lock(&shared.capture_state).clone();
+        let slot = lock(&shared.recording);
+        let recording_failure = slot.failed.clone();
+        let recording = slot.active.as_ref().map(|r| {
+            let stats = r.stats();
+            RecordingStatus {
+                path: r.path().display().to_string(),
+                frames: stats.frames.load(Ordering::Relaxed),
+                readings: stats.readings.load(Ordering::Relaxed),
+                telemetry: stats.telemetry.load(Ordering::Relaxed),
+                dropped: stats.dropped.load(Ordering::Relaxed),
+                queued_bytes: stats.queued_bytes.load(Ordering::Relaxed),
+                failure: r.failure(),
+            }
+        });
+        drop(slot);
         PipelineStatus {
-            source: shared.source_info.lock().unwrap_or_else(|e| e.into_inner()).clone(),
+            source: lock(&shared.source_info).clone(),
             capture_running: capture.running,
             capture_finished: capture.finished,
             capture_error: capture.last_error,
@@ -527,8 +615,9 @@ impl PipelineHandle {
             capture_errors: shared.counters.capture_errors.load(Ordering::Relaxed),
             estimate_errors: shared.counters.estimate_errors.load(Ordering::Relaxed),
             tares: shared.counters.tares.load(Ordering::Relaxed),
-            latency_ms: shared.latency.lock().unwrap_or_else(|e| e.into_inner()).summary(),
+            latency_ms: lock(&shared.latency).summary(),
             recording,
+            recording_failure,
         }
     }
 }

@@ -114,7 +114,7 @@ fn point([x, y]: [f64; 2]) -> Point2 {
 /// implausible), each corner's shear from the rest frame (yellow, drawn [`SHEAR_DRAW_GAIN`] times its length), and
 /// the contact with its force. `None` for a frame without an estimate.
 pub(crate) fn annotations(published: &PublishedReading) -> Option<Vec<u8>> {
-    let reading = &published.reading;
+    let reading = &published.message;
     let estimate = reading.estimate.as_ref()?;
     let stamp = timestamp(reading.capture_time_us);
     let (mut valid, mut masked, mut shear) = (Vec::new(), Vec::new(), Vec::new());

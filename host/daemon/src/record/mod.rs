@@ -37,7 +37,7 @@ pub const CALIBRATION_TOPIC: &str = "/camera/calibration";
 /// Each reading drawn over its frame, as `foxglove.ImageAnnotations`: lattice corners, shear vectors, contact and
 /// force.
 pub const ANNOTATIONS_TOPIC: &str = "/camera/annotations";
-/// One [`crate::pipeline::DaemonReading`] per processed frame.
+/// One [`crate::ReadingMessage`] per processed frame.
 pub const READING_TOPIC: &str = "/nusense/reading";
 /// Board telemetry (LED channels, temperature, supply) as the board reported it.
 pub const TELEMETRY_TOPIC: &str = "/nusense/board";
@@ -136,8 +136,10 @@ mod tests {
     }
 
     fn published(frame_id: u64, time_us: u64) -> Arc<crate::pipeline::PublishedReading> {
-        let reading = crate::pipeline::DaemonReading {
+        let message = crate::ReadingMessage {
+            schema_version: crate::reading::SCHEMA_VERSION,
             frame_id,
+            file: None,
             capture_time_us: time_us,
             processed_time_us: time_us + 5000,
             latency_ms: 5.0,
@@ -147,8 +149,8 @@ mod tests {
             error: Some("no rest frame yet".into()),
             led: None,
         };
-        let json = serde_json::to_string(&reading).unwrap();
-        Arc::new(crate::pipeline::PublishedReading { reading, json })
+        let json = serde_json::to_string(&message).unwrap();
+        Arc::new(crate::pipeline::PublishedReading { message, json })
     }
 
     fn record_frames(recorder: &Recorder, frames: u64) {

@@ -121,7 +121,7 @@ impl RecordItem {
             RecordItem::Frame { jpeg: Some(jpeg), .. } => jpeg.len(),
             RecordItem::Frame { image, .. } => image.as_raw().len(),
             RecordItem::Reading(published) => {
-                let corners = published.reading.estimate.as_ref().map_or(0, |e| e.shear_field.len());
+                let corners = published.message.estimate.as_ref().map_or(0, |e| e.shear_field.len());
                 published.json.len() + corners * std::mem::size_of::<nusense_estimator::ShearVector>()
             }
             RecordItem::Telemetry { json, .. } => json.len(),
@@ -428,8 +428,8 @@ impl WriterThread {
                 self.stats.frames.fetch_add(1, Ordering::Relaxed);
             }
             RecordItem::Reading(published) => {
-                let frame_id = published.reading.frame_id as u32;
-                let time_us = published.reading.capture_time_us;
+                let frame_id = published.message.frame_id as u32;
+                let time_us = published.message.capture_time_us;
                 if let Some(annotations) = messages::annotations(&published) {
                     self.put(Kind::Annotations, frame_id, time_us, &annotations)?;
                 }

@@ -1,0 +1,6 @@
+//! `nusense serve` as users run it: the real binary on a loopback port, driven over HTTP and WebSocket (and by
+//! headless Chromium for the dashboard). One test binary, so the workspace links it once.
+
+mod api;
+mod daemon;
+mod security;
