@@ -1,12 +1,10 @@
 //! The dashboard in headless Chromium (Debian's chromium + chromedriver, driven over WebDriver's HTTP API)
 //! against a daemon on the simulator: readings appear on the page and change when the simulated contact does.
 
-mod daemon_common;
-
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use daemon_common::{press, rest, start, DaemonSetup};
+use crate::daemon::{press, rest, Daemon, Options};
 use serde_json::{json, Value};
 
 const CHROMIUM: &str = "/usr/bin/chromium";
@@ -156,12 +154,8 @@ const PAGE_STATE: &str = "return { frame: document.getElementById('frame-id').te
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn dashboard_shows_live_readings_that_follow_the_simulated_contact() {
-    let daemon = start(DaemonSetup {
-        fps: 10.0,
-        ..Default::default()
-    })
-    .await;
-    let resting = daemon.settle(rest(), true).await;
+    let daemon = Daemon::start(Options::sim(640, 480, 10.0));
+    let resting = daemon.settle(&rest(), true).await;
     assert_eq!(resting["estimate"]["contact"], json!(false));
 
     let driver = Driver::start().await;
@@ -176,7 +170,9 @@ async fn dashboard_shows_live_readings_that_follow_the_simulated_contact() {
         .await;
 
     // Press: the page must show the contact and a different force/shear.
-    daemon.scene.hold(press(4.0)).unwrap();
+    daemon
+        .send("PUT", "/api/v1/sim/scene", json!({ "scene": press(4.0) }))
+        .await;
     let after = driver
         .wait_for(PAGE_STATE, Duration::from_secs(60), |s| s["contact"] == json!("yes"))
         .await;
@@ -208,10 +204,11 @@ async fn dashboard_shows_live_readings_that_follow_the_simulated_contact() {
     assert_eq!(driver.text("led-message").await, message.as_str().unwrap());
 
     // Release: the contact disappears again.
-    daemon.scene.hold(rest()).unwrap();
+    daemon
+        .send("PUT", "/api/v1/sim/scene", json!({ "scene": rest() }))
+        .await;
     driver
         .wait_for(PAGE_STATE, Duration::from_secs(60), |s| s["contact"] == json!("no"))
         .await;
     drop(driver);
-    daemon.stop().await;
 }

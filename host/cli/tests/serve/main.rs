@@ -2,5 +2,6 @@
 //! headless Chromium for the dashboard). One test binary, so the workspace links it once.
 
 mod api;
+mod browser;
 mod daemon;
 mod security;

@@ -17,7 +17,7 @@ let imageSize = null;
 
 function connect() {
   const scheme = location.protocol === "https:" ? "wss:" : "ws:";
-  const ws = new WebSocket(scheme + "//" + location.host + api("/api/stream"));
+  const ws = new WebSocket(scheme + "//" + location.host + api("/api/v1/stream"));
   ws.onopen = () => { $("connection").textContent = "live"; $("connection").className = "badge live"; };
   ws.onclose = () => {
     $("connection").textContent = "disconnected, retrying";
@@ -139,7 +139,7 @@ function drawContactMarker(est) {
 
 async function refreshFrame() {
   try {
-    const response = await fetch(api("/api/frame.jpg?overlay=1"), { cache: "no-store" });
+    const response = await fetch(api("/api/v1/frame.jpg?overlay=1"), { cache: "no-store" });
     if (response.ok) {
       const url = URL.createObjectURL(await response.blob());
       const img = $("frame");
@@ -152,7 +152,7 @@ async function refreshFrame() {
 
 async function refreshStatus() {
   try {
-    const status = await (await fetch(api("/api/status"))).json();
+    const status = await (await fetch(api("/api/v1/status"))).json();
     const cam = status.camera;
     $("source").textContent = (status.simulator ? "simulator: " : cam.kind + ": ") + cam.name + " " + cam.width + "×" + cam.height +
       " — dropped " + status.pipeline.frames_dropped + " frames";
@@ -184,21 +184,21 @@ $("led-form").addEventListener("submit", async (event) => {
   }
   const message = $("led-message");
   try {
-    await send("PUT", "/api/led", body);
+    await send("PUT", "/api/v1/led", body);
     message.textContent = "set"; message.className = "";
   } catch (e) {
     message.textContent = e.message; message.className = "error";
   }
 });
 
-$("tare").addEventListener("click", () => send("POST", "/api/tare").catch(() => {}));
+$("tare").addEventListener("click", () => send("POST", "/api/v1/tare").catch(() => {}));
 
 $("record").addEventListener("click", async () => {
   const state = $("record-state");
   try {
     const recording = $("record").dataset.recording === "1";
-    const result = await send("POST", "/api/record", { action: recording ? "stop" : "start" });
-    state.textContent = recording ? "saved " + result.recorded.path + " (" + result.recorded.frames + " frames)" : "recording " + result.recording;
+    const result = await send("POST", "/api/v1/record", { action: recording ? "stop" : "start" });
+    state.textContent = recording ? "saved " + result.recorded.path + " (" + result.recorded.frames + " frames)" : "recording " + result.recording.file;
     state.className = "";
   } catch (e) { state.textContent = e.message; state.className = "error"; }
 });
