@@ -1,10 +1,12 @@
 //! The dashboard in headless Chromium (Debian's chromium + chromedriver, driven over WebDriver's HTTP API)
-//! against a daemon on the simulator: readings appear on the page and change when the simulated contact does.
+//! against `nusense serve` on the simulator, checked by the pixels of a screenshot as well as by the page: the
+//! camera shows (not a black panel), the lattice is drawn over it, and the contact marker sits over the contact
+//! where the simulator pressed.
 
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::daemon::{press, rest, Daemon, Options};
+use crate::daemon::{contact_px, press_at, rest, Daemon, Options};
 use serde_json::{json, Value};
 
 const CHROMIUM: &str = "/usr/bin/chromium";
@@ -114,6 +116,18 @@ impl Driver {
             .await
     }
 
+    /// The viewport as pixels.
+    async fn screenshot(&self) -> image::RgbaImage {
+        let url = format!("{}/session/{}/screenshot", self.base, self.session);
+        let answer: Value = self.http.get(url).send().await.unwrap().json().await.unwrap();
+        let png = base64::Engine::decode(
+            &base64::engine::general_purpose::STANDARD,
+            answer["value"].as_str().expect("a screenshot"),
+        )
+        .unwrap();
+        image::load_from_memory(&png).expect("a PNG").to_rgba8()
+    }
+
     async fn text(&self, id: &str) -> String {
         let value = self
             .eval(&format!(
@@ -150,44 +164,179 @@ impl Drop for Driver {
 const PAGE_STATE: &str = "return { frame: document.getElementById('frame-id').textContent, \
     force: document.getElementById('force').textContent, contact: document.getElementById('contact').textContent, \
     gamma: document.getElementById('gamma').textContent, live: document.getElementById('connection').textContent, \
-    image: document.getElementById('frame').naturalWidth };";
+    image: document.getElementById('frame').naturalWidth, overlay: document.getElementById('overlay').dataset.frameId, \
+    problems: document.getElementById('problems').hidden };";
+
+/// Where the picture is on screen, in screenshot pixels.
+struct Rect {
+    x: f64,
+    y: f64,
+    width: f64,
+    height: f64,
+}
+
+impl Rect {
+    fn pixels<'a>(&'a self, shot: &'a image::RgbaImage) -> impl Iterator<Item = (f64, f64, [u8; 4])> + 'a {
+        let (x0, y0) = (self.x.ceil() as u32, self.y.ceil() as u32);
+        let (x1, y1) = ((self.x + self.width) as u32, (self.y + self.height) as u32);
+        (y0..y1.min(shot.height()))
+            .flat_map(move |y| (x0..x1.min(shot.width())).map(move |x| (x, y)))
+            .map(|(x, y)| (x as f64, y as f64, shot.get_pixel(x, y).0))
+    }
+}
+
+async fn element_rect(driver: &Driver, id: &str) -> Rect {
+    let r = driver
+        .eval(&format!(
+            "const r = document.getElementById('{id}').getBoundingClientRect(); const s = window.devicePixelRatio; \
+             return [r.x * s, r.y * s, r.width * s, r.height * s];"
+        ))
+        .await;
+    let v: Vec<f64> = r.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    Rect {
+        x: v[0],
+        y: v[1],
+        width: v[2],
+        height: v[3],
+    }
+}
+
+fn is_marker(p: [u8; 4]) -> bool {
+    p[0] > 190 && p[1] < 90 && p[2] > 190
+}
+
+fn is_lattice(p: [u8; 4]) -> bool {
+    p[1] > 190 && p[0] < 120 && p[2] < 170
+}
+
+/// The pad's yellow squares, as the camera shows them.
+fn is_pad_yellow(p: [u8; 4]) -> bool {
+    p[0] > 120 && p[1] > 100 && (p[2] as i32) < p[1] as i32 - 40
+}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn dashboard_shows_live_readings_that_follow_the_simulated_contact() {
-    let daemon = Daemon::start(Options::sim(640, 480, 10.0));
+async fn dashboard_shows_the_camera_with_its_overlay_and_follows_the_contact() {
+    const WIDTH: u32 = 640;
+    const HEIGHT: u32 = 480;
+    // With a token: the page must work through the cookie it gets from /?token=.
+    let daemon = Daemon::start(Options::sim(WIDTH, HEIGHT, 10.0).token("dashboard-token"));
     let resting = daemon.settle(&rest(), true).await;
     assert_eq!(resting["estimate"]["contact"], json!(false));
 
     let driver = Driver::start().await;
-    driver.goto(&daemon.url("/")).await;
+    driver.goto(&daemon.url("/?token=dashboard-token")).await;
     let before = driver
         .wait_for(PAGE_STATE, Duration::from_secs(60), |s| {
             s["live"] == json!("live")
                 && s["contact"] == json!("no")
                 && s["force"].as_str().is_some_and(|f| f.parse::<f64>().is_ok())
-                && s["image"].as_u64() == Some(640)
+                && s["image"].as_u64() == Some(WIDTH as u64)
+                && s["overlay"].as_str().is_some_and(|f| !f.is_empty())
         })
         .await;
-
-    // Press: the page must show the contact and a different force/shear.
-    daemon
-        .send("PUT", "/api/v1/sim/scene", json!({ "scene": press(4.0) }))
-        .await;
-    let after = driver
-        .wait_for(PAGE_STATE, Duration::from_secs(60), |s| s["contact"] == json!("yes"))
-        .await;
-    assert_ne!(after["frame"], before["frame"], "frames advance");
-    assert_ne!(
-        after["gamma"], before["gamma"],
-        "the shear shown changes with the contact: {before} -> {after}"
+    assert_eq!(before["problems"], json!(true), "no problems shown at rest: {before}");
+    let url = driver.eval("return location.href;").await;
+    assert!(
+        !url.as_str().unwrap().contains("token"),
+        "the token left the address bar: {url}"
     );
 
-    // The heat map was drawn (some non-background pixels).
-    let painted = driver
-        .eval("const c = document.getElementById('heatmap'); const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data; \
-               let n = 0; for (let i = 3; i < d.length; i += 4) if (d[i] > 0) n++; return n;")
+    // The camera panel shows the pad: many yellow squares, and the green lattice over them.
+    let shot = driver.screenshot().await;
+    let frame = element_rect(&driver, "frame").await;
+    let pixels: Vec<_> = frame.pixels(&shot).collect();
+    let yellow = pixels.iter().filter(|(_, _, p)| is_pad_yellow(*p)).count();
+    let lattice = pixels.iter().filter(|(_, _, p)| is_lattice(*p)).count();
+    assert!(
+        yellow * 10 > pixels.len(),
+        "the camera region is blank: {yellow} yellow pixels of {}",
+        pixels.len()
+    );
+    assert!(
+        lattice > 1000,
+        "the lattice is not drawn over the picture: {lattice} green pixels"
+    );
+    assert_eq!(
+        pixels.iter().filter(|(_, _, p)| is_marker(*p)).count(),
+        0,
+        "no contact marker at rest"
+    );
+
+    // Press left of centre: the marker appears where the simulator pressed.
+    let mut scene = press_at(4.0, [-9.0, 5.0]);
+    // A straight press: a drag moves the shear centre off the contact, which is the estimator's business.
+    scene.contacts[0].tangential_force_n = [0.0, 0.0];
+    let truth = contact_px(WIDTH, HEIGHT, &scene);
+    daemon.settle(&scene, false).await;
+    let pressed = driver
+        .wait_for(PAGE_STATE, Duration::from_secs(60), |s| s["contact"] == json!("yes"))
         .await;
-    assert!(painted.as_u64().unwrap_or(0) > 1000, "heat map painted: {painted}");
+    assert_ne!(pressed["frame"], before["frame"], "frames advance");
+    assert_ne!(
+        pressed["gamma"], before["gamma"],
+        "the shear shown changes: {before} -> {pressed}"
+    );
+    // A frame shown after the press, with its own overlay.
+    let pressed_frame: u64 = pressed["frame"]
+        .as_str()
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    driver
+        .wait_for(PAGE_STATE, Duration::from_secs(30), |s| {
+            s["overlay"].as_str().and_then(|f| f.parse::<u64>().ok()) > Some(pressed_frame)
+        })
+        .await;
+    let shot = driver.screenshot().await;
+    let marker: Vec<(f64, f64)> = frame
+        .pixels(&shot)
+        .filter(|(_, _, p)| is_marker(*p))
+        .map(|(x, y, _)| (x, y))
+        .collect();
+    assert!(marker.len() > 30, "no contact marker drawn: {} pixels", marker.len());
+    let n = marker.len() as f64;
+    let centre_screen = (
+        marker.iter().map(|m| m.0).sum::<f64>() / n,
+        marker.iter().map(|m| m.1).sum::<f64>() / n,
+    );
+    let centre_px = [
+        (centre_screen.0 - frame.x) * WIDTH as f64 / frame.width,
+        (centre_screen.1 - frame.y) * HEIGHT as f64 / frame.height,
+    ];
+    let miss = ((centre_px[0] - truth[0]).powi(2) + (centre_px[1] - truth[1]).powi(2)).sqrt();
+    // Within the contact: about 2.5 mm on the pad at this size (the sphere's contact radius is larger).
+    assert!(
+        miss < 20.0,
+        "the marker is at {centre_px:?} px, the contact at {truth:?} px ({miss:.1} px apart)"
+    );
+    // And exactly where the shown frame's reading puts it.
+    let shown = driver
+        .eval("return document.getElementById('overlay').dataset.frameId;")
+        .await;
+    let (_, reading) = daemon.get("/api/v1/reading").await;
+    if reading["frame_id"].to_string() == shown.as_str().unwrap_or_default() {
+        let c = &reading["estimate"]["contact_px"];
+        let (cx, cy) = (c[0].as_f64().unwrap(), c[1].as_f64().unwrap());
+        assert!(
+            (cx - centre_px[0]).hypot(cy - centre_px[1]) < 3.0,
+            "marker {centre_px:?}, reading {c}"
+        );
+    }
+    assert!(
+        centre_px[0] < WIDTH as f64 / 2.0,
+        "pressed left of centre: {centre_px:?}"
+    );
+
+    // The force plot drew its line.
+    let chart = element_rect(&driver, "force-chart").await;
+    let line = chart
+        .pixels(&shot)
+        .filter(|(_, _, p)| p[2] > 200 && p[1] > 150 && p[0] < 120)
+        .count();
+    assert!(line > 50, "force plot line: {line} pixels");
 
     // LED controls: a current above the limit is refused with the daemon's message.
     driver
@@ -202,6 +351,11 @@ async fn dashboard_shows_live_readings_that_follow_the_simulated_contact() {
         .await;
     assert!(message.as_str().unwrap().contains("120 mA"), "{message}");
     assert_eq!(driver.text("led-message").await, message.as_str().unwrap());
+    let leds = driver.text("led-table").await;
+    assert!(
+        leds.contains("top") && leds.contains("mA"),
+        "LED currents shown: {leds}"
+    );
 
     // Release: the contact disappears again.
     daemon
@@ -210,5 +364,4 @@ async fn dashboard_shows_live_readings_that_follow_the_simulated_contact() {
     driver
         .wait_for(PAGE_STATE, Duration::from_secs(60), |s| s["contact"] == json!("no"))
         .await;
-    drop(driver);
 }

@@ -22,6 +22,8 @@ pub struct Daemon {
     /// Holds the daemon's XDG_DATA_HOME (its default recordings folder lives there).
     pub data_home: tempfile::TempDir,
     pub http: reqwest::Client,
+    /// The token it was started with; the helpers below send it.
+    pub token: Option<String>,
 }
 
 /// How to start it: `serve` plus these arguments (`--listen 127.0.0.1:0` is added unless given).
@@ -30,6 +32,7 @@ pub struct Options {
     /// Runs the daemon under `unshare --mount --map-root-user`, with a tmpfs of this many KiB mounted on its
     /// recordings folder: a disk that fills up, without touching the machine's disks.
     pub small_disk_kib: Option<u64>,
+    pub token: Option<String>,
 }
 
 impl Options {
@@ -37,6 +40,7 @@ impl Options {
         Self {
             args: args.iter().map(|a| a.to_string()).collect(),
             small_disk_kib: None,
+            token: None,
         }
     }
 
@@ -55,6 +59,12 @@ impl Options {
 
     pub fn arg(mut self, arg: impl Into<String>) -> Self {
         self.args.push(arg.into());
+        self
+    }
+
+    pub fn token(mut self, token: &str) -> Self {
+        self.args.extend(["--token".into(), token.into()]);
+        self.token = Some(token.into());
         self
     }
 }
@@ -126,6 +136,7 @@ impl Daemon {
                 .redirect(reqwest::redirect::Policy::none())
                 .build()
                 .unwrap(),
+            token: options.token,
         }
     }
 
@@ -183,13 +194,21 @@ impl Daemon {
         self.child.as_mut().and_then(|c| c.try_wait().ok().flatten())
     }
 
+    fn authorised(&self, request: reqwest::RequestBuilder) -> reqwest::RequestBuilder {
+        match &self.token {
+            Some(token) => request.bearer_auth(token),
+            None => request,
+        }
+    }
+
     pub async fn get(&self, path: &str) -> (u16, Value) {
-        json_of(self.http.get(self.url(path)).send().await.expect("GET")).await
+        let request = self.authorised(self.http.get(self.url(path)));
+        json_of(request.send().await.expect("GET")).await
     }
 
     pub async fn send(&self, method: &str, path: &str, body: Value) -> (u16, Value) {
         let request = self.http.request(method.parse().unwrap(), self.url(path)).json(&body);
-        json_of(request.send().await.expect("request")).await
+        json_of(self.authorised(request).send().await.expect("request")).await
     }
 
     pub async fn status(&self) -> Value {

@@ -4,4 +4,7 @@
 mod api;
 mod browser;
 mod daemon;
+mod lifecycle;
+mod load;
+mod replay;
 mod security;

@@ -1,4 +1,5 @@
-//! Draws the lattice found in a frame and its shear field onto the frame, for `/api/frame.jpg?overlay=1`.
+//! Draws the lattice found in a frame, its shear field and its contacts onto the frame, for
+//! `/api/v1/frame.jpg?overlay=1`, in the dashboard's colours.
 
 use std::collections::HashMap;
 
@@ -6,8 +7,11 @@ use image::{Rgb, RgbImage};
 use nusense_estimator::Reading;
 
 const LATTICE: Rgb<u8> = Rgb([40, 255, 90]);
-const SHEAR: Rgb<u8> = Rgb([0, 230, 255]);
-const CONTACT: Rgb<u8> = Rgb([255, 255, 255]);
+const SHEAR: Rgb<u8> = Rgb([0, 200, 255]);
+/// Magenta: a colour the pad (yellow on red, black around it) never shows.
+const CONTACT: Rgb<u8> = Rgb([255, 0, 255]);
+/// Contact crosses are this many pixels thick, so that they survive JPEG's colour subsampling.
+const CONTACT_THICKNESS: i32 = 3;
 /// Shear arrows are drawn this many times longer than the displacement, so sub-pixel shear is visible.
 const ARROW_GAIN: f64 = 4.0;
 
@@ -34,8 +38,11 @@ pub fn draw_overlay(image: &mut RgbImage, reading: &Reading) {
     }
     if let Some(c) = reading.contact_px() {
         let arm = (image.width().min(image.height()) as f64 / 30.0).max(4.0);
-        draw_line(image, [c[0] - arm, c[1]], [c[0] + arm, c[1]], CONTACT);
-        draw_line(image, [c[0], c[1] - arm], [c[0], c[1] + arm], CONTACT);
+        for offset in 0..CONTACT_THICKNESS {
+            let d = f64::from(offset - CONTACT_THICKNESS / 2);
+            draw_line(image, [c[0] - arm, c[1] + d], [c[0] + arm, c[1] + d], CONTACT);
+            draw_line(image, [c[0] + d, c[1] - arm], [c[0] + d, c[1] + arm], CONTACT);
+        }
     }
 }
 

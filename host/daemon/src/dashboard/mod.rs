@@ -1,5 +1,6 @@
-//! The dashboard: one static page (HTML, JS, CSS compiled into the binary) that reads `/api/stream` and
-//! `/api/frame.jpg` and drives `/api/tare`, `/api/led` and `/api/record`. No build step.
+//! The dashboard: one static page (HTML, JS, CSS compiled into the binary) that reads `/api/v1/stream`,
+//! `/api/v1/frame.jpg` and `/api/v1/status`, draws the lattice, shear and contacts of each shown frame's own
+//! reading over it, and drives `/api/v1/tare`, `/api/v1/led` and `/api/v1/record`. No build step.
 
 use axum::http::header;
 use axum::response::IntoResponse;
