@@ -70,6 +70,8 @@ fn human(message: &ReadingMessage) -> String {
         (Some(reading), _) => reading,
         (None, error) => return format!("{frame}: FAILED: {}", error.as_deref().unwrap_or("no estimate")),
     };
+    // The flat view of the reading: the same fields `--json` prints.
+    let r = nusense_estimator::ReadingJson::from(r.clone());
     let point = |p: Option<[f64; 2]>, unit: &str| match p {
         Some([x, y]) => format!("({x:.1}, {y:.1}) {unit}"),
         None => "-".to_string(),

@@ -43,10 +43,10 @@ fn typed<T: Encode>(topic: &'static str) -> ChannelSpec {
     }
 }
 
-fn json(topic: &'static str, name: &str, schema: &'static str) -> ChannelSpec {
+fn json(topic: &'static str, name: &str, schema: Vec<u8>) -> ChannelSpec {
     ChannelSpec {
         topic,
-        schema: Schema::new(name, "jsonschema", schema.as_bytes()),
+        schema: Schema::new(name, "jsonschema", schema),
         message_encoding: "json".into(),
     }
 }
@@ -57,8 +57,8 @@ pub(crate) fn channel_table() -> Vec<ChannelSpec> {
         typed::<CompressedImage>(FRAME_TOPIC),
         typed::<CameraCalibration>(CALIBRATION_TOPIC),
         typed::<ImageAnnotations>(ANNOTATIONS_TOPIC),
-        json(READING_TOPIC, "nusense.Reading", READING_SCHEMA),
-        json(TELEMETRY_TOPIC, "nusense.BoardTelemetry", TELEMETRY_SCHEMA),
+        json(READING_TOPIC, "nusense.Reading", crate::reading::reading_schema_json().into_bytes()),
+        json(TELEMETRY_TOPIC, "nusense.BoardTelemetry", TELEMETRY_SCHEMA.as_bytes().to_vec()),
     ]
 }
 
@@ -151,7 +151,8 @@ pub(crate) fn annotations(published: &PublishedReading) -> Option<Vec<u8>> {
         ],
         ..Default::default()
     };
-    if let (true, Some(contact)) = (estimate.contact, estimate.contact_px) {
+    for region in estimate.contacts() {
+        let contact = region.centre_px;
         message.circles.push(CircleAnnotation {
             timestamp: stamp,
             position: Some(point(contact)),
@@ -163,7 +164,7 @@ pub(crate) fn annotations(published: &PublishedReading) -> Option<Vec<u8>> {
         message.texts.push(TextAnnotation {
             timestamp: stamp,
             position: Some(point([contact[0] + 24.0, contact[1] - 24.0])),
-            text: format!("{:.2} N", estimate.force_n),
+            text: format!("{:.2} N", region.force_n),
             font_size: 18.0,
             text_color: color(1.0, 1.0, 1.0),
             background_color: Some(Color {
@@ -178,8 +179,8 @@ pub(crate) fn annotations(published: &PublishedReading) -> Option<Vec<u8>> {
     Some(encode(&message))
 }
 
-/// The reading channel's encoding: the daemon's reading message as the pipeline serialised it. Switching to
-/// another reading message is a change here and in [`READING_SCHEMA`].
+/// The reading channel's encoding: the daemon's one reading message as the pipeline serialised it; its schema is
+/// the one served at `/api/v1/schema` ([`crate::reading::reading_schema_json`]).
 pub(crate) fn reading(published: &Arc<PublishedReading>) -> Vec<u8> {
     published.json.as_bytes().to_vec()
 }
@@ -187,37 +188,6 @@ pub(crate) fn reading(published: &Arc<PublishedReading>) -> Vec<u8> {
 pub(crate) fn telemetry(json: &str) -> Vec<u8> {
     json.as_bytes().to_vec()
 }
-
-pub(crate) const READING_SCHEMA: &str = r#"{
-  "$schema": "https://json-schema.org/draft/2020-12/schema",
-  "title": "nusense.Reading",
-  "description": "One processed frame: timestamps in microseconds since the Unix epoch, estimator outputs (force N, contact in raw px, undistorted px and pad mm, edge angle in degrees, shear field per lattice corner) and the LED state",
-  "type": "object",
-  "required": ["frame_id", "capture_time_us", "processed_time_us", "latency_ms"],
-  "properties": {
-    "frame_id": {"type": "integer", "minimum": 0},
-    "capture_time_us": {"type": "integer", "minimum": 0},
-    "processed_time_us": {"type": "integer", "minimum": 0},
-    "latency_ms": {"type": "number"},
-    "queue_ms": {"type": "number"},
-    "reference_frame_id": {"type": ["integer", "null"]},
-    "estimate": {
-      "type": ["object", "null"],
-      "required": ["contact", "force_n", "gamma", "shear_field"],
-      "properties": {
-        "contact": {"type": "boolean"},
-        "force_n": {"type": "number"},
-        "gamma": {"type": "number"},
-        "contact_px": {"type": ["array", "null"], "items": {"type": "number"}, "minItems": 2, "maxItems": 2},
-        "contact_mm": {"type": ["array", "null"], "items": {"type": "number"}, "minItems": 2, "maxItems": 2},
-        "edge_angle_deg": {"type": ["number", "null"]},
-        "shear_field": {"type": "array", "items": {"type": "object"}}
-      }
-    },
-    "error": {"type": ["string", "null"]},
-    "led": {"type": ["object", "null"]}
-  }
-}"#;
 
 const TELEMETRY_SCHEMA: &str = r#"{
   "$schema": "https://json-schema.org/draft/2020-12/schema",
