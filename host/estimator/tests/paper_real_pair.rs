@@ -170,8 +170,6 @@ fn bad_frames_give_typed_errors_not_panics() {
 }
 
 #[test]
-#[ignore = "known failure: paper mode reports no contact on the real touch frame since it shares the noise-based \
-            contact test with the inverse; cause not yet found"]
 fn paper_mode_estimator_reads_the_touch_with_masked_gaps() {
     // The whole estimator on paper-mode points: the published method's gaps are masked, not padded, and the
     // reading still lands on the contact (the authors' heat map: about (960, 768) undistorted px).

@@ -66,8 +66,6 @@ fn the_rest_frame_against_itself_is_no_contact() {
 }
 
 #[test]
-#[ignore = "known failure: paper mode reports no contact on the real touch frame since it shares the noise-based \
-            contact test with the inverse; cause not yet found"]
 fn paper_mode_finds_the_same_contact_with_the_published_pipeline() {
     let mut estimator = Estimator::new(SensorConfig::default(), Mode::Paper, reference()).unwrap();
     let rest = estimator.reference_lattice().corners_found();
