@@ -28,7 +28,7 @@ pub struct Args {
     /// Stop after this many seconds (default: until Ctrl-C, or until a replay ends).
     #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,
-    /// Stop after this many frames have been captured.
+    /// Stop once this many frames have been measured (each recorded with its reading).
     #[arg(long, value_name = "N")]
     pub frames: Option<u64>,
     /// Longest time a chunk stays open before it is written and fsynced: what a crash or power cut loses at most.
@@ -104,7 +104,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     loop {
         std::thread::sleep(Duration::from_millis(20));
         let status = handle.status();
-        let done_frames = args.frames.is_some_and(|n| status.frames_captured >= n);
+        // Counted in measured frames, not captured ones: the estimator's first frame (building the rest frame's
+        // model) can take longer than a burst of captures, and a recording of frames without their readings
+        // would be cut short of what was asked.
+        let done_frames = args.frames.is_some_and(|n| status.frames_processed >= n);
         let done_time = deadline.is_some_and(|d| started.elapsed() >= d);
         let source_ended = status.capture_finished
             && status.frames_processed >= status.frames_captured.saturating_sub(status.frames_dropped);
