@@ -13,6 +13,8 @@
 
 use thiserror::Error;
 
+pub mod modulus;
+
 /// One calibration point: the sensor's gamma and the reference force in newtons.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CalibrationSample {
@@ -528,36 +530,10 @@ pub fn align_by_time(
     forces: &[ForceSample],
     max_skew_s: f64,
 ) -> Result<Alignment, CalibrationError> {
-    let mut forces: Vec<ForceSample> =
-        forces.iter().copied().filter(|f| f.time_s.is_finite() && f.force_n.is_finite()).collect();
-    forces.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
+    let times: Vec<f64> = readings.iter().map(|r| if r.gamma.is_finite() { r.time_s } else { f64::NAN }).collect();
     let mut samples = Vec::new();
     let mut dropped = 0;
-    for r in readings {
-        if !(r.time_s.is_finite() && r.gamma.is_finite()) {
-            dropped += 1;
-            continue;
-        }
-        let after = forces.partition_point(|f| f.time_s < r.time_s);
-        let before = after.checked_sub(1).map(|i| forces[i]);
-        let next = forces.get(after).copied();
-        let force = match (before, next) {
-            (Some(b), Some(n)) => {
-                let nearest = (r.time_s - b.time_s).min(n.time_s - r.time_s);
-                (nearest <= max_skew_s).then(|| {
-                    let span = n.time_s - b.time_s;
-                    if span > 0.0 {
-                        b.force_n + (n.force_n - b.force_n) * (r.time_s - b.time_s) / span
-                    } else {
-                        0.5 * (b.force_n + n.force_n)
-                    }
-                })
-            }
-            (Some(only), None) | (None, Some(only)) => {
-                ((r.time_s - only.time_s).abs() <= max_skew_s).then_some(only.force_n)
-            }
-            (None, None) => None,
-        };
+    for (r, force) in readings.iter().zip(forces_at_times(&times, forces, max_skew_s)) {
         match force {
             Some(force_n) => samples.push(CalibrationSample { gamma: r.gamma, force_n }),
             None => dropped += 1,
@@ -569,24 +545,104 @@ pub fn align_by_time(
     Ok(Alignment { samples, dropped })
 }
 
+/// The log's force at each of `times` (seconds, the log's clock), by [`align_by_time`]'s rule; `None` where no
+/// force sample lies within `max_skew_s` or the time is not finite.
+pub fn forces_at_times(times: &[f64], forces: &[ForceSample], max_skew_s: f64) -> Vec<Option<f64>> {
+    let mut forces: Vec<ForceSample> =
+        forces.iter().copied().filter(|f| f.time_s.is_finite() && f.force_n.is_finite()).collect();
+    forces.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
+    times
+        .iter()
+        .map(|&time_s| {
+            if !time_s.is_finite() {
+                return None;
+            }
+            let after = forces.partition_point(|f| f.time_s < time_s);
+            let before = after.checked_sub(1).map(|i| forces[i]);
+            let next = forces.get(after).copied();
+            match (before, next) {
+                (Some(b), Some(n)) => {
+                    let nearest = (time_s - b.time_s).min(n.time_s - time_s);
+                    (nearest <= max_skew_s).then(|| {
+                        let span = n.time_s - b.time_s;
+                        if span > 0.0 {
+                            b.force_n + (n.force_n - b.force_n) * (time_s - b.time_s) / span
+                        } else {
+                            0.5 * (b.force_n + n.force_n)
+                        }
+                    })
+                }
+                (Some(only), None) | (None, Some(only)) => {
+                    ((time_s - only.time_s).abs() <= max_skew_s).then_some(only.force_n)
+                }
+                (None, None) => None,
+            }
+        })
+        .collect()
+}
+
 /// Sets `calibration.a` and `calibration.b` in a sensor config's TOML text, keeping every other key, comment
 /// and the layout; the result must still be a valid config.
 pub fn update_config_toml(text: &str, a: f64, b: f64) -> Result<String, CalibrationError> {
     if !(a.is_finite() && b.is_finite()) {
         return Err(CalibrationError::Config(format!("refusing to write a non-finite calibration (a = {a}, b = {b})")));
     }
+    edit_config(text, |document| {
+        let table = table_mut(document, "calibration")?;
+        table.insert("a", toml_edit::value(a));
+        table.insert("b", toml_edit::value(b));
+        Ok(())
+    })
+}
+
+/// Sets `elastic.shear_modulus_kpa` (what [`modulus::fit_modulus_scale`] calibrates), keeping everything else.
+pub fn set_config_shear_modulus(text: &str, kpa: f64) -> Result<String, CalibrationError> {
+    if !(kpa.is_finite() && kpa > 0.0) {
+        return Err(CalibrationError::Config(format!("refusing to write a shear modulus of {kpa} kPa")));
+    }
+    edit_config(text, |document| {
+        table_mut(document, "elastic")?.insert("shear_modulus_kpa", toml_edit::value(kpa));
+        Ok(())
+    })
+}
+
+/// Replaces the config's `[pad_map]` with `map` (the rest frame's fitted raw px -> pad mm map), keeping everything
+/// else.
+pub fn set_config_pad_map(text: &str, map: &crate::StoredPadMap) -> Result<String, CalibrationError> {
+    map.validate().map_err(|reason| CalibrationError::Config(format!("refusing to write the pad map: {reason}")))?;
+    let serialised = toml::to_string(map).map_err(|e| CalibrationError::Config(e.to_string()))?;
+    let parsed: toml_edit::DocumentMut =
+        serialised.parse().map_err(|e: toml_edit::TomlError| CalibrationError::Config(e.to_string()))?;
+    edit_config(text, |document| {
+        let mut table = parsed.as_table().clone();
+        table.set_implicit(false);
+        document.insert("pad_map", toml_edit::Item::Table(table));
+        Ok(())
+    })
+}
+
+/// Parses a config's TOML, applies `edit`, and checks that the result is still a valid config.
+fn edit_config(
+    text: &str,
+    edit: impl FnOnce(&mut toml_edit::DocumentMut) -> Result<(), CalibrationError>,
+) -> Result<String, CalibrationError> {
     let mut document: toml_edit::DocumentMut =
         text.parse().map_err(|e: toml_edit::TomlError| CalibrationError::Config(e.to_string()))?;
-    let table = document
-        .entry("calibration")
-        .or_insert_with(|| toml_edit::Item::Table(toml_edit::Table::new()))
-        .as_table_like_mut()
-        .ok_or_else(|| CalibrationError::Config("`calibration` is not a table".into()))?;
-    table.insert("a", toml_edit::value(a));
-    table.insert("b", toml_edit::value(b));
+    edit(&mut document)?;
     let updated = document.to_string();
     crate::SensorConfig::from_toml_str(&updated).map_err(|e| CalibrationError::Config(e.to_string()))?;
     Ok(updated)
+}
+
+fn table_mut<'a>(
+    document: &'a mut toml_edit::DocumentMut,
+    name: &str,
+) -> Result<&'a mut dyn toml_edit::TableLike, CalibrationError> {
+    document
+        .entry(name)
+        .or_insert_with(|| toml_edit::Item::Table(toml_edit::Table::new()))
+        .as_table_like_mut()
+        .ok_or_else(|| CalibrationError::Config(format!("`{name}` is not a table")))
 }
 
 #[cfg(test)]
@@ -787,5 +843,39 @@ mod tests {
         assert!(update_config_toml("calibration = 3\n", 1.0, 2.0).is_err());
         assert!(update_config_toml("", f64::NAN, 2.0).is_err());
         assert!(update_config_toml("[surface]\ndegree_u = 99\n", 1.0, 2.0).is_err(), "an invalid config stays invalid");
+    }
+
+    #[test]
+    fn the_modulus_and_the_pad_map_are_written_beside_other_keys_and_read_back_exactly() {
+        let text = "# bench sensor\n[elastic]\ngel_mm = 2.0\n";
+        let updated = set_config_shear_modulus(text, 31.25).unwrap();
+        let config = crate::SensorConfig::from_toml_str(&updated).unwrap();
+        assert_eq!((config.elastic.shear_modulus_kpa, config.elastic.gel_mm), (31.25, 2.0));
+        assert!(updated.contains("# bench sensor"), "{updated}");
+        assert!(set_config_shear_modulus(text, 0.0).is_err());
+        assert!(set_config_shear_modulus(text, f64::INFINITY).is_err());
+
+        let map = crate::StoredPadMap {
+            width: 1024,
+            height: 768,
+            correction: crate::pad_map::LensCorrection {
+                centre_px: [511.5, 383.25],
+                scale_px: 402.0,
+                x: [1e-3, -2e-4, 3e-5, 0.0, 1.5e-6, -7e-7, 2e-8],
+                y: [-1e-3, 2e-4, -3e-5, 4e-6, 0.0, 7e-7, -2e-8],
+            },
+            homography: [0.05, 1e-4, -25.0, -2e-4, 0.051, -19.0, 1e-6, -2e-6, 1.0],
+            residual: crate::MapResidual { rms_mm: 0.011, max_mm: 0.04, points: 163, outliers: 2 },
+        };
+        let with_map = set_config_pad_map(&updated, &map).unwrap();
+        let config = crate::SensorConfig::from_toml_str(&with_map).unwrap();
+        assert_eq!(config.pad_map, Some(map), "{with_map}");
+        assert_eq!(config.elastic.shear_modulus_kpa, 31.25);
+        // Writing it again replaces the table rather than adding a second one.
+        let moved = crate::StoredPadMap { homography: [0.06, 0.0, -20.0, 0.0, 0.06, -15.0, 0.0, 0.0, 1.0], ..map };
+        let again = set_config_pad_map(&with_map, &moved).unwrap();
+        assert_eq!(crate::SensorConfig::from_toml_str(&again).unwrap().pad_map, Some(moved), "{again}");
+        let broken = crate::StoredPadMap { width: 0, ..map };
+        assert!(set_config_pad_map(text, &broken).is_err());
     }
 }

@@ -214,9 +214,9 @@ impl Default for ElasticConfig {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct InverseConfig {
-    /// Displacement noise of one corner along one axis (1 sigma), mm: the regularisation's noise level. Measured
-    /// from rest frames by `nusense calibrate`; the default is what the fast detector shows on the simulated real
-    /// sensor at 640 x 480 (the lowest resolution the daemon captures by default).
+    /// Displacement noise of one corner along one axis (1 sigma), mm: the regularisation's noise level. Set in the
+    /// config (`nusense calibrate` does not measure it yet); the default is what the fast detector shows on the
+    /// simulated real sensor at 640 x 480 (the lowest resolution the daemon captures by default).
     pub noise_mm: f64,
     /// Prior scale (1 sigma) of the force one traction cell carries, N. The regularisation rule is MAP under this
     /// prior: lambda = (noise_mm / traction_prior_n)^2. The default is the load of an 8 N press (the top of the

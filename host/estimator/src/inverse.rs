@@ -70,9 +70,7 @@ pub struct InverseModel {
     /// The first `observations` columns of the kriging system's inverse, (obs + P) x obs.
     s: Dense,
     lambda: f64,
-    /// AᵀA, AᵀB, BᵀB over all observations (stage 2 subtracts missing rows).
-    gram_aa: Dense,
-    gram_ab: Dense,
+    /// BᵀB over all observations (stage 2 subtracts missing rows).
     gram_bb: Dense,
     /// Expected share of each corner's residual |e|^2 under H0, per sigma^2.
     residual_share: Vec<f64>,
@@ -220,8 +218,6 @@ impl InverseModel {
             pad,
             a_t: Dense::from_nalgebra(&a.transpose()),
             b_t: Dense::from_nalgebra(&b.transpose()),
-            gram_aa: Dense::from_nalgebra(&(a.transpose() * &a)),
-            gram_ab: Dense::from_nalgebra(&(a.transpose() * &b)),
             gram_bb: Dense::from_nalgebra(&btb),
             a: Dense::from_nalgebra(&a),
             b: Dense::from_nalgebra(&b),

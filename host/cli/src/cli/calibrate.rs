@@ -1,6 +1,11 @@
-//! `nusense calibrate`: fit the force calibration F = a * gamma + b and write it into the sensor config.
+//! `nusense calibrate`: fit a sensor's calibration and write it into its config:
+//! - the paper's force line F = a * gamma + b (`[calibration]`), from (gamma, force) pairs or a session;
+//! - the pad model's stiffness (`elastic.shear_modulus_kpa`), from a session's inverse-mode readings: the reference
+//!   force against the model's, one scale through the origin (see `nusense_estimator::calibration::modulus`);
+//! - with `--rest FRAME`, the raw px -> pad mm map of this sensor's lens and pose (`[pad_map]`), fitted on a frame
+//!   with nothing touching the pad, and its residual.
 //!
-//! Input, one of:
+//! Force input, one of (optional with `--rest`):
 //! - `--pairs FILE.csv`: (gamma, force) pairs; a header naming `gamma` and `force` (or `force_n`), or no header
 //!   and those two columns in that order.
 //! - `--readings FILE.jsonl --ft-log FILE.csv`: a recorded session. Readings are JSON lines (as `nusense analyze
@@ -11,19 +16,27 @@
 //!   `t`, optional `_s`/`_ms`/`_us` suffix) and `fx, fy, fz`. Each reading takes the force interpolated at its
 //!   time when a force sample lies within `--max-skew-ms`; others are dropped and counted.
 //!
-//! With `--config FILE`, a and b are written into that TOML (created if missing; other keys and comments are
-//! kept) unless `--dry-run`. `--json` prints the fit as one JSON object.
-//! Exit code: 0 on a fit, 1 when the data cannot be fitted or the config cannot be written.
+//! Readings in inverse mode with contact also give the model's force (`force_n`); with at least two of them the
+//! modulus scale is fitted as well.
+//!
+//! With `--config FILE`, what was fitted is written into that TOML (created if missing; other keys and comments are
+//! kept) unless `--dry-run`; the modulus is the config's own times the fitted scale. `--json` prints the fits as
+//! one JSON object. Exit code: 0 on a fit, 1 when the data cannot be fitted or the config cannot be written.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{bail, Context};
+use nusense_capture::read_image_file;
+use nusense_estimator::calibration::modulus::{fit_modulus_scale, ModelForceSample, ModulusFit};
 use nusense_estimator::calibration::{
-    align_by_time, fit_force_line, parse_force_log_csv, parse_pairs_csv, update_config_toml, CalibrationSample,
-    FitOptions, ForceComponent, ForceFit, TimedGamma,
+    align_by_time, fit_force_line, forces_at_times, parse_force_log_csv, parse_pairs_csv, set_config_pad_map,
+    set_config_shear_modulus, update_config_toml, CalibrationSample, FitOptions, ForceComponent, ForceFit, TimedGamma,
 };
+use nusense_estimator::{Estimator, MapResidual, Mode, SensorConfig, StoredPadMap};
 use serde::Serialize;
+
+use super::common::load_config;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -48,7 +61,10 @@ pub struct Args {
     /// Two-sided confidence level of the intervals.
     #[arg(long, default_value_t = 0.95)]
     confidence: f64,
-    /// Sensor config (TOML) to write a and b into; created if missing.
+    /// A frame with nothing touching the pad: fit this sensor's raw px -> pad mm map on it.
+    #[arg(long, value_name = "FRAME")]
+    rest: Option<PathBuf>,
+    /// Sensor config (TOML) to write what was fitted into; created if missing.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
     /// Fit and print, but leave the config file as it is.
@@ -84,19 +100,51 @@ impl From<CliForce> for ForceComponent {
 
 #[derive(Serialize)]
 struct Report {
-    a: f64,
-    b: f64,
-    a_interval: [f64; 2],
-    b_interval: [f64; 2],
-    a_std_error: f64,
-    b_std_error: f64,
+    /// The force line; null when only `--rest` was given.
+    a: Option<f64>,
+    b: Option<f64>,
+    a_interval: Option<[f64; 2]>,
+    b_interval: Option<[f64; 2]>,
+    a_std_error: Option<f64>,
+    b_std_error: Option<f64>,
     confidence: f64,
-    residual_scale_n: f64,
+    residual_scale_n: Option<f64>,
     points: usize,
     outliers: usize,
     /// Readings skipped (ok: false) or without a force sample within the skew.
     readings_dropped: usize,
+    /// The pad model's stiffness; null without inverse-mode readings in contact.
+    modulus: Option<ModulusReport>,
+    /// The rest frame's pad map; null without `--rest`.
+    pad_map: Option<PadMapReport>,
     config_written: Option<String>,
+}
+
+#[derive(Serialize)]
+struct ModulusReport {
+    scale: f64,
+    scale_interval: [f64; 2],
+    /// The config's shear modulus before and after, kPa.
+    shear_modulus_kpa_before: f64,
+    shear_modulus_kpa: f64,
+    residual_scale_n: f64,
+    points: usize,
+    outliers: usize,
+}
+
+#[derive(Serialize)]
+struct PadMapReport {
+    width: u32,
+    height: u32,
+    residual: MapResidual,
+}
+
+/// What one run fitted.
+struct Fits {
+    line: Option<ForceFit>,
+    modulus: Option<(ModulusFit, f64)>,
+    pad_map: Option<StoredPadMap>,
+    readings_dropped: usize,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
@@ -106,23 +154,37 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if !args.time_offset_s.is_finite() {
         bail!("--time-offset-s must be finite, got {}", args.time_offset_s);
     }
-    let (samples, readings_dropped) = load_samples(&args)?;
-    let options = FitOptions {
-        confidence: args.confidence,
-        ..FitOptions::default()
+    if args.pairs.is_none() && args.readings.is_none() && args.rest.is_none() {
+        bail!("give --pairs FILE, or --readings FILE together with --ft-log FILE, and/or --rest FRAME");
+    }
+    let existing = match &args.config {
+        Some(path) => match std::fs::read_to_string(path) {
+            Ok(text) => Some(text),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+            Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
+        },
+        None => None,
     };
-    let fit = fit_force_line(&samples, &options).context("cannot fit the force calibration")?;
+    let config = match (&existing, &args.config) {
+        (Some(_), Some(path)) => load_config(Some(path))?,
+        _ => SensorConfig::default(),
+    };
+    let fits = fit_all(&args, &config)?;
 
     let config_written = match (&args.config, args.dry_run) {
         (Some(path), false) => {
-            let text = match std::fs::read_to_string(path) {
-                Ok(text) => text,
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
-                Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
-            };
-            let updated = update_config_toml(&text, fit.a, fit.b)
-                .with_context(|| format!("cannot update the sensor config {}", path.display()))?;
-            std::fs::write(path, updated).with_context(|| format!("cannot write {}", path.display()))?;
+            let mut text = existing.unwrap_or_default();
+            let context = || format!("cannot update the sensor config {}", path.display());
+            if let Some(line) = &fits.line {
+                text = update_config_toml(&text, line.a, line.b).with_context(context)?;
+            }
+            if let Some((_, kpa)) = fits.modulus {
+                text = set_config_shear_modulus(&text, kpa).with_context(context)?;
+            }
+            if let Some(map) = &fits.pad_map {
+                text = set_config_pad_map(&text, map).with_context(context)?;
+            }
+            std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?;
             Some(path.display().to_string())
         }
         _ => None,
@@ -131,12 +193,12 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if args.json {
         println!(
             "{}",
-            serde_json::to_string(&report(&fit, readings_dropped, config_written))?
+            serde_json::to_string(&report(&fits, &config, args.confidence, config_written))?
         );
     } else {
         print_human(
-            &fit,
-            readings_dropped,
+            &fits,
+            &config,
             config_written.as_deref(),
             args.dry_run && args.config.is_some(),
         );
@@ -144,27 +206,86 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-fn load_samples(args: &Args) -> anyhow::Result<(Vec<CalibrationSample>, usize)> {
+fn fit_all(args: &Args, config: &SensorConfig) -> anyhow::Result<Fits> {
+    let options = FitOptions {
+        confidence: args.confidence,
+        ..FitOptions::default()
+    };
+    let mut fits = Fits {
+        line: None,
+        modulus: None,
+        pad_map: None,
+        readings_dropped: 0,
+    };
     if let Some(path) = &args.pairs {
         let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
         let samples = parse_pairs_csv(&text).with_context(|| format!("in {}", path.display()))?;
-        return Ok((samples, 0));
+        fits.line = Some(fit_force_line(&samples, &options).context("cannot fit the force calibration")?);
     }
-    let (Some(readings_path), Some(log_path)) = (&args.readings, &args.ft_log) else {
-        bail!("give either --pairs FILE, or --readings FILE together with --ft-log FILE");
-    };
+    if let (Some(readings_path), Some(log_path)) = (&args.readings, &args.ft_log) {
+        let session = load_session(args, readings_path, log_path)?;
+        fits.line = Some(fit_force_line(&session.samples, &options).context("cannot fit the force calibration")?);
+        fits.readings_dropped = session.dropped;
+        if session.model.len() >= 2 {
+            let fit = fit_modulus_scale(&session.model, options.bisquare_c, args.confidence)
+                .context("cannot fit the pad model's modulus")?;
+            fits.modulus = Some((fit, config.elastic.shear_modulus_kpa * fit.scale));
+        }
+    }
+    if let Some(path) = &args.rest {
+        let frame = read_image_file(path)
+            .with_context(|| format!("rest frame {}", path.display()))?
+            .image;
+        // The map is fitted afresh: a stored one would only have its pose re-fitted.
+        let config = SensorConfig {
+            pad_map: None,
+            ..config.clone()
+        };
+        let estimator = Estimator::new(config, Mode::Fast, &frame)
+            .with_context(|| format!("cannot find the pattern in the rest frame {}", path.display()))?;
+        fits.pad_map = Some(estimator.mapping().stored());
+    }
+    Ok(fits)
+}
+
+/// A session's readings paired with the force log.
+struct Session {
+    samples: Vec<CalibrationSample>,
+    /// Inverse-mode readings in contact: the model's force against the reference.
+    model: Vec<ModelForceSample>,
+    dropped: usize,
+}
+
+fn load_session(args: &Args, readings_path: &PathBuf, log_path: &PathBuf) -> anyhow::Result<Session> {
     let text =
         std::fs::read_to_string(readings_path).with_context(|| format!("cannot read {}", readings_path.display()))?;
-    let (readings, skipped) = parse_readings(&text).with_context(|| format!("in {}", readings_path.display()))?;
+    let parsed = parse_readings(&text).with_context(|| format!("in {}", readings_path.display()))?;
     let log = std::fs::read_to_string(log_path).with_context(|| format!("cannot read {}", log_path.display()))?;
     let mut forces =
         parse_force_log_csv(&log, args.force.into()).with_context(|| format!("in {}", log_path.display()))?;
     for f in &mut forces {
         f.time_s += args.time_offset_s;
     }
-    let alignment = align_by_time(&readings, &forces, args.max_skew_ms / 1e3)
+    let max_skew_s = args.max_skew_ms / 1e3;
+    let alignment = align_by_time(&parsed.readings, &forces, max_skew_s)
         .context("cannot align the readings with the force log (check the clocks, --time-offset-s, --max-skew-ms)")?;
-    Ok((alignment.samples, skipped + alignment.dropped))
+    let times: Vec<f64> = parsed.model.iter().map(|m| m.time_s).collect();
+    let model = parsed
+        .model
+        .iter()
+        .zip(forces_at_times(&times, &forces, max_skew_s))
+        .filter_map(|(m, reference)| {
+            reference.map(|reference_n| ModelForceSample {
+                model_n: m.force_n,
+                reference_n,
+            })
+        })
+        .collect();
+    Ok(Session {
+        samples: alignment.samples,
+        model,
+        dropped: parsed.skipped + alignment.dropped,
+    })
 }
 
 /// Time fields a reading may carry, with their unit in seconds.
@@ -177,10 +298,29 @@ const TIME_FIELDS: [(&str, f64); 6] = [
     ("timestamp_us", 1e-6),
 ];
 
-/// Readings with a time and a gamma; returns them and the number of lines skipped (`ok: false`).
-fn parse_readings(text: &str) -> anyhow::Result<(Vec<TimedGamma>, usize)> {
-    let mut readings = Vec::new();
-    let mut skipped = 0;
+/// An inverse-mode reading in contact: the model's normal force at a time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct TimedModelForce {
+    time_s: f64,
+    force_n: f64,
+}
+
+/// What a readings file holds for calibration.
+#[derive(Debug, PartialEq)]
+struct ParsedReadings {
+    readings: Vec<TimedGamma>,
+    model: Vec<TimedModelForce>,
+    /// Lines without a measurement (`ok: false`, or a message without an estimate).
+    skipped: usize,
+}
+
+/// Readings with a time and a gamma, and the model's force of those in inverse mode with contact.
+fn parse_readings(text: &str) -> anyhow::Result<ParsedReadings> {
+    let mut parsed = ParsedReadings {
+        readings: Vec::new(),
+        model: Vec::new(),
+        skipped: 0,
+    };
     for (i, line) in text.lines().enumerate() {
         let line = line.trim();
         if line.is_empty() {
@@ -192,25 +332,34 @@ fn parse_readings(text: &str) -> anyhow::Result<(Vec<TimedGamma>, usize)> {
         if value.get("schema_version").is_some() {
             // A reading message: the estimate (if any) and the capture time.
             let Some(estimate) = value.get("estimate").filter(|e| e.is_object()) else {
-                skipped += 1;
+                parsed.skipped += 1;
                 continue;
             };
             let gamma = estimate
                 .get("gamma")
                 .and_then(serde_json::Value::as_f64)
                 .with_context(|| format!("line {n}: the estimate has no numeric `gamma`"))?;
-            let time_us = value
+            let time_s = value
                 .get("capture_time_us")
                 .and_then(serde_json::Value::as_f64)
-                .with_context(|| format!("line {n} has no `capture_time_us`"))?;
-            readings.push(TimedGamma {
-                time_s: time_us * 1e-6,
-                gamma,
-            });
+                .with_context(|| format!("line {n} has no `capture_time_us`"))?
+                * 1e-6;
+            parsed.readings.push(TimedGamma { time_s, gamma });
+            let inverse = estimate.get("mode").and_then(serde_json::Value::as_str) == Some("inverse");
+            let contact = estimate.get("contact").and_then(serde_json::Value::as_bool) == Some(true);
+            if inverse && contact {
+                let force_n = estimate
+                    .get("force_n")
+                    .and_then(serde_json::Value::as_f64)
+                    .with_context(|| {
+                        format!("line {n}: an inverse-mode estimate in contact has no numeric `force_n`")
+                    })?;
+                parsed.model.push(TimedModelForce { time_s, force_n });
+            }
             continue;
         }
         if value.get("ok").and_then(serde_json::Value::as_bool) == Some(false) {
-            skipped += 1;
+            parsed.skipped += 1;
             continue;
         }
         let gamma = value
@@ -224,48 +373,87 @@ fn parse_readings(text: &str) -> anyhow::Result<(Vec<TimedGamma>, usize)> {
                 let names: Vec<&str> = TIME_FIELDS.iter().map(|f| f.0).collect();
                 format!("line {n} has no time field (one of {})", names.join(", "))
             })?;
-        readings.push(TimedGamma { time_s, gamma });
+        parsed.readings.push(TimedGamma { time_s, gamma });
     }
-    Ok((readings, skipped))
+    Ok(parsed)
 }
 
-fn report(fit: &ForceFit, readings_dropped: usize, config_written: Option<String>) -> Report {
+fn report(fits: &Fits, config: &SensorConfig, confidence: f64, config_written: Option<String>) -> Report {
+    let line = fits.line.as_ref();
     Report {
-        a: fit.a,
-        b: fit.b,
-        a_interval: fit.a_interval,
-        b_interval: fit.b_interval,
-        a_std_error: fit.a_std_error,
-        b_std_error: fit.b_std_error,
-        confidence: fit.confidence,
-        residual_scale_n: fit.residual_scale_n,
-        points: fit.points,
-        outliers: fit.outliers,
-        readings_dropped,
+        a: line.map(|f| f.a),
+        b: line.map(|f| f.b),
+        a_interval: line.map(|f| f.a_interval),
+        b_interval: line.map(|f| f.b_interval),
+        a_std_error: line.map(|f| f.a_std_error),
+        b_std_error: line.map(|f| f.b_std_error),
+        confidence,
+        residual_scale_n: line.map(|f| f.residual_scale_n),
+        points: line.map_or(0, |f| f.points),
+        outliers: line.map_or(0, |f| f.outliers),
+        readings_dropped: fits.readings_dropped,
+        modulus: fits.modulus.map(|(fit, kpa)| ModulusReport {
+            scale: fit.scale,
+            scale_interval: fit.scale_interval,
+            shear_modulus_kpa_before: config.elastic.shear_modulus_kpa,
+            shear_modulus_kpa: kpa,
+            residual_scale_n: fit.residual_scale_n,
+            points: fit.points,
+            outliers: fit.outliers,
+        }),
+        pad_map: fits.pad_map.map(|m| PadMapReport {
+            width: m.width,
+            height: m.height,
+            residual: m.residual,
+        }),
         config_written,
     }
 }
 
-fn print_human(fit: &ForceFit, readings_dropped: usize, config_written: Option<&str>, dry_run: bool) {
-    let level = fit.confidence * 100.0;
-    println!(
-        "F = a * gamma + b from {} points ({} outliers given no weight)",
-        fit.points, fit.outliers
-    );
-    println!(
-        "  a = {:.4}   {level:.0} % interval [{:.4}, {:.4}]",
-        fit.a, fit.a_interval[0], fit.a_interval[1]
-    );
-    println!(
-        "  b = {:.4} N {level:.0} % interval [{:.4}, {:.4}]",
-        fit.b, fit.b_interval[0], fit.b_interval[1]
-    );
-    println!("  robust residual scale {:.4} N", fit.residual_scale_n);
-    if readings_dropped > 0 {
-        println!("  {readings_dropped} readings dropped (not ok, or no force sample close enough in time)");
+fn print_human(fits: &Fits, config: &SensorConfig, config_written: Option<&str>, dry_run: bool) {
+    if let Some(fit) = &fits.line {
+        let level = fit.confidence * 100.0;
+        println!(
+            "F = a * gamma + b from {} points ({} outliers given no weight)",
+            fit.points, fit.outliers
+        );
+        println!(
+            "  a = {:.4}   {level:.0} % interval [{:.4}, {:.4}]",
+            fit.a, fit.a_interval[0], fit.a_interval[1]
+        );
+        println!(
+            "  b = {:.4} N {level:.0} % interval [{:.4}, {:.4}]",
+            fit.b, fit.b_interval[0], fit.b_interval[1]
+        );
+        println!("  robust residual scale {:.4} N", fit.residual_scale_n);
+    }
+    if fits.readings_dropped > 0 {
+        println!(
+            "  {} readings dropped (not ok, or no force sample close enough in time)",
+            fits.readings_dropped
+        );
+    }
+    if let Some((fit, kpa)) = &fits.modulus {
+        let level = fit.confidence * 100.0;
+        println!(
+            "pad model: reference force = {:.4} x model force from {} inverse-mode readings ({} outliers), \
+             {level:.0} % interval [{:.4}, {:.4}], residual scale {:.4} N",
+            fit.scale, fit.points, fit.outliers, fit.scale_interval[0], fit.scale_interval[1], fit.residual_scale_n
+        );
+        println!(
+            "  shear modulus {:.2} kPa -> {kpa:.2} kPa",
+            config.elastic.shear_modulus_kpa
+        );
+    }
+    if let Some(map) = &fits.pad_map {
+        let r = map.residual;
+        println!(
+            "pad map on {}x{}: residual {:.4} mm RMS, {:.4} mm max, {} corners ({} left out)",
+            map.width, map.height, r.rms_mm, r.max_mm, r.points, r.outliers
+        );
     }
     match (config_written, dry_run) {
-        (Some(path), _) => println!("wrote calibration.a and calibration.b to {path}"),
+        (Some(path), _) => println!("wrote the fitted values to {path}"),
         (None, true) => println!("dry run: config left unchanged"),
         (None, false) => println!("no --config given: nothing written"),
     }
@@ -282,10 +470,10 @@ mod tests {
 
 {"frame":"c.jpg","ok":true,"gamma":0.75,"t":2.0}
 "#;
-        let (readings, skipped) = parse_readings(text).unwrap();
-        assert_eq!(skipped, 1);
+        let parsed = parse_readings(text).unwrap();
+        assert_eq!(parsed.skipped, 1);
         assert_eq!(
-            readings,
+            parsed.readings,
             vec![
                 TimedGamma {
                     time_s: 1.5,
@@ -297,17 +485,28 @@ mod tests {
                 }
             ]
         );
-        let messages = r#"{"schema_version":1,"frame_id":0,"capture_time_us":2500000,"estimate":{"gamma":0.25}}
+        assert!(parsed.model.is_empty());
+        let messages = r#"{"schema_version":1,"frame_id":0,"capture_time_us":2500000,"estimate":{"mode":"fast","contact":true,"gamma":0.25,"force_n":0.3}}
 {"schema_version":1,"frame_id":1,"capture_time_us":2600000,"estimate":null,"error":"no pattern"}
+{"schema_version":1,"frame_id":2,"capture_time_us":2700000,"estimate":{"mode":"inverse","contact":true,"gamma":0.5,"force_n":4.5}}
+{"schema_version":1,"frame_id":3,"capture_time_us":2800000,"estimate":{"mode":"inverse","contact":false,"gamma":0.01,"force_n":0.0}}
 "#;
-        let (readings, skipped) = parse_readings(messages).unwrap();
-        assert_eq!(skipped, 1);
+        let parsed = parse_readings(messages).unwrap();
+        assert_eq!(parsed.skipped, 1);
+        assert_eq!(parsed.readings.len(), 3);
         assert_eq!(
-            readings,
-            vec![TimedGamma {
+            parsed.readings[0],
+            TimedGamma {
                 time_s: 2.5,
                 gamma: 0.25
-            }]
+            }
+        );
+        // Only the inverse's force in contact is the pad model's: the fast mode's is the paper's line.
+        assert_eq!(parsed.model.len(), 1);
+        assert!(
+            (parsed.model[0].time_s - 2.7).abs() < 1e-12 && parsed.model[0].force_n == 4.5,
+            "{:?}",
+            parsed.model
         );
         let err = parse_readings(r#"{"ok":true,"gamma":1.0}"#).unwrap_err();
         assert!(format!("{err:#}").contains("line 1 has no time field"), "{err:#}");

@@ -1,0 +1,279 @@
+//! `nusense calibrate` on a simulated session, end to end: the pad model's modulus fitted from inverse-mode readings
+//! and a force/torque log, and the pad map fitted on a rest frame, each written into the sensor config and then
+//! used by the estimator on presses the calibration never saw.
+
+use std::path::Path;
+use std::process::Command;
+
+use image::RgbImage;
+use nusense_daemon::{ReadingMessage, SCHEMA_VERSION};
+use nusense_estimator::{Estimator, Mode, Reading, SensorConfig};
+use nusense_sim::{Contact, Renderer, Scene, SensorModel};
+
+const WIDTH: u32 = 640;
+const HEIGHT: u32 = 480;
+/// Seconds between presses in the session; the force log holds each press for +-0.1 s around its frame.
+const PRESS_PERIOD_S: f64 = 0.5;
+const LOG_RATE_HZ: f64 = 200.0;
+
+/// Round presses (position mm, normal force N) over the pad, 1.5-8 N: the calibration's.
+const TRAINING: [([f64; 2], f64); 8] = [
+    ([0.0, 0.0], 4.0),
+    ([-12.0, 6.0], 2.0),
+    ([10.0, -8.0], 6.5),
+    ([15.0, 9.0], 3.0),
+    ([-16.0, -10.0], 8.0),
+    ([5.0, 12.0], 5.0),
+    ([-6.0, -4.0], 1.5),
+    ([18.0, -2.0], 7.0),
+];
+/// Presses at other places and forces, never used to calibrate.
+const HELD_OUT: [([f64; 2], f64); 4] = [
+    ([-9.0, 5.0], 4.5),
+    ([12.0, 3.0], 2.5),
+    ([-3.0, -11.0], 7.5),
+    ([7.0, -6.0], 3.5),
+];
+
+struct Frames {
+    rest: RgbImage,
+    training: Vec<RgbImage>,
+    held_out: Vec<RgbImage>,
+}
+
+fn render() -> Frames {
+    let renderer = Renderer::new(SensorModel::real(WIDTH, HEIGHT)).unwrap();
+    let frame = |scene: &Scene, seed: u64| renderer.render(scene, [100.0; 4], seed).unwrap().0;
+    let press = |&(position, force): &([f64; 2], f64), seed: u64| {
+        frame(&Scene::with_contact(Contact::sphere(5.0, position, force)), seed)
+    };
+    Frames {
+        rest: frame(&Scene::rest(), 1),
+        training: TRAINING.iter().zip(100..).map(|(p, seed)| press(p, seed)).collect(),
+        held_out: HELD_OUT.iter().zip(200..).map(|(p, seed)| press(p, seed)).collect(),
+    }
+}
+
+fn estimate_all(config: &SensorConfig, rest: &RgbImage, frames: &[RgbImage]) -> Vec<Reading> {
+    let mut estimator = Estimator::new(config.clone(), Mode::Inverse, rest).unwrap();
+    frames.iter().map(|f| estimator.estimate(f).unwrap()).collect()
+}
+
+/// The session as the daemon records it (one reading message per line) and as an F/T sensor logs it (fz negative,
+/// pressing into the sensor).
+fn write_session(dir: &Path, readings: &[Reading]) -> (std::path::PathBuf, std::path::PathBuf) {
+    let time_of = |k: usize| 1.0 + PRESS_PERIOD_S * k as f64;
+    let mut lines = String::new();
+    for (k, reading) in readings.iter().enumerate() {
+        let capture_time_us = (time_of(k) * 1e6).round() as u64;
+        let message = ReadingMessage {
+            schema_version: SCHEMA_VERSION,
+            frame_id: k as u64,
+            file: None,
+            capture_time_us,
+            processed_time_us: capture_time_us + 5_000,
+            latency_ms: 5.0,
+            queue_ms: 0.0,
+            reference_frame_id: Some(0),
+            estimate: Some(reading.clone()),
+            error: None,
+            led: None,
+        };
+        lines += &serde_json::to_string(&message).unwrap();
+        lines.push('\n');
+    }
+    let mut log = String::from("timestamp,fx,fy,fz,tx,ty,tz\n");
+    let end_s = time_of(readings.len());
+    let samples = (end_s * LOG_RATE_HZ) as usize;
+    for i in 0..samples {
+        let t = i as f64 / LOG_RATE_HZ;
+        let force = TRAINING
+            .iter()
+            .enumerate()
+            .find(|(k, _)| (t - time_of(*k)).abs() <= 0.1)
+            .map_or(0.0, |(_, &(_, force))| force);
+        log += &format!("{t:.4},0.0,0.0,{:.4},0,0,0\n", -force);
+    }
+    let readings_path = dir.join("readings.jsonl");
+    let log_path = dir.join("ft.csv");
+    std::fs::write(&readings_path, lines).unwrap();
+    std::fs::write(&log_path, log).unwrap();
+    (readings_path, log_path)
+}
+
+fn calibrate(args: &[&str], extra: &[&Path]) -> serde_json::Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_nusense"))
+        .arg("calibrate")
+        .arg("--json")
+        .args(args)
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+fn config_with_modulus(kpa: f64) -> SensorConfig {
+    let mut config = SensorConfig::default();
+    config.elastic.shear_modulus_kpa = kpa;
+    config
+}
+
+#[test]
+fn the_fitted_modulus_makes_unseen_presses_read_their_force() {
+    let frames = render();
+    let dir = tempfile::tempdir().unwrap();
+    let mut fitted = Vec::new();
+    // Once from the default modulus and once from a config twice as stiff: the fit must not depend on the start.
+    for start_kpa in [SensorConfig::default().elastic.shear_modulus_kpa, 96.0] {
+        let start = config_with_modulus(start_kpa);
+        let readings = estimate_all(&start, &frames.rest, &frames.training);
+        assert!(
+            readings.iter().all(|r| r.touch.is_some()),
+            "every training press is a contact"
+        );
+        let (readings_path, log_path) = write_session(dir.path(), &readings);
+        let config_path = dir.path().join(format!("sensor-{start_kpa}.toml"));
+        std::fs::write(
+            &config_path,
+            format!("# bench sensor\n[elastic]\nshear_modulus_kpa = {start_kpa}\n"),
+        )
+        .unwrap();
+        let report = calibrate(
+            &["--readings"],
+            &[
+                &readings_path,
+                Path::new("--ft-log"),
+                &log_path,
+                Path::new("--config"),
+                &config_path,
+            ],
+        );
+        let modulus = &report["modulus"];
+        assert_eq!(modulus["points"], TRAINING.len(), "{report}");
+        assert_eq!(modulus["shear_modulus_kpa_before"], start_kpa, "{report}");
+        let written = SensorConfig::load(&config_path).unwrap();
+        assert_eq!(
+            written.elastic.shear_modulus_kpa,
+            modulus["shear_modulus_kpa"].as_f64().unwrap()
+        );
+        assert!(std::fs::read_to_string(&config_path)
+            .unwrap()
+            .starts_with("# bench sensor"));
+        fitted.push(written);
+    }
+    let (from_default, from_stiff) = (fitted[0].elastic.shear_modulus_kpa, fitted[1].elastic.shear_modulus_kpa);
+    assert!(
+        (from_default / from_stiff - 1.0).abs() < 0.03,
+        "the model's force is not proportional to 1/G: {from_default} kPa vs {from_stiff} kPa"
+    );
+
+    // On presses it never saw, the calibrated model reads the force: far closer than the uncalibrated one.
+    let uncalibrated = held_out_force_rms(&SensorConfig::default(), &frames);
+    let calibrated = held_out_force_rms(&fitted[1], &frames);
+    eprintln!("held-out force RMS: {uncalibrated:.3} N uncalibrated, {calibrated:.3} N with G = {from_stiff:.2} kPa");
+    assert!(
+        calibrated <= 0.5 * uncalibrated,
+        "calibration did not help: {calibrated:.3} N RMS against {uncalibrated:.3} N uncalibrated"
+    );
+}
+
+/// RMS error of the normal force over the held-out presses, N.
+fn held_out_force_rms(config: &SensorConfig, frames: &Frames) -> f64 {
+    let readings = estimate_all(config, &frames.rest, &frames.held_out);
+    let errors: Vec<f64> = readings
+        .iter()
+        .zip(&HELD_OUT)
+        .map(|(r, &(_, truth))| r.force_n() - truth)
+        .collect();
+    eprintln!(
+        "held-out force errors {errors:.3?} N at G = {:.2} kPa",
+        config.elastic.shear_modulus_kpa
+    );
+    (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt()
+}
+
+/// Issue 12's target for force over the whole pad: 0.3 N RMS on 1-8 N presses with one calibration.
+#[test]
+#[ignore = "known failure (issue 12): 0.31 N RMS on the held-out presses at 640x480 after calibration (the 7.5 N \
+            press at (-3, -11) mm reads 8.1 N); target 0.3 N"]
+fn one_calibration_reads_unseen_presses_within_the_issue_target() {
+    let frames = render();
+    let dir = tempfile::tempdir().unwrap();
+    let readings = estimate_all(&SensorConfig::default(), &frames.rest, &frames.training);
+    let (readings_path, log_path) = write_session(dir.path(), &readings);
+    let config_path = dir.path().join("sensor.toml");
+    calibrate(
+        &["--readings"],
+        &[
+            &readings_path,
+            Path::new("--ft-log"),
+            &log_path,
+            Path::new("--config"),
+            &config_path,
+        ],
+    );
+    let rms = held_out_force_rms(&SensorConfig::load(&config_path).unwrap(), &frames);
+    assert!(rms <= 0.3, "held-out force RMS {rms:.3} N");
+}
+
+#[test]
+fn the_pad_map_fitted_on_a_rest_frame_is_stored_and_reproduces_the_fresh_fit() {
+    let frames = render();
+    let dir = tempfile::tempdir().unwrap();
+    let rest_path = dir.path().join("rest.png");
+    frames.rest.save(&rest_path).unwrap();
+    let config_path = dir.path().join("sensor.toml");
+    std::fs::write(&config_path, "# bench sensor\n[calibration]\na = 3.09\nb = -1.14\n").unwrap();
+    let report = calibrate(&["--rest"], &[&rest_path, Path::new("--config"), &config_path]);
+    assert!(
+        report["a"].is_null() && report["modulus"].is_null(),
+        "only the map was asked for: {report}"
+    );
+    let residual = &report["pad_map"]["residual"];
+    assert_eq!(report["pad_map"]["width"], WIDTH, "{report}");
+    assert!(residual["rms_mm"].as_f64().unwrap() < 0.03, "{report}");
+    assert!(residual["points"].as_u64().unwrap() >= 160, "{report}");
+
+    let stored = SensorConfig::load(&config_path).unwrap();
+    assert_eq!(stored.calibration.a, 3.09, "other keys are kept");
+    assert!(stored.pad_map.is_some());
+    // With the stored map the estimator only re-fits the pose; on the same rest frame that is the same map.
+    let fresh = estimate_all(&SensorConfig::default(), &frames.rest, &frames.held_out);
+    let with_map = estimate_all(&stored, &frames.rest, &frames.held_out);
+    for ((a, b), (truth, _)) in fresh.iter().zip(&with_map).zip(&HELD_OUT) {
+        let (pa, pb) = (a.contact_mm().unwrap(), b.contact_mm().unwrap());
+        assert!(
+            (pa[0] - pb[0]).hypot(pa[1] - pb[1]) < 0.05,
+            "press at {truth:?}: {pa:?} mm fresh, {pb:?} mm with the stored map"
+        );
+        assert!(
+            (a.force_n() - b.force_n()).abs() < 0.02 * a.force_n().max(1.0),
+            "{} vs {} N",
+            a.force_n(),
+            b.force_n()
+        );
+    }
+}
+
+#[test]
+fn a_rest_frame_without_the_pattern_is_a_clear_error_and_the_config_is_left_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let blank = dir.path().join("blank.png");
+    RgbImage::from_pixel(WIDTH, HEIGHT, image::Rgb([20, 20, 20]))
+        .save(&blank)
+        .unwrap();
+    let config_path = dir.path().join("sensor.toml");
+    std::fs::write(&config_path, "# untouched\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_nusense"))
+        .args(["calibrate", "--rest"])
+        .arg(&blank)
+        .arg("--config")
+        .arg(&config_path)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("cannot find the pattern in the rest frame"), "{stderr}");
+    assert_eq!(std::fs::read_to_string(&config_path).unwrap(), "# untouched\n");
+}
