@@ -38,6 +38,8 @@ enum Command {
     Analyze(cli::analyze::Args),
     /// Fit the force calibration (F = a * gamma + b) and write it to the sensor config.
     Calibrate(cli::calibrate::Args),
+    /// The paper's experiments from a recording: calibration, repeatability, localisation.
+    Report(cli::report::Args),
     /// The synthetic sensor: render scenes and sweeps with ground truth.
     Sim(cli::sim::Args),
     /// Measure every estimator variant's speed against its error.
@@ -58,6 +60,7 @@ fn main() -> ExitCode {
         Command::Replay(args) => cli::replay::run(args),
         Command::Analyze(args) => cli::analyze::run(args),
         Command::Calibrate(args) => cli::calibrate::run(args),
+        Command::Report(args) => cli::report::run(args),
         Command::Sim(args) => cli::sim::run(args),
         Command::Bench(args) => cli::bench::run(args),
         Command::Hil(args) => cli::hil::run(args),

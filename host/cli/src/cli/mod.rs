@@ -12,5 +12,6 @@ pub mod info;
 pub mod led;
 pub mod record;
 pub mod replay;
+pub mod report;
 pub mod serve;
 pub mod sim;

@@ -33,6 +33,8 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Record a scripted session (MCAP, F/T log, ground truth) for `nusense report`.
+    Session(super::report::SessionArgs),
     /// Render one of the paper's experiments.
     Sweep {
         #[arg(value_enum)]
@@ -83,6 +85,7 @@ struct SensorArgs {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     match args.command {
+        Command::Session(args) => super::report::simulate(args),
         Command::Render { scene, out, json } => {
             let file = SceneFile::load(&scene)?;
             let frames: Vec<SweepFrame> = file
