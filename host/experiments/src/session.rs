@@ -12,9 +12,10 @@ use std::time::Instant;
 
 use nusense_daemon::pipeline::PublishedReading;
 use nusense_daemon::reading::SCHEMA_VERSION;
-use nusense_daemon::ReadingMessage;
 use nusense_daemon::record::{encode_jpeg, RecordError, RecordItem, Recorder, RecorderOptions};
+use nusense_daemon::ReadingMessage;
 use nusense_estimator::{EstimateError, Estimator, Mode, SensorConfig};
+use nusense_geometry::SquareIndex;
 use nusense_sim::{Contact, Damage, ModelError, RenderError, Renderer, Scene, SensorModel};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -142,6 +143,7 @@ pub struct FrameTruth {
     pub applied_n: f64,
     /// The force the pad's deformation corresponds to (equal to `applied_n` on an elastic pad), N.
     pub deformation_n: f64,
+    /// Where the pad is deformed (the sphere's place), while it is.
     pub position_mm: Option<[f64; 2]>,
 }
 
@@ -149,8 +151,10 @@ pub struct FrameTruth {
 pub struct DamageTruth {
     pub centre_mm: [f64; 2],
     pub radius_mm: f64,
-    /// Interior corners inside the damaged disc (see [`corners_lost`]).
+    /// Interior corners the damage costs (see [`corners_lost`]).
     pub corners_lost: usize,
+    /// Interior corners inside the disc: fewer, as the disc cuts squares whose far corners lie outside it.
+    pub corners_in_disc: usize,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -293,19 +297,55 @@ pub fn target_grid(grid: [usize; 2]) -> Vec<[f64; 2]> {
     ys.iter().flat_map(|&y| xs.iter().map(move |&x| [x, y])).collect()
 }
 
-/// The damaged pad's damage: the ink gone in a disc away from the touches.
-pub const DAMAGE_CENTRE_MM: [f64; 2] = [-13.0, 8.0];
+/// The damaged pad's damage: the ink gone in a disc away from the touches. It takes two yellow squares whole and
+/// leaves every other square it reaches most of its ink, so the lattice points it costs do not hinge on how little
+/// ink the detector still takes for a square (see [`corners_lost`] and its test).
+pub const DAMAGE_CENTRE_MM: [f64; 2] = [-13.0, 6.5];
 pub const DAMAGE_RADIUS_MM: f64 = 4.5;
 
-/// Interior corners that lie inside the damaged disc, on the pad at rest (the pattern's geometry). Corners just
-/// outside it may be lost too, when one of their squares loses most of its ink.
+/// A yellow square is found while more than this share of its ink is left: the detector keeps a yellow blob
+/// larger than 35 % of the pattern's typical square (the estimator's `detection/blobs.rs`).
+pub const MIN_INK_FOUND: f64 = 0.35;
+
+/// The share of a yellow square's ink outside the disc, on the pad at rest (sampled on a 48 x 48 grid).
+pub fn ink_kept(model: &SensorModel, square: SquareIndex, centre_mm: [f64; 2], radius_mm: f64) -> f64 {
+    const SAMPLES: usize = 48;
+    let pad = &model.pad;
+    let centre = pad.square_centre_mm(square);
+    let side = [
+        model.yellow_fill * pad.pitch_x_mm(),
+        model.yellow_fill * pad.pitch_y_mm(),
+    ];
+    let offset = |k: usize, axis: usize| ((k as f64 + 0.5) / SAMPLES as f64 - 0.5) * side[axis];
+    let kept = (0..SAMPLES * SAMPLES)
+        .filter(|k| {
+            let p = [centre[0] + offset(k % SAMPLES, 0), centre[1] + offset(k / SAMPLES, 1)];
+            (p[0] - centre_mm[0]).hypot(p[1] - centre_mm[1]) >= radius_mm
+        })
+        .count();
+    kept as f64 / (SAMPLES * SAMPLES) as f64
+}
+
+/// Interior corners the damage costs on the pad at rest. The estimator measures corner (r, c) as the midpoint of
+/// the two yellow squares of its 2 x 2 block, so a corner is lost with either of them, even outside the disc,
+/// and kept inside it while both squares keep enough ink; a square is lost when less than [`MIN_INK_FOUND`] of
+/// its ink is left.
 pub fn corners_lost(model: &SensorModel, centre_mm: [f64; 2], radius_mm: f64) -> usize {
-    model
-        .pad
-        .corners()
-        .filter(|&corner| {
-            let p = model.pad.corner_mm(corner);
-            (p[0] - centre_mm[0]).hypot(p[1] - centre_mm[1]) < radius_mm
+    let pad = &model.pad;
+    let lost = |row: u16, col: u16| {
+        let square = SquareIndex { row, col };
+        pad.is_yellow(square) && ink_kept(model, square, centre_mm, radius_mm) < MIN_INK_FOUND
+    };
+    pad.corners()
+        .filter(|c| {
+            [
+                (c.row, c.col),
+                (c.row, c.col + 1),
+                (c.row + 1, c.col),
+                (c.row + 1, c.col + 1),
+            ]
+            .into_iter()
+            .any(|(row, col)| lost(row, col))
         })
         .count()
 }
@@ -390,7 +430,8 @@ pub fn write_session(
                 time_s: start_s + frame_t,
                 applied_n: applied,
                 deformation_n: deformation,
-                position_mm: (applied > LIFT_OFF_N).then_some(position),
+                // A viscoelastic pad is still deformed for a while after the sphere lifts off: render that too.
+                position_mm: (applied.max(deformation) > LIFT_OFF_N).then_some(position),
             });
         }
     }
@@ -402,6 +443,14 @@ pub fn write_session(
         centre_mm: DAMAGE_CENTRE_MM,
         radius_mm: DAMAGE_RADIUS_MM,
         corners_lost: corners_lost(&model, DAMAGE_CENTRE_MM, DAMAGE_RADIUS_MM),
+        corners_in_disc: model
+            .pad
+            .corners()
+            .filter(|&c| {
+                let p = model.pad.corner_mm(c);
+                (p[0] - DAMAGE_CENTRE_MM[0]).hypot(p[1] - DAMAGE_CENTRE_MM[1]) < DAMAGE_RADIUS_MM
+            })
+            .count(),
     });
     let renderer = Renderer::new(model)?;
     let mut files = SessionFiles {
