@@ -38,7 +38,7 @@ enum Command {
     Analyze(cli::analyze::Args),
     /// Fit the force calibration (F = a * gamma + b) and write it to the sensor config.
     Calibrate(cli::calibrate::Args),
-    /// The paper's experiments from a recording: calibration, repeatability, localisation.
+    /// The paper's experiments from a recording: calibration, hysteresis, repeatability, localisation, damage.
     Report(cli::report::Args),
     /// The synthetic sensor: render scenes and sweeps with ground truth.
     Sim(cli::sim::Args),

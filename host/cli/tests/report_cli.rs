@@ -152,3 +152,126 @@ fn repeatability_report_counts_the_sessions_touches_where_they_were() {
     eprintln!("x drift {drift:.4} mm per touch (truth {true_drift:.4})");
     assert!((drift - true_drift).abs() < 0.1, "{drift} against {true_drift}");
 }
+
+/// The loop of `pairs` (reference force, value) as the report measures it, % of the values' full scale.
+fn loop_percent(pairs: &[(f64, f64)]) -> f64 {
+    nusense_experiments::hysteresis::cycles(pairs)
+        .iter()
+        .map(|c| c.hysteresis_percent)
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn hysteresis_report_measures_the_loop_the_viscoelastic_pad_traces() {
+    let dir = tempfile::tempdir().unwrap();
+    let truth = session("hysteresis", dir.path());
+    let frames = truth["frames"].as_array().unwrap();
+    // The loop the pad itself traces: its deformation (as a force) against the applied force.
+    let pad_loop: Vec<(f64, f64)> = frames
+        .iter()
+        .map(|f| (number(&f["applied_n"]), number(&f["deformation_n"])))
+        .collect();
+    let pad_percent = loop_percent(&pad_loop);
+    assert!(
+        pad_percent > 10.0,
+        "the session injects a visible loop: {pad_percent} %"
+    );
+
+    let recording = dir.path().join("session.mcap");
+    let ft = dir.path().join("ft.csv");
+    let offset = format!("{}", number(&truth["ft_offset_s"]));
+    let report = run_json(
+        &["report", "hysteresis", "--json", "--clock-offset", &offset, "--ft"],
+        &[&ft, &recording, Path::new("--out"), &dir.path().join("report")],
+    );
+    let result = &report["result"];
+    let measured = number(&result["max_percent"]);
+    let cycles = result["cycles"].as_array().unwrap().len();
+    eprintln!("hysteresis {measured:.2} % of full scale (the pad's loop {pad_percent:.2} %), {cycles} cycles");
+    assert_eq!(cycles, nusense_experiments::hysteresis::cycles(&pad_loop).len());
+    assert!(
+        (measured - pad_percent).abs() < 2.0,
+        "{measured} % against the pad's {pad_percent} %"
+    );
+
+    // Without the rig's clock offset the report cross-correlates, which takes the pad's lag for clock offset:
+    // the offset comes out early by that lag and the loop shrinks, and the report says so.
+    let correlated = run_json(
+        &["report", "hysteresis", "--json", "--ft"],
+        &[&ft, &recording, Path::new("--out"), &dir.path().join("correlated")],
+    );
+    let found = number(&correlated["result"]["clock_offset_s"]);
+    let shrunk = number(&correlated["result"]["max_percent"]);
+    eprintln!("cross-correlated: offset {found:.4} s (truth {offset}), hysteresis {shrunk:.2} %");
+    assert!(found < number(&truth["ft_offset_s"]) - 0.02, "{found}");
+    assert!(shrunk < measured - 5.0, "{shrunk} against {measured}");
+    let markdown = std::fs::read_to_string(dir.path().join("correlated/report.md")).unwrap();
+    assert!(markdown.contains("lower bound"), "{markdown}");
+}
+
+#[test]
+fn damage_report_counts_the_lattice_points_the_missing_ink_costs() {
+    use nusense_experiments::session::{ink_kept, DAMAGE_CENTRE_MM, DAMAGE_RADIUS_MM, MIN_INK_FOUND};
+
+    let dir = tempfile::tempdir().unwrap();
+    let truth = session("damage", dir.path());
+    let report = run_json(
+        &["report", "damage", "--json", "--intact"],
+        &[
+            &dir.path().join("intact.mcap"),
+            &dir.path().join("damaged.mcap"),
+            Path::new("--out"),
+            &dir.path().join("report"),
+        ],
+    );
+    let result = &report["result"];
+    let lost = number(&result["points_lost"]);
+    let true_lost = truth["damage"]["corners_lost"].as_u64().unwrap() as f64;
+    let in_disc = truth["damage"]["corners_in_disc"].as_u64().unwrap() as f64;
+    eprintln!("lost {lost} lattice points (truth {true_lost}; {in_disc} corners lie inside the disc)");
+    assert_eq!(number(&result["intact"]["points_detected"]), 165.0);
+    assert_eq!(lost, true_lost);
+    assert_eq!(
+        result["touches"].as_array().unwrap().len(),
+        truth["touches"].as_array().unwrap().len()
+    );
+
+    // The truth does not hinge on the detector's exact ink threshold: every square the disc reaches is either
+    // (nearly) gone or keeps most of its ink. And it tells the corner rule from the disc's: 7 corners go where
+    // the disc holds 6, as two whole squares take their corners beyond the disc with them.
+    let model = nusense_sim::SensorModel::real(160, 120);
+    let reached: Vec<f64> = model
+        .pad
+        .yellow_squares()
+        .map(|s| ink_kept(&model, s, DAMAGE_CENTRE_MM, DAMAGE_RADIUS_MM))
+        .filter(|&k| k < 1.0)
+        .collect();
+    assert!(reached.iter().all(|&k| k < 0.05 || k > 0.65), "{reached:?}");
+    assert_eq!(reached.iter().filter(|&&k| k < MIN_INK_FOUND).count(), 2, "{reached:?}");
+    assert_eq!((true_lost, in_disc), (7.0, 6.0));
+}
+
+#[test]
+fn a_lattice_point_goes_with_either_of_its_two_yellow_squares() {
+    use nusense_experiments::session::corners_lost;
+
+    let model = nusense_sim::SensorModel::real(160, 120);
+    // The yellow square nearest the pad's centre, and a disc that just covers it: its four corners go, though
+    // they lie just outside the disc, and no other (the diagonal squares' ink starts further out).
+    let square = model
+        .pad
+        .yellow_squares()
+        .min_by(|&a, &b| {
+            let r = |s| {
+                let p = model.pad.square_centre_mm(s);
+                p[0].hypot(p[1])
+            };
+            r(a).total_cmp(&r(b))
+        })
+        .unwrap();
+    let centre = model.pad.square_centre_mm(square);
+    let half_diagonal = 0.5 * model.yellow_fill * model.pad.pitch_x_mm().hypot(model.pad.pitch_y_mm());
+    assert_eq!(corners_lost(&model, centre, half_diagonal + 0.01), 4);
+    // A speck of missing ink costs nothing: the square's centroid is still found.
+    assert_eq!(corners_lost(&model, centre, 0.3), 0);
+}

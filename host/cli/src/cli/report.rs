@@ -8,32 +8,22 @@ use anyhow::{bail, Context};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 use nusense_experiments::calibration::{self, CalibrationOptions};
+use nusense_experiments::hysteresis::{self, Clock};
 use nusense_experiments::session::{write_session, SessionKind, SessionOptions};
-use nusense_experiments::{load_readings, localisation, repeatability};
+use nusense_experiments::{damage, load_readings, localisation, repeatability};
 
-/// The experiments with a report.
+/// The paper's experiments: each has a report and a simulated session.
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Kind {
     /// Readings against a force/torque log (--ft): clock offset, force line with intervals, residuals.
     Calibration,
+    /// Loading/unloading cycles in the force log (--ft): the loop and the hysteresis error, % of full scale.
+    Hysteresis,
     /// Repeated touches: peak force reading and location per touch, spread and drift.
     Repeatability,
     /// Touches at the targets of --targets, in order: error per target, bias, RMSE, map.
     Localisation,
-}
-
-/// The scripted sessions of the simulator (one per experiment of the paper).
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum SessionChoice {
-    /// Presses of different depths and speeds at the centre, with the F/T log.
-    Calibration,
-    /// Loading/unloading cycles on a viscoelastic pad, with the F/T log.
-    Hysteresis,
-    /// Repeated touches with drift and spread in force and position.
-    Repeatability,
-    /// Touches at a grid of known targets (targets.csv).
-    Localisation,
-    /// The same touches on an intact and on a damaged pad (intact.mcap, damaged.mcap).
+    /// RECORDING on a damaged pad against --intact: coverage, lattice points lost, change per touch.
     Damage,
 }
 
@@ -43,12 +33,20 @@ pub struct Args {
     pub kind: Kind,
     /// The recording (MCAP with readings, from `nusense record` or `nusense sim session`).
     pub recording: PathBuf,
-    /// Force/torque log (CSV: a time column and fx, fy, fz); calibration.
+    /// Force/torque log (CSV: a time column and fx, fy, fz); calibration and hysteresis.
     #[arg(long, value_name = "FT.csv")]
     pub ft: Option<PathBuf>,
     /// Targets (CSV with x_mm, y_mm), in the order they were touched; localisation.
     #[arg(long, value_name = "T.csv")]
     pub targets: Option<PathBuf>,
+    /// The same session on the intact pad; damage.
+    #[arg(long, value_name = "INTACT.mcap")]
+    pub intact: Option<PathBuf>,
+    /// Hysteresis: the F/T clock minus the camera clock, s, known from outside this recording (hardware sync, or
+    /// the calibration report on the same rig). Without it the offset is cross-correlated, which takes the pad's
+    /// lag for clock offset and shows a smaller loop than the pad has.
+    #[arg(long, value_name = "SECONDS", allow_hyphen_values = true)]
+    pub clock_offset: Option<f64>,
     /// Output folder for report.md, report.json and the plots.
     #[arg(long, default_value = "report")]
     pub out: PathBuf,
@@ -86,10 +84,26 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             };
             calibration::report(&readings, &forces, &options, &source)?
         }
+        Kind::Hysteresis => {
+            let forces = calibration::load_force_log(&needs(&args.ft, "--ft FT.csv")?)?;
+            let clock = match args.clock_offset {
+                Some(offset_s) => Clock::Given(offset_s),
+                None => Clock::CrossCorrelation {
+                    max_lag_s: args.max_lag,
+                },
+            };
+            hysteresis::report(&readings, &forces, clock, &source)?
+        }
         Kind::Repeatability => repeatability::report(&readings, &source)?,
         Kind::Localisation => {
             let targets = localisation::load_targets(&needs(&args.targets, "--targets T.csv")?)?;
             localisation::report(&readings, &targets, &source)?
+        }
+        Kind::Damage => {
+            let intact_path = needs(&args.intact, "--intact INTACT.mcap")?;
+            let (intact, _) =
+                load_readings(&intact_path).with_context(|| format!("reading {}", intact_path.display()))?;
+            damage::report(&intact, &readings, &intact_path.display().to_string(), &source)?
         }
     };
     let files = report.write(&args.out)?;
@@ -107,14 +121,13 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
 #[derive(clap::Args, Debug)]
 pub struct SessionArgs {
     #[arg(value_enum)]
-    pub kind: SessionChoice,
+    pub kind: Kind,
     /// Output folder: the recording(s), ft.csv, truth.json (and targets.csv for localisation).
     #[arg(long)]
     pub out: PathBuf,
     /// The documentation's session (320 x 240, 15 fps, 10 repetitions) instead of the short one of the tests.
     #[arg(long)]
     pub example: bool,
-    /// Seed of the session's script, rendering and F/T noise (default: the short session's 17).
     #[arg(long)]
     pub seed: Option<u64>,
     /// Print the ground truth as JSON.
@@ -132,11 +145,11 @@ pub fn simulate(args: SessionArgs) -> anyhow::Result<ExitCode> {
         options.seed = seed;
     }
     let kind = match args.kind {
-        SessionChoice::Calibration => SessionKind::Calibration,
-        SessionChoice::Hysteresis => SessionKind::Hysteresis,
-        SessionChoice::Repeatability => SessionKind::Repeatability,
-        SessionChoice::Localisation => SessionKind::Localisation,
-        SessionChoice::Damage => SessionKind::Damage,
+        Kind::Calibration => SessionKind::Calibration,
+        Kind::Hysteresis => SessionKind::Hysteresis,
+        Kind::Repeatability => SessionKind::Repeatability,
+        Kind::Localisation => SessionKind::Localisation,
+        Kind::Damage => SessionKind::Damage,
     };
     let progress = if args.json {
         ProgressBar::hidden()
