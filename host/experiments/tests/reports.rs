@@ -87,9 +87,11 @@ fn repeatability_counts_every_touch_and_follows_its_drift() {
 }
 
 #[test]
-#[ignore = "known failure: since fast mode's contact is the noise test's decision (not the paper line reaching the \
-            floor), each touch's run starts at the true zero-load reading, the 80 % hold window widens, and the RMSE \
-            on 160x120 frames is 1.32 mm against the 1 mm bound (0.50 mm before)"]
+#[ignore = "known failure of the estimator, not of the report: on 160x120 frames fast mode reports each 6 N press at \
+            (+-14, +-9) mm 0.85-1.7 mm further from the pad's centre than it is (5-10 % of the radius; 0.3 mm at \
+            5 mm in the repeatability session), in every frame of the hold, so the RMSE is 1.31 mm against the 1 mm \
+            bound. Every frame at the full 6 N is that far off, so no choice of hold window (from the run's minimum \
+            or from the rest reading, both inside the hold) brings it under"]
 fn localisation_error_against_the_targets_is_small() {
     let dir = tempfile::tempdir().unwrap();
     let files = write_session(
