@@ -243,6 +243,12 @@ fn problems(pipeline: &PipelineStatus, board: &BoardStatus, latest_error: Option
     if let Some(error) = latest_error {
         problems.push(format!("estimator: {error}"));
     }
+    if pipeline.encode_errors > 0 {
+        problems.push(format!(
+            "{} messages could not be written as JSON and were not sent (see the daemon's log)",
+            pipeline.encode_errors
+        ));
+    }
     problems
 }
 

@@ -98,12 +98,25 @@ pub enum PipelineError {
     NotRecording,
 }
 
+/// A message the pipeline could not write as JSON. serde_json writes a non-finite number as `null` and the
+/// messages are derived structs with string keys, so this is not expected to happen; should a change to a type
+/// ever make it happen, the message is logged, counted in the status (`encode_errors`) and not sent, rather than
+/// sent empty.
+#[derive(Debug, thiserror::Error)]
+#[error("the {what} could not be written as JSON")]
+pub struct EncodeError {
+    what: &'static str,
+    #[source]
+    source: serde_json::Error,
+}
+
 #[derive(Debug, Default)]
 struct Counters {
     frames_captured: AtomicU64,
     frames_processed: AtomicU64,
     capture_errors: AtomicU64,
     estimate_errors: AtomicU64,
+    encode_errors: AtomicU64,
     tares: AtomicU64,
 }
 
@@ -155,12 +168,19 @@ impl Shared {
     /// Hands an item to the recorder, if one runs. A recorder whose writer stopped (a full disk, an I/O error)
     /// is finished here and its failure kept for the status: recording ends, the pipeline goes on.
     fn record(&self, item: impl FnOnce() -> RecordItem) {
+        self.record_if_some(|| Some(item()));
+    }
+
+    /// [`Shared::record`] for an item that may fail to be made (`None`: nothing is recorded).
+    fn record_if_some(&self, item: impl FnOnce() -> Option<RecordItem>) {
         let mut slot = lock(&self.recording);
         let Some(recorder) = slot.active.as_ref() else {
             return;
         };
         if recorder.failure().is_none() {
-            recorder.record(item());
+            if let Some(item) = item() {
+                recorder.record(item);
+            }
             return;
         }
         let Some(recorder) = slot.active.take() else {
@@ -438,15 +458,30 @@ fn estimate_loop(config: SensorConfig, mode: Mode, shared: &Shared) {
     }
 }
 
+/// `value` as JSON; a failure is logged and counted in `counter` (see [`EncodeError`]).
+fn encode_json<T: Serialize>(value: &T, what: &'static str, counter: &AtomicU64) -> Result<String, EncodeError> {
+    serde_json::to_string(value).map_err(|source| {
+        let error = EncodeError { what, source };
+        counter.fetch_add(1, Ordering::Relaxed);
+        tracing::error!("{}", error_chain(&error));
+        error
+    })
+}
+
 fn publish(shared: &Shared, frame: QueuedFrame, mut message: ReadingMessage) {
-    let json = match serde_json::to_string(&message) {
+    let encode_errors = &shared.counters.encode_errors;
+    let json = match encode_json(&message, "reading", encode_errors) {
         Ok(json) => json,
         Err(error) => {
-            // Only a non-finite number could fail here, and the estimator promises none: publish the frame
-            // without its estimate, saying why, rather than nothing.
+            // The estimate is the one part made elsewhere (the estimator's crate, through its flat wire form):
+            // publish the frame without it, saying why, so that clients still see the frame go by.
             message.estimate = None;
-            message.error = Some(format!("the estimate could not be written as JSON: {error}"));
-            serde_json::to_string(&message).unwrap_or_default()
+            message.error = Some(error_chain(&error));
+            match encode_json(&message, "reading without its estimate", encode_errors) {
+                Ok(json) => json,
+                // Nothing is published for this frame; it is counted in the status.
+                Err(_) => return,
+            }
         }
     };
     let published = Arc::new(PublishedReading { message, json });
@@ -473,15 +508,17 @@ fn telemetry_loop(events: std::sync::mpsc::Receiver<BoardEvent>, shared: &Shared
         match events.recv_timeout(POLL_INTERVAL) {
             Ok(BoardEvent::Telemetry(telemetry)) => {
                 let time_us = unix_time_us();
-                shared.record(|| RecordItem::Telemetry {
-                    time_us,
-                    json: serde_json::to_string(&TimedTelemetry {
+                shared.record_if_some(|| {
+                    let message = TimedTelemetry {
                         schema_version: SCHEMA_VERSION,
                         time_us,
                         telemetry: &telemetry,
+                    };
+                    let json = encode_json(&message, "board telemetry", &shared.counters.encode_errors).ok()?;
+                    Some(RecordItem::Telemetry {
+                        time_us,
+                        json: json.into(),
                     })
-                    .unwrap_or_default()
-                    .into(),
                 });
             }
             Ok(_) => {}
@@ -507,6 +544,8 @@ pub struct PipelineStatus {
     pub frames_dropped: u64,
     pub capture_errors: u64,
     pub estimate_errors: u64,
+    /// Readings and telemetry messages that could not be written as JSON ([`EncodeError`]): logged, not sent.
+    pub encode_errors: u64,
     pub tares: u64,
     pub latency_ms: LatencySummary,
     /// The recording running now.
@@ -614,10 +653,67 @@ impl PipelineHandle {
             frames_dropped: shared.queue.dropped(),
             capture_errors: shared.counters.capture_errors.load(Ordering::Relaxed),
             estimate_errors: shared.counters.estimate_errors.load(Ordering::Relaxed),
+            encode_errors: shared.counters.encode_errors.load(Ordering::Relaxed),
             tares: shared.counters.tares.load(Ordering::Relaxed),
             latency_ms: lock(&shared.latency).summary(),
             recording,
             recording_failure,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A value whose serialisation fails, as a future type with a non-string map key or a failing
+    /// `Serialize` would.
+    struct Unwritable;
+
+    impl Serialize for Unwritable {
+        fn serialize<S: serde::Serializer>(&self, _: S) -> Result<S::Ok, S::Error> {
+            Err(serde::ser::Error::custom("no JSON for this"))
+        }
+    }
+
+    fn message(latency_ms: f64) -> ReadingMessage {
+        ReadingMessage {
+            schema_version: SCHEMA_VERSION,
+            frame_id: 7,
+            file: None,
+            capture_time_us: 1,
+            processed_time_us: 2,
+            latency_ms,
+            queue_ms: f64::INFINITY,
+            reference_frame_id: Some(0),
+            estimate: None,
+            error: None,
+            led: None,
+        }
+    }
+
+    #[test]
+    fn a_message_that_cannot_be_written_is_a_typed_error_and_counted_never_an_empty_string() {
+        let counter = AtomicU64::new(0);
+        let error = encode_json(&Unwritable, "reading", &counter).unwrap_err();
+        assert_eq!(counter.load(Ordering::Relaxed), 1);
+        assert_eq!(
+            error_chain(&error),
+            "the reading could not be written as JSON: no JSON for this"
+        );
+        encode_json(&Unwritable, "board telemetry", &counter).unwrap_err();
+        assert_eq!(counter.load(Ordering::Relaxed), 2);
+    }
+
+    /// Why the error is not expected: serde_json writes a non-finite number as null instead of failing.
+    #[test]
+    fn non_finite_numbers_are_written_as_null() {
+        let counter = AtomicU64::new(0);
+        let json = encode_json(&message(f64::NAN), "reading", &counter).unwrap();
+        let value: serde_json::Value = serde_json::from_str(&json).unwrap();
+        assert_eq!(value["latency_ms"], serde_json::Value::Null);
+        assert_eq!(value["queue_ms"], serde_json::Value::Null);
+        assert_eq!(value["frame_id"], 7);
+        assert_eq!(counter.load(Ordering::Relaxed), 0);
     }
 }
