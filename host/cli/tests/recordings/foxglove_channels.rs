@@ -5,12 +5,10 @@
 //!   `nusense replay` replays it, and a recording of the first format (JSON frames) too.
 //! - `nusense serve --foxglove` serves the same channels to a Foxglove WebSocket client.
 
-mod daemon_common;
-
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use foxglove::messages::{CameraCalibration, CompressedImage, ImageAnnotations};
@@ -18,24 +16,9 @@ use foxglove::Decode;
 use futures_util::{SinkExt, StreamExt};
 use nusense_daemon::record::{ANNOTATIONS_TOPIC, CALIBRATION_TOPIC, FRAME_TOPIC, READING_TOPIC, TELEMETRY_TOPIC};
 
-const FRAMES: u64 = 20;
+use crate::support::{nusense, python_reports, record_command, HEIGHT, WIDTH};
 
-fn python_report(path: &Path) -> serde_json::Value {
-    let python = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../.venv/bin/python");
-    assert!(
-        python.exists(),
-        "{} is missing: `scripts/setup test` creates it",
-        python.display()
-    );
-    let output = Command::new(python)
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/mcap_check.py"))
-        .arg("--decode")
-        .arg(path)
-        .output()
-        .expect("run the Python reader");
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    serde_json::from_slice(&output.stdout).expect("one JSON report")
-}
+const FRAMES: u64 = 20;
 
 fn is_jpeg(bytes: &[u8]) -> bool {
     bytes.starts_with(&[0xFF, 0xD8]) && bytes.ends_with(&[0xFF, 0xD9])
@@ -85,24 +68,15 @@ fn check_message(schema: &str, data: &[u8], width: u32, height: u32) {
 fn a_recording_carries_foxglove_schemas_that_every_reader_decodes() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("foxglove.mcap");
-    let status = Command::new(daemon_common::nusense_binary())
-        .args([
-            "record",
-            path.to_str().unwrap(),
-            "--sim",
-            "--width",
-            "320",
-            "--height",
-            "240",
-        ])
-        .args(["--frames", &FRAMES.to_string()])
-        .stdout(Stdio::null())
+    let status = record_command(&path, &["--frames", &FRAMES.to_string()])
         .status()
         .unwrap();
     assert!(status.success());
 
     // The reference Python reader, in its own process: every message decodes against the file's own schema.
-    let report = python_report(&path);
+    let reports = python_reports(std::slice::from_ref(&path), true);
+    assert_eq!(reports.len(), 1, "one JSON report: {reports:?}");
+    let report = &reports[&path];
     assert!(report["stopped_by"].is_null(), "{report}");
     assert_eq!(report["decoded"], report["messages"], "{report}");
     assert_eq!(report["indexed_messages"], report["messages"], "{report}");
@@ -129,7 +103,7 @@ fn a_recording_carries_foxglove_schemas_that_every_reader_decodes() {
     for message in mcap::MessageStream::new(&bytes).unwrap() {
         let message = message.unwrap();
         let schema = message.channel.schema.as_ref().expect("every channel has a schema");
-        check_message(&schema.name, &message.data, 320, 240);
+        check_message(&schema.name, &message.data, WIDTH, HEIGHT);
         schemas.insert(schema.name.clone());
         count += 1;
     }
@@ -154,7 +128,7 @@ fn a_recording_carries_foxglove_schemas_that_every_reader_decodes() {
     assert_eq!(lens, config["camera"]);
 
     // It replays.
-    let replay = Command::new(daemon_common::nusense_binary())
+    let replay = nusense()
         .args(["replay", path.to_str().unwrap(), "--json"])
         .output()
         .unwrap();
@@ -203,7 +177,7 @@ fn a_recording_of_the_first_format_still_replays() {
         }
         writer.finish().unwrap();
     }
-    let replay = Command::new(daemon_common::nusense_binary())
+    let replay = nusense()
         .args(["replay", path.to_str().unwrap(), "--json"])
         .output()
         .unwrap();
@@ -212,14 +186,14 @@ fn a_recording_of_the_first_format_still_replays() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn serve_foxglove_streams_the_channels_to_a_websocket_client() {
-    let mut child = Command::new(daemon_common::nusense_binary())
+    let mut child = nusense()
         .args([
             "serve",
             "--sim",
             "--width",
-            "320",
+            &WIDTH.to_string(),
             "--height",
-            "240",
+            &HEIGHT.to_string(),
             "--listen",
             "127.0.0.1:0",
         ])
@@ -296,7 +270,7 @@ async fn serve_foxglove_streams_the_channels_to_a_websocket_client() {
                 assert_eq!(bytes[0], 1, "message data");
                 let subscription = u32::from_le_bytes(bytes[1..5].try_into().unwrap()) as u64;
                 let (topic, schema) = channels[&subscription].clone();
-                check_message(&schema, &bytes[13..], 320, 240);
+                check_message(&schema, &bytes[13..], WIDTH, HEIGHT);
                 *received.entry(topic).or_default() += 1;
             }
             _ => {}

@@ -6,15 +6,14 @@
 //! in order. `nusense record --recover` must turn each into a finished file whose summary counts those messages
 //! and through whose chunk index a seeking reader reads them all.
 
-mod daemon_common;
-
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 use mcap::records::{op, Record};
 use rand::{Rng, SeedableRng};
+
+use crate::support::{nusense, python_reports, record_command};
 
 const RUNS: usize = 20;
 const FLUSH_MS: u64 = 100;
@@ -94,53 +93,9 @@ fn mcap_crate_messages(bytes: &[u8]) -> Vec<MessageKey> {
         .collect()
 }
 
-fn python() -> PathBuf {
-    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../.venv/bin/python");
-    assert!(
-        venv.exists(),
-        "{} is missing: `scripts/setup test` creates it (the reference Python MCAP reader)",
-        venv.display()
-    );
-    venv
-}
-
-/// One JSON report per file from the reference Python reader, run as its own process.
-fn python_reports(files: &[PathBuf]) -> HashMap<PathBuf, serde_json::Value> {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/mcap_check.py");
-    let output = Command::new(python())
-        .arg(script)
-        .args(files)
-        .output()
-        .expect("run the Python reader");
-    assert!(
-        output.status.success(),
-        "python: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8(output.stdout)
-        .unwrap()
-        .lines()
-        .map(|line| {
-            let report: serde_json::Value = serde_json::from_str(line).unwrap();
-            (PathBuf::from(report["path"].as_str().unwrap()), report)
-        })
-        .collect()
-}
-
 fn spawn_recorder(path: &Path, extra: &[&str]) -> Child {
-    Command::new(daemon_common::nusense_binary())
-        .args([
-            "record",
-            path.to_str().unwrap(),
-            "--sim",
-            "--width",
-            "320",
-            "--height",
-            "240",
-        ])
-        .args(["--flush-ms", &FLUSH_MS.to_string()])
+    record_command(path, &["--flush-ms", &FLUSH_MS.to_string()])
         .args(extra)
-        .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
         .expect("spawn nusense record")
@@ -148,7 +103,7 @@ fn spawn_recorder(path: &Path, extra: &[&str]) -> Child {
 
 fn recover(input: &Path) -> PathBuf {
     let output = input.with_extension("recovered.mcap");
-    let status = Command::new(daemon_common::nusense_binary())
+    let status = nusense()
         .args(["record", "--recover"])
         .args([input, &output])
         .stdout(Stdio::null())
@@ -205,7 +160,7 @@ fn killed_and_cut_recordings_read_to_their_last_whole_chunk_in_every_reader() {
     let recovered: Vec<PathBuf> = files.iter().map(|f| recover(f)).collect();
     let mut python_files = files.clone();
     python_files.extend(recovered.iter().cloned());
-    let reports = python_reports(&python_files);
+    let reports = python_reports(&python_files, false);
 
     eprintln!(
         "{:<28} {:>9} {:>6} {:>7} {:>9} {:>7} {:>10}",
