@@ -1,7 +1,7 @@
 //! The dashboard in headless Chromium (Debian's chromium + chromedriver, driven over WebDriver's HTTP API)
 //! against `nusense serve` on the simulator, checked by the pixels of a screenshot as well as by the page: the
 //! camera shows (not a black panel), the lattice is drawn over it, and the contact marker sits over the contact
-//! where the simulator pressed.
+//! where the simulator pressed; a full disk is said in words.
 
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -363,5 +363,85 @@ async fn dashboard_shows_the_camera_with_its_overlay_and_follows_the_contact() {
         .await;
     driver
         .wait_for(PAGE_STATE, Duration::from_secs(60), |s| s["contact"] == json!("no"))
+        .await;
+}
+
+/// The `.error` colour of the page's style (#ff8a80), as text anti-aliasing leaves its cores.
+fn is_error_text(p: [u8; 4]) -> bool {
+    p[0] > 220 && (110..170).contains(&p[1]) && (100..160).contains(&p[2])
+}
+
+/// A disk that fills up while the dashboard records: the page says so in words, in red, from the status's
+/// `recording_failure` (the recording panel, beside the problems banner), and its readings go on.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn dashboard_says_in_words_that_the_disk_is_full_and_keeps_showing_readings() {
+    let mut options = Options::sim(320, 240, 15.0);
+    options.small_disk_kib = Some(256);
+    let daemon = Daemon::start(options);
+    let driver = Driver::start().await;
+    driver.goto(&daemon.url("/")).await;
+    driver
+        .wait_for(PAGE_STATE, Duration::from_secs(60), |s| s["live"] == json!("live"))
+        .await;
+
+    // Recording started from the page, as a user does.
+    driver
+        .eval(
+            "document.getElementById('record-name').value = 'big.mcap'; \
+             document.getElementById('record').click(); return true;",
+        )
+        .await;
+    const RECORD_STATE: &str = "const e = document.getElementById('record-state'); \
+        return { text: e.textContent, class: e.className };";
+    let shown = driver
+        .wait_for(RECORD_STATE, Duration::from_secs(60), |s| {
+            s["text"].as_str().is_some_and(|t| t.contains("the disk is full"))
+        })
+        .await;
+    let status = daemon.status().await;
+    let failure = &status["pipeline"]["recording_failure"];
+    assert_eq!(failure["disk_full"], json!(true), "{status}");
+    // The words are the recording failure's own (the problems banner carries other words).
+    assert_eq!(
+        shown["text"].as_str().unwrap(),
+        format!("stopped: the disk is full — {}", failure["error"].as_str().unwrap()),
+        "{shown}"
+    );
+    assert_eq!(shown["class"], json!("error"), "{shown}");
+    assert_eq!(
+        driver.text("record").await,
+        "Start recording",
+        "the page knows nothing records now"
+    );
+    let problems = driver
+        .eval("const p = document.getElementById('problems'); return p.hidden ? null : p.textContent;")
+        .await;
+    assert!(
+        problems
+            .as_str()
+            .is_some_and(|p| p.contains("recording stopped: the disk is full")),
+        "problems banner: {problems}"
+    );
+
+    // And a user sees it: the panel's words are drawn in the error colour.
+    driver
+        .eval("document.getElementById('record-state').scrollIntoView(); return true;")
+        .await;
+    let shot = driver.screenshot().await;
+    let words = element_rect(&driver, "record-state").await;
+    let red = words.pixels(&shot).filter(|(_, _, p)| is_error_text(*p)).count();
+    assert!(red > 100, "the failure is not drawn in red: {red} pixels");
+
+    // The readings go on after the disk filled.
+    let frame_id = |s: &Value| {
+        s["frame"]
+            .as_str()
+            .and_then(|f| f.split(' ').next()?.parse::<u64>().ok())
+    };
+    let then = frame_id(&driver.eval(PAGE_STATE).await).expect("the page shows a frame id");
+    driver
+        .wait_for(PAGE_STATE, Duration::from_secs(60), |s| {
+            s["live"] == json!("live") && frame_id(s) > Some(then + 5)
+        })
         .await;
 }
