@@ -156,8 +156,29 @@ impl Driver {
 
 impl Drop for Driver {
     fn drop(&mut self) {
+        // Killing chromedriver alone leaves its browser running, adopted by init, after every test: ending the
+        // WebDriver session quits the browser first.
+        quit_session(&self.base, &self.session);
         let _ = self.process.kill();
         let _ = self.process.wait();
+    }
+}
+
+/// `DELETE /session/{id}` over a plain socket, since `drop` cannot await.
+fn quit_session(base: &str, session: &str) {
+    use std::io::{Read, Write};
+    let Some(addr) = base.strip_prefix("http://") else {
+        return;
+    };
+    let Ok(mut stream) = std::net::TcpStream::connect(addr) else {
+        return;
+    };
+    let _ = stream.set_read_timeout(Some(Duration::from_secs(20)));
+    let request =
+        format!("DELETE /session/{session} HTTP/1.1\r\nHost: {addr}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n");
+    if stream.write_all(request.as_bytes()).is_ok() {
+        // The answer comes once the browser has quit.
+        let _ = stream.read_to_end(&mut Vec::new());
     }
 }
 
