@@ -1,4 +1,5 @@
-//! Small statistics over measured samples (hil checks, benchmarks): percentiles, mean and spread, correlation.
+//! Small statistics over measured samples (hil checks, benchmarks, the experiments' reports): percentiles, mean and
+//! spread, correlation.
 //! Empty or degenerate input gives `None`, never NaN.
 
 /// The `q`-quantile (0..=1) by linear interpolation between order statistics; `None` for no samples.
@@ -27,6 +28,17 @@ pub fn mean(samples: &[f64]) -> Option<f64> {
 pub fn std_dev(samples: &[f64]) -> Option<f64> {
     let centre = mean(samples)?;
     let variance = samples.iter().map(|v| (v - centre).powi(2)).sum::<f64>() / samples.len() as f64;
+    let value = variance.sqrt();
+    value.is_finite().then_some(value)
+}
+
+/// Sample standard deviation (n - 1: the spread of the population the samples come from); `None` below two.
+pub fn sample_std_dev(samples: &[f64]) -> Option<f64> {
+    if samples.len() < 2 {
+        return None;
+    }
+    let centre = mean(samples)?;
+    let variance = samples.iter().map(|v| (v - centre).powi(2)).sum::<f64>() / (samples.len() - 1) as f64;
     let value = variance.sqrt();
     value.is_finite().then_some(value)
 }
@@ -69,6 +81,9 @@ mod tests {
     #[test]
     fn spread_and_correlation() {
         assert_eq!(std_dev(&[2.0, 4.0, 4.0, 4.0, 5.0, 5.0, 7.0, 9.0]), Some(2.0));
+        let sample = sample_std_dev(&[2.0, 4.0, 4.0, 4.0, 5.0, 5.0, 7.0, 9.0]).unwrap();
+        assert!((sample - (32.0f64 / 7.0).sqrt()).abs() < 1e-12);
+        assert_eq!(sample_std_dev(&[3.0]), None);
         let x = [1.0, 2.0, 3.0, 4.0];
         let y = [2.0, 4.1, 5.9, 8.0];
         assert!(pearson(&x, &y).unwrap() > 0.99);

@@ -12,7 +12,9 @@ use serde::Serialize;
 use crate::plot::{Chart, Series, Style};
 use crate::recording::SessionReading;
 use crate::report::{plot, read_text, table, Report, ReportError};
-use crate::stats::{correlation, interpolate, median};
+use nusense_estimator::stats::{pearson, quantile};
+
+use crate::stats::interpolate;
 
 /// The paper's calibration of the original sensor (F = 3.09 gamma - 1.14 N, fitted over 1-8 N).
 pub const PAPER_LINE: (f64, f64) = (3.09, -1.14);
@@ -85,12 +87,17 @@ pub fn find_clock_offset(
     };
     let nominal = first_force.time_s - first_reading.time_s;
     let centre = if nominal.abs() > SAME_CLOCK_S { nominal } else { 0.0 };
-    let force_step = median(&forces.windows(2).map(|w| w[1].time_s - w[0].time_s).collect::<Vec<_>>()).unwrap_or(0.01);
-    let frame_step = median(
+    let force_step = quantile(
+        &forces.windows(2).map(|w| w[1].time_s - w[0].time_s).collect::<Vec<_>>(),
+        0.5,
+    )
+    .unwrap_or(0.01);
+    let frame_step = quantile(
         &readings
             .windows(2)
             .map(|w| w[1].time_s - w[0].time_s)
             .collect::<Vec<_>>(),
+        0.5,
     )
     .unwrap_or(0.1);
     let lag_step_s = force_step.min(frame_step / 4.0).max(1e-4);
@@ -105,7 +112,7 @@ pub fn find_clock_offset(
         }
         // Half the readings at least, so that a lag cannot win on a sliver of overlap.
         (gamma.len() * 2 >= readings.len())
-            .then(|| correlation(&gamma, &force))
+            .then(|| pearson(&gamma, &force))
             .flatten()
     };
     let curve: Vec<(f64, f64)> = (-steps..=steps)
@@ -177,7 +184,11 @@ pub fn analyse(
     options: &CalibrationOptions,
 ) -> Result<CalibrationResult, ReportError> {
     let clock = find_clock_offset(readings, forces, options.max_lag_s)?;
-    let force_step = median(&forces.windows(2).map(|w| w[1].time_s - w[0].time_s).collect::<Vec<_>>()).unwrap_or(0.01);
+    let force_step = quantile(
+        &forces.windows(2).map(|w| w[1].time_s - w[0].time_s).collect::<Vec<_>>(),
+        0.5,
+    )
+    .unwrap_or(0.01);
     let timed: Vec<TimedGamma> = readings
         .iter()
         .map(|r| TimedGamma {

@@ -8,7 +8,7 @@ use crate::recording::SessionReading;
 use crate::repeatability::HOLD_FRACTION;
 use crate::report::{plot, table, Report, ReportError};
 use crate::segment::{touches, Touch};
-use crate::stats::median;
+use nusense_estimator::stats::quantile;
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct PadCoverage {
@@ -23,7 +23,8 @@ pub struct PadCoverage {
 
 fn coverage(readings: &[SessionReading]) -> Result<PadCoverage, ReportError> {
     let at_rest: Vec<&SessionReading> = readings.iter().filter(|r| !r.contact).collect();
-    let pick = |f: fn(&SessionReading) -> usize| median(&at_rest.iter().map(|r| f(r) as f64).collect::<Vec<_>>());
+    let pick =
+        |f: fn(&SessionReading) -> usize| quantile(&at_rest.iter().map(|r| f(r) as f64).collect::<Vec<_>>(), 0.5);
     let (Some(points_detected), Some(points_valid)) = (pick(|r| r.points_detected), pick(|r| r.points_valid)) else {
         return Err(ReportError::NotEnoughData {
             what: "damage",

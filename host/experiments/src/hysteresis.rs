@@ -19,7 +19,9 @@ use crate::calibration::{find_clock_offset, ClockOffset};
 use crate::plot::{Chart, Series, Style};
 use crate::recording::SessionReading;
 use crate::report::{plot, table, Report, ReportError};
-use crate::stats::{interpolate, mean};
+use nusense_estimator::stats::mean;
+
+use crate::stats::interpolate;
 
 const CYCLE_THRESHOLD: f64 = 0.05;
 const BINS: usize = 8;

@@ -7,7 +7,9 @@ use crate::plot::{Chart, Series, Style};
 use crate::recording::SessionReading;
 use crate::report::{plot, table, Report, ReportError};
 use crate::segment::{touches, Touch};
-use crate::stats::{least_squares, mean, std_dev};
+use nusense_estimator::stats::{mean, sample_std_dev};
+
+use crate::stats::least_squares;
 
 /// Positions are averaged over the frames within this fraction of the touch's peak force (the hold).
 pub const HOLD_FRACTION: f64 = 0.8;
@@ -33,7 +35,7 @@ fn spread(values: &[f64]) -> Option<Spread> {
     let index: Vec<f64> = (0..values.len()).map(|i| i as f64).collect();
     Some(Spread {
         mean: mean(values)?,
-        std_dev: std_dev(values)?,
+        std_dev: sample_std_dev(values)?,
         drift_per_touch: least_squares(&index, values)?.slope,
     })
 }

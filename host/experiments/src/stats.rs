@@ -1,45 +1,6 @@
-//! Small statistics shared by the reports.
+//! The reports' line fit and interpolation; mean, spread, median and correlation are `nusense_estimator::stats`.
 
-/// Mean; `None` for an empty slice.
-pub fn mean(values: &[f64]) -> Option<f64> {
-    (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64)
-}
-
-/// Sample standard deviation (n - 1); `None` below two values.
-pub fn std_dev(values: &[f64]) -> Option<f64> {
-    let m = mean(values)?;
-    (values.len() >= 2)
-        .then(|| (values.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (values.len() - 1) as f64).sqrt())
-}
-
-pub fn median(values: &[f64]) -> Option<f64> {
-    let mut sorted: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
-    if sorted.is_empty() {
-        return None;
-    }
-    sorted.sort_by(f64::total_cmp);
-    let mid = sorted.len() / 2;
-    Some(if sorted.len() % 2 == 1 {
-        sorted[mid]
-    } else {
-        0.5 * (sorted[mid - 1] + sorted[mid])
-    })
-}
-
-/// Pearson correlation; `None` when either side does not vary or fewer than three pairs.
-pub fn correlation(x: &[f64], y: &[f64]) -> Option<f64> {
-    if x.len() != y.len() || x.len() < 3 {
-        return None;
-    }
-    let (mx, my) = (mean(x)?, mean(y)?);
-    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
-    for (a, b) in x.iter().zip(y) {
-        sxy += (a - mx) * (b - my);
-        sxx += (a - mx).powi(2);
-        syy += (b - my).powi(2);
-    }
-    (sxx > 0.0 && syy > 0.0).then(|| sxy / (sxx * syy).sqrt())
-}
+use nusense_estimator::stats::mean;
 
 /// Ordinary least-squares line y = slope * x + intercept.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -86,15 +47,9 @@ mod tests {
     use super::*;
 
     #[test]
-    fn statistics_of_known_samples() {
-        let v = [2.0, 4.0, 4.0, 4.0, 5.0, 5.0, 7.0, 9.0];
-        assert_eq!(mean(&v), Some(5.0));
-        assert!((std_dev(&v).unwrap() - (32.0f64 / 7.0).sqrt()).abs() < 1e-12);
-        assert_eq!(median(&v), Some(4.5));
+    fn a_line_through_known_points_and_interpolation_inside_a_series() {
         let line = least_squares(&[0.0, 1.0, 2.0], &[1.0, 3.0, 5.0]).unwrap();
         assert!((line.slope - 2.0).abs() < 1e-12 && (line.intercept - 1.0).abs() < 1e-12);
-        assert!((correlation(&[0.0, 1.0, 2.0], &[5.0, 3.0, 1.0]).unwrap() + 1.0).abs() < 1e-12);
-        assert_eq!(correlation(&[1.0, 1.0, 1.0], &[0.0, 1.0, 2.0]), None);
         let series = [(0.0, 0.0), (1.0, 10.0), (3.0, 30.0)];
         assert_eq!(interpolate(&series, 2.0), Some(20.0));
         assert_eq!(interpolate(&series, 0.0), Some(0.0));
