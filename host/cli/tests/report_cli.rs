@@ -275,3 +275,62 @@ fn a_lattice_point_goes_with_either_of_its_two_yellow_squares() {
     // A speck of missing ink costs nothing: the square's centroid is still found.
     assert_eq!(corners_lost(&model, centre, 0.3), 0);
 }
+
+#[test]
+fn localisation_report_locates_each_touch_where_the_estimator_saw_its_hold() {
+    let dir = tempfile::tempdir().unwrap();
+    let truth = session("localisation", dir.path());
+    let recording = dir.path().join("session.mcap");
+    let report = run_json(
+        &["report", "localisation", "--json", "--targets"],
+        &[
+            &dir.path().join("targets.csv"),
+            &recording,
+            Path::new("--out"),
+            &dir.path().join("report"),
+        ],
+    );
+    let found = report["result"]["targets"].as_array().unwrap();
+    let touches = truth["touches"].as_array().unwrap();
+    assert_eq!(found.len(), touches.len());
+    assert_eq!(report["result"]["unlocated"], 0);
+
+    // The estimator's contacts over the frames where the full force was applied (the truth's hold): the report
+    // must give each touch that location, whatever the estimator's own error against the target.
+    let (readings, _) = nusense_experiments::load_readings(&recording).unwrap();
+    let frames: HashMap<u64, &Value> = truth["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| (f["frame_id"].as_u64().unwrap(), f))
+        .collect();
+    for (target, touch) in found.iter().zip(touches) {
+        let (start, end, peak) = (
+            number(&touch["start_s"]),
+            number(&touch["end_s"]),
+            number(&touch["peak_n"]),
+        );
+        let hold: Vec<[f64; 2]> = readings
+            .iter()
+            .filter(|r| {
+                let f = frames[&r.frame_id];
+                let t = number(&f["time_s"]);
+                t >= start && t <= end && (number(&f["applied_n"]) - peak).abs() < 1e-9
+            })
+            .filter_map(|r| r.contact_mm)
+            .collect();
+        assert!(hold.len() >= 4, "{hold:?}");
+        let n = hold.len() as f64;
+        let expected = [
+            hold.iter().map(|p| p[0]).sum::<f64>() / n,
+            hold.iter().map(|p| p[1]).sum::<f64>() / n,
+        ];
+        let measured = [number(&target["measured_mm"][0]), number(&target["measured_mm"][1])];
+        let gap = (measured[0] - expected[0]).hypot(measured[1] - expected[1]);
+        eprintln!(
+            "target {}: reported {measured:.3?}, the hold's mean {expected:.3?} ({gap:.3} mm apart)",
+            touch["position_mm"]
+        );
+        assert!(gap < 0.15, "{measured:?} against the hold's {expected:?}");
+    }
+}
