@@ -86,7 +86,8 @@ fn largest_gap(loading: &[(f64, f64)], unloading: &[(f64, f64)]) -> Option<(f64,
     };
     let ((lo_l, hi_l), (lo_u, hi_u)) = (span(loading), span(unloading));
     let (lo, hi) = (lo_l.max(lo_u), hi_l.min(hi_u));
-    if !(hi > lo) {
+    // Branches that share no range of force (or NaN spans) have no gap to measure.
+    if hi.is_nan() || lo.is_nan() || hi <= lo {
         return None;
     }
     let width = (hi - lo) / BINS as f64;
