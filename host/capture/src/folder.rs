@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use super::{read_image_file, CaptureError, CapturedImage, FrameSource, SourceInfo};
+use super::{read_image_file, CaptureError, Frame, FrameSource, SourceInfo};
 
 pub struct ImageFolder {
     folder: PathBuf,
@@ -36,7 +36,7 @@ impl ImageFolder {
             .collect();
         files.sort();
         let first = files.first().ok_or_else(|| CaptureError::Empty(path_text.clone()))?;
-        let size = image::image_dimensions(first).map_err(|e| CaptureError::Decode {
+        let size = image::image_dimensions(first).map_err(|e| CaptureError::Image {
             origin: first.display().to_string(),
             message: e.to_string(),
         })?;
@@ -82,7 +82,7 @@ impl FrameSource for ImageFolder {
         }
     }
 
-    fn next_frame(&mut self) -> Result<CapturedImage, CaptureError> {
+    fn next_frame(&mut self) -> Result<Frame, CaptureError> {
         if self.next >= self.files.len() {
             if !self.looping {
                 return Err(CaptureError::EndOfStream);
@@ -119,7 +119,7 @@ mod tests {
         assert_eq!(folder.len(), 3);
         assert_eq!((folder.info().width, folder.info().height), (8, 6));
         let shades: Vec<u8> = (0..3)
-            .map(|_| folder.next_frame().unwrap().image.get_pixel(0, 0)[0])
+            .map(|_| folder.next_frame().unwrap().to_rgb().unwrap().get_pixel(0, 0)[0])
             .collect();
         assert_eq!(&shades[..2], &[10, 20]);
         assert!(shades[2] > 150, "JPEG frame decoded: {shades:?}");

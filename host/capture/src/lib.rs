@@ -1,40 +1,101 @@
-//! Where frames come from: a V4L2 camera, a recording (image folder or MCAP), or the simulated sensor.
-//! Every source hands out RGB frames in raw px with the time they were captured; pacing (the camera's own
-//! clock, the recording's timestamps or the simulator's frame rate) is the source's business.
+//! Where frames come from: a V4L2 camera, a recording (image folder or MCAP), or the simulated sensor, and how
+//! they are decoded ([`decode`]). Every source hands out frames as the camera delivered them (MJPEG, YUYV, or RGB
+//! for sources that have nothing else) with the time they were captured; decoding is left to whoever knows how
+//! much of the frame it needs. Pacing (the camera's own clock, the recording's timestamps or the simulator's frame
+//! rate) is the source's business.
 
+pub mod decode;
 mod folder;
 mod simulated;
 mod v4l2;
 
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use image::RgbImage;
 use serde::Serialize;
 
+pub use decode::{jpeg_dimensions, yuyv_to_rgb, DecodeError, DecodeOptions, DecodedFrame, Decoder, PixelRect, Scale};
 pub use folder::ImageFolder;
 pub use simulated::{SceneControl, SimulatedCamera, SIM_DEFAULT_FPS, SIM_DEFAULT_HEIGHT, SIM_DEFAULT_WIDTH};
 pub use v4l2::{list_cameras, CameraInfo, CameraSelector, PixelFormat, V4l2Camera, V4l2Options};
 
+/// A frame's pixels as the source delivered them.
+#[derive(Clone, Debug)]
+pub enum FramePixels {
+    /// An MJPEG camera's frame or a JPEG file, kept as bytes: recording writes them as they are, and decoding
+    /// takes only what is needed.
+    Jpeg(Arc<Vec<u8>>),
+    /// A YUYV 4:2:2 camera frame.
+    Yuyv {
+        bytes: Arc<Vec<u8>>,
+        width: u32,
+        height: u32,
+    },
+    /// Sources with nothing else (the simulator, PNG files).
+    Rgb(Arc<RgbImage>),
+}
+
+impl FramePixels {
+    /// Width and height of the frame (a JPEG's from its header, without decoding).
+    pub fn dimensions(&self) -> Result<(u32, u32), DecodeError> {
+        match self {
+            FramePixels::Jpeg(bytes) => jpeg_dimensions(bytes),
+            FramePixels::Yuyv { width, height, .. } => Ok((*width, *height)),
+            FramePixels::Rgb(image) => Ok(image.dimensions()),
+        }
+    }
+
+    /// The compressed frame, when the source delivered one.
+    pub fn jpeg(&self) -> Option<&Arc<Vec<u8>>> {
+        match self {
+            FramePixels::Jpeg(bytes) => Some(bytes),
+            _ => None,
+        }
+    }
+
+    /// Bytes as delivered (what "bytes to reading" starts from).
+    pub fn byte_len(&self) -> usize {
+        match self {
+            FramePixels::Jpeg(bytes) | FramePixels::Yuyv { bytes, .. } => bytes.len(),
+            FramePixels::Rgb(image) => image.as_raw().len(),
+        }
+    }
+}
+
 /// One frame as captured.
 #[derive(Clone, Debug)]
-pub struct CapturedImage {
-    pub image: RgbImage,
-    /// The frame's compressed form when the source already has one (MJPEG cameras, recordings), so that
-    /// recording and `/api/frame.jpg` do not encode it again.
-    pub jpeg: Option<Vec<u8>>,
+pub struct Frame {
+    pub pixels: FramePixels,
+    /// When the frame was captured on the monotonic clock: the driver's buffer timestamp for a V4L2 camera
+    /// (`CLOCK_MONOTONIC`, the clock `Instant` reads), else when the source produced it. Latency is measured
+    /// from here.
     pub captured_at: Instant,
-    /// Capture time on the wall clock, microseconds since the Unix epoch (what goes on the wire).
+    /// The same moment on the wall clock, microseconds since the Unix epoch (what goes on the wire).
     pub capture_time_us: u64,
 }
 
-impl CapturedImage {
+impl Frame {
     /// A frame captured now.
-    pub fn now(image: RgbImage, jpeg: Option<Vec<u8>>) -> Self {
+    pub fn now(pixels: FramePixels) -> Self {
+        Self::captured_ago(pixels, Duration::ZERO)
+    }
+
+    /// A frame captured `age` ago (a driver timestamp older than the moment the frame was dequeued).
+    pub fn captured_ago(pixels: FramePixels, age: Duration) -> Self {
+        let now = Instant::now();
         Self {
-            image,
-            jpeg,
-            captured_at: Instant::now(),
-            capture_time_us: unix_time_us(),
+            pixels,
+            captured_at: now.checked_sub(age).unwrap_or(now),
+            capture_time_us: unix_time_us().saturating_sub(age.as_micros() as u64),
+        }
+    }
+
+    /// The whole frame at full size, in RGB.
+    pub fn to_rgb(&self) -> Result<RgbImage, DecodeError> {
+        match &self.pixels {
+            FramePixels::Rgb(image) => Ok(image.as_ref().clone()),
+            pixels => Ok(Decoder::new().decode(pixels, &DecodeOptions::FULL)?.image),
         }
     }
 }
@@ -66,8 +127,10 @@ pub enum CaptureError {
     },
     #[error("camera {device} stopped delivering frames: {source}")]
     Vanished { device: String, source: std::io::Error },
-    #[error("cannot decode a frame from {origin}: {message}")]
-    Decode { origin: String, message: String },
+    #[error("cannot decode a frame from {origin}: {source}")]
+    Decode { origin: String, source: DecodeError },
+    #[error("cannot read the image {origin}: {message}")]
+    Image { origin: String, message: String },
     #[error("cannot read {path}: {source}")]
     Io { path: String, source: std::io::Error },
     #[error("no frames in {0}")]
@@ -94,7 +157,7 @@ impl CaptureError {
 /// A source of frames. `next_frame` blocks until the next frame is due.
 pub trait FrameSource: Send {
     fn info(&self) -> SourceInfo;
-    fn next_frame(&mut self) -> Result<CapturedImage, CaptureError>;
+    fn next_frame(&mut self) -> Result<Frame, CaptureError>;
     /// Re-open after a transient error (a camera that vanished). Sources that cannot vanish do nothing.
     fn reopen(&mut self) -> Result<(), CaptureError> {
         Ok(())
@@ -108,33 +171,31 @@ pub fn unix_time_us() -> u64 {
         .unwrap_or(0)
 }
 
-/// Reads an image file (JPEG, PNG, or any format `image` knows by its content) as a frame captured now; a JPEG's
-/// bytes are kept so that recording it does not encode it again.
-pub fn read_image_file(path: &std::path::Path) -> Result<CapturedImage, CaptureError> {
+/// Reads an image file as a frame captured now: a JPEG's bytes as they are (nothing decoded), any other format
+/// `image` knows (by its content) decoded to RGB.
+pub fn read_image_file(path: &std::path::Path) -> Result<Frame, CaptureError> {
     let origin = path.display().to_string();
     let bytes = std::fs::read(path).map_err(|source| CaptureError::Io {
         path: origin.clone(),
         source,
     })?;
     if bytes.starts_with(&[0xFF, 0xD8]) {
-        let image = decode_jpeg(&bytes, &origin)?;
-        return Ok(CapturedImage::now(image, Some(bytes)));
+        jpeg_dimensions(&bytes).map_err(|source| CaptureError::Decode { origin, source })?;
+        return Ok(Frame::now(FramePixels::Jpeg(Arc::new(bytes))));
     }
     let image = image::load_from_memory(&bytes)
-        .map_err(|e| CaptureError::Decode {
+        .map_err(|e| CaptureError::Image {
             origin,
             message: e.to_string(),
         })?
         .to_rgb8();
-    Ok(CapturedImage::now(image, None))
+    Ok(Frame::now(FramePixels::Rgb(Arc::new(image))))
 }
 
-/// Decodes a JPEG to RGB.
-pub fn decode_jpeg(bytes: &[u8], origin: &str) -> Result<RgbImage, CaptureError> {
-    image::load_from_memory_with_format(bytes, image::ImageFormat::Jpeg)
-        .map(|img| img.to_rgb8())
-        .map_err(|e| CaptureError::Decode {
-            origin: origin.to_string(),
-            message: e.to_string(),
-        })
+/// Reads an image file and decodes all of it to RGB (a rest frame, a frame to analyse offline).
+pub fn read_image_rgb(path: &std::path::Path) -> Result<RgbImage, CaptureError> {
+    read_image_file(path)?.to_rgb().map_err(|source| CaptureError::Decode {
+        origin: path.display().to_string(),
+        source,
+    })
 }

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use nusense_geometry::PadGeometry;
 use nusense_sim::{Renderer, Scene, SensorModel};
 
-use super::{CaptureError, CapturedImage, FrameSource, SourceInfo};
+use super::{CaptureError, Frame, FramePixels, FrameSource, SourceInfo};
 
 pub const SIM_DEFAULT_WIDTH: u32 = 640;
 pub const SIM_DEFAULT_HEIGHT: u32 = 480;
@@ -122,7 +122,7 @@ impl FrameSource for SimulatedCamera {
         }
     }
 
-    fn next_frame(&mut self) -> Result<CapturedImage, CaptureError> {
+    fn next_frame(&mut self) -> Result<Frame, CaptureError> {
         // Frames are due on a fixed clock, like a camera's; when rendering falls behind, the clock restarts
         // rather than bursting to catch up.
         let now = Instant::now();
@@ -142,6 +142,6 @@ impl FrameSource for SimulatedCamera {
             .map_err(|e| CaptureError::Simulator(e.to_string()))?;
         self.frames += 1;
         // Stamped when the frame exists, as a camera driver stamps it on arrival.
-        Ok(CapturedImage::now(image, None))
+        Ok(Frame::now(FramePixels::Rgb(Arc::new(image))))
     }
 }

@@ -19,6 +19,8 @@ pub enum CameraProbeError {
     EmptyFrame,
     #[error("the simulated camera has no light reading yet (the emulator's light channel is silent)")]
     NoLight,
+    #[error("the camera's frame does not decode: {0}")]
+    Decode(#[from] nusense_capture::DecodeError),
 }
 
 /// Mean image brightness for the LEDs as they are now, seen from outside the board: never from what the board
@@ -162,7 +164,7 @@ impl BrightnessProbe for V4l2CameraProbe {
         let mut total = 0.0;
         for _ in 0..AVERAGED_FRAMES {
             let frame = self.camera.next_frame()?;
-            total += mean_luma(&frame.image).ok_or(CameraProbeError::EmptyFrame)?;
+            total += mean_luma(&frame.to_rgb()?).ok_or(CameraProbeError::EmptyFrame)?;
         }
         Ok(total / AVERAGED_FRAMES as f64)
     }

@@ -13,7 +13,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Context;
-use nusense_capture::{read_image_file, unix_time_us};
+use nusense_capture::{read_image_rgb, unix_time_us};
 use nusense_daemon::{ReadingMessage, SCHEMA_VERSION};
 use nusense_estimator::{Estimator, Mode, Reading};
 
@@ -42,9 +42,9 @@ pub struct Args {
 fn measure(estimator: &mut Estimator, frame_id: u64, path: &Path) -> ReadingMessage {
     let started = Instant::now();
     let capture_time_us = unix_time_us();
-    let (estimate, error) = match read_image_file(path) {
+    let (estimate, error) = match read_image_rgb(path) {
         Err(error) => (None, Some(error.to_string())),
-        Ok(captured) => match estimator.estimate(&captured.image) {
+        Ok(image) => match estimator.estimate(&image) {
             Ok(reading) => (Some(reading), None),
             Err(error) => (None, Some(error.to_string())),
         },
@@ -104,7 +104,7 @@ fn human(message: &ReadingMessage) -> String {
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let config = load_config(args.config.as_ref())?;
     let mode = args.mode;
-    let reference = read_image_file(&args.reference).context("reference frame")?.image;
+    let reference = read_image_rgb(&args.reference).context("reference frame")?;
     let mut estimator = Estimator::new(config, mode, &reference)
         .with_context(|| format!("reference frame {}", args.reference.display()))?;
     let mut all_ok = true;

@@ -27,7 +27,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{bail, Context};
-use nusense_capture::read_image_file;
+use nusense_capture::read_image_rgb;
 use nusense_estimator::calibration::modulus::{fit_modulus_scale, ModelForceSample, ModulusFit};
 use nusense_estimator::calibration::{
     align_by_time, fit_force_line, forces_at_times, parse_force_log_csv, parse_pairs_csv, set_config_pad_map,
@@ -233,9 +233,7 @@ fn fit_all(args: &Args, config: &SensorConfig) -> anyhow::Result<Fits> {
         }
     }
     if let Some(path) = &args.rest {
-        let frame = read_image_file(path)
-            .with_context(|| format!("rest frame {}", path.display()))?
-            .image;
+        let frame = read_image_rgb(path).with_context(|| format!("rest frame {}", path.display()))?;
         // The map is fitted afresh: a stored one would only have its pose re-fitted.
         let config = SensorConfig {
             pad_map: None,

@@ -61,22 +61,30 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         };
         let index = frames;
         frames += 1;
+        // A frame that does not decode (a truncated JPEG) is a failed frame, not the end of the replay.
+        let image = frame.to_rgb().map_err(|source| CaptureError::Decode {
+            origin: format!("frame {index} of {}", args.input.display()),
+            source,
+        });
         if estimator.is_none() {
+            let rest = image.as_ref().map_err(|error| anyhow::anyhow!("{error}"));
             estimator = Some(
-                Estimator::new(config.clone(), args.mode, &frame.image)
+                Estimator::new(config.clone(), args.mode, rest?)
                     .with_context(|| format!("frame {index} cannot be the rest frame"))?,
             );
         }
         let Some(estimator) = estimator.as_mut() else {
             continue;
         };
-        let result = estimator.estimate(&frame.image);
+        let result = image
+            .map_err(|error| error.to_string())
+            .and_then(|image| estimator.estimate(&image).map_err(|error| error.to_string()));
         if args.json {
             let (estimate, error) = match result {
                 Ok(reading) => (Some(reading), None),
                 Err(error) => {
                     failures += 1;
-                    (None, Some(error.to_string()))
+                    (None, Some(error))
                 }
             };
             let message = ReadingMessage {

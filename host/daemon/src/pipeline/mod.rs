@@ -25,7 +25,7 @@ use tokio::sync::broadcast;
 
 use crate::reading::{ReadingMessage, SCHEMA_VERSION};
 use crate::record::{RecordError, RecordFailure, RecordItem, RecordSummary, Recorder, RecorderOptions};
-use nusense_capture::{unix_time_us, CaptureError, FrameSource, SourceInfo};
+use nusense_capture::{unix_time_us, CaptureError, DecodeOptions, Decoder, FrameSource, SourceInfo};
 
 pub use board::{Board, BoardError, BoardKind, BoardStatus, LedCommand, LedState, LinkedBoard, NoBoard, LED_LIMIT_MA};
 pub use queue::DropOldestQueue;
@@ -335,15 +335,26 @@ impl Drop for Pipeline {
 fn capture_loop(mut source: Box<dyn FrameSource>, shared: &Shared) {
     let mut next_id: u64 = 0;
     let mut backoff = REOPEN_BACKOFF_MIN;
+    let mut decoder = Decoder::new();
     while !shared.stop.load(Ordering::Relaxed) {
-        match source.next_frame() {
-            Ok(frame) => {
+        let decoded = source.next_frame().and_then(|frame| {
+            let image = decoder
+                .decode(&frame.pixels, &DecodeOptions::FULL)
+                .map_err(|source| CaptureError::Decode {
+                    origin: lock(&shared.source_info).name.clone(),
+                    source,
+                })?
+                .image;
+            Ok((frame, image))
+        });
+        match decoded {
+            Ok((frame, image)) => {
                 backoff = REOPEN_BACKOFF_MIN;
                 let frame_id = next_id;
                 next_id += 1;
                 shared.counters.frames_captured.fetch_add(1, Ordering::Relaxed);
-                let image = Arc::new(frame.image);
-                let jpeg = frame.jpeg.map(Arc::new);
+                let image = Arc::new(image);
+                let jpeg = frame.pixels.jpeg().cloned();
                 shared.record(|| RecordItem::Frame {
                     frame_id,
                     capture_time_us: frame.capture_time_us,

@@ -2,11 +2,12 @@
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use super::{ends_finished, RecordedFrame, RecordingReader};
 
-use nusense_capture::{decode_jpeg, CaptureError, CapturedImage, FrameSource, SourceInfo};
+use nusense_capture::{jpeg_dimensions, CaptureError, Frame, FramePixels, FrameSource, SourceInfo};
 
 /// Frames read ahead to learn the frame rate before the first is handed out.
 const LOOKAHEAD_FRAMES: usize = 8;
@@ -45,7 +46,10 @@ impl McapReplay {
         let first = lookahead
             .front()
             .ok_or_else(|| CaptureError::Empty(path_text.clone()))?;
-        let image = decode_jpeg(&first.jpeg, &path_text)?;
+        let size = jpeg_dimensions(&first.jpeg).map_err(|source| CaptureError::Decode {
+            origin: path_text.clone(),
+            source,
+        })?;
         let first_us = first.capture_time_us;
         let span_s = lookahead
             .back()
@@ -59,7 +63,7 @@ impl McapReplay {
         };
         Ok(Self {
             path: path.to_path_buf(),
-            size: image.dimensions(),
+            size,
             reader,
             lookahead,
             looping,
@@ -111,7 +115,7 @@ impl FrameSource for McapReplay {
         }
     }
 
-    fn next_frame(&mut self) -> Result<CapturedImage, CaptureError> {
+    fn next_frame(&mut self) -> Result<Frame, CaptureError> {
         let Some(frame) = self.next_recorded()? else {
             return Err(CaptureError::EndOfStream);
         };
@@ -121,7 +125,6 @@ impl FrameSource for McapReplay {
         if self.paced && due > now {
             std::thread::sleep(due - now);
         }
-        let image = decode_jpeg(&frame.jpeg, &self.path.display().to_string())?;
-        Ok(CapturedImage::now(image, Some(frame.jpeg)))
+        Ok(Frame::now(FramePixels::Jpeg(Arc::new(frame.jpeg))))
     }
 }
