@@ -7,6 +7,7 @@
 //! (shared/data/real) for points found and gamma agreement. Speed is the median and p99 time of `estimate`
 //! per frame, and a ratio against a baseline variant timed in the same run.
 
+pub mod decode;
 pub mod metrics;
 pub mod report;
 pub mod validation;

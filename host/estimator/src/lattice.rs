@@ -68,6 +68,31 @@ impl Lattice {
     pub fn square(&self, index: SquareIndex) -> Option<Point2> {
         self.square_slot(index).and_then(|slot| self.squares.get(slot)).and_then(|s| s.raw_px)
     }
+
+    /// Where the pattern is: the raw-px box (min, max) around the squares found, grown on every side by
+    /// `margin_cells` times the lattice's cell size (measured from those squares). A later frame needs only
+    /// this part decoded. `None` with fewer than two squares in distinct rows and columns.
+    pub fn region_px(&self, margin_cells: f64) -> Option<(Point2, Point2)> {
+        let found: Vec<(SquareIndex, Point2)> =
+            self.squares.iter().filter_map(|s| Some((s.index, s.raw_px?))).collect();
+        let span = |axis: usize| {
+            let key = |(i, _): &(SquareIndex, Point2)| if axis == 0 { i.col } else { i.row };
+            let first = found.iter().min_by_key(|s| key(s))?;
+            let last = found.iter().max_by_key(|s| key(s))?;
+            let cells = f64::from(key(last) - key(first));
+            (cells > 0.0).then(|| (last.1[axis] - first.1[axis]).abs() / cells)
+        };
+        let cell = span(0)?.max(span(1)?);
+        let margin = margin_cells * cell;
+        let (mut min, mut max) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for (_, p) in &found {
+            for axis in 0..2 {
+                min[axis] = min[axis].min(p[axis] - margin);
+                max[axis] = max[axis].max(p[axis] + margin);
+            }
+        }
+        Some((min, max))
+    }
 }
 
 #[cfg(test)]

@@ -1,10 +1,12 @@
 //! `nusense bench`: every estimator variant's speed against its error on the paper's sweeps, and every estimator
-//! mode on the validation set (issue 12's figures), written as markdown tables, JSON and a Pareto plot (SVG).
+//! mode on the validation set (issue 12's figures), written as markdown tables, JSON and a Pareto plot (SVG); and
+//! camera bytes to reading per mode and decode scale (decode.md, decode.json).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context;
+use nusense_bench::decode::{run_decode_bench, DecodeBenchOptions};
 use nusense_bench::{find_real_pair, report, run_bench, BenchOptions};
 
 #[derive(clap::Args)]
@@ -23,6 +25,12 @@ pub struct Args {
     /// Print the results as JSON on stdout as well.
     #[arg(long)]
     json: bool,
+    /// Only the bytes-to-reading tables (decode.md, decode.json), not the estimator variants.
+    #[arg(long, conflicts_with = "skip_decode")]
+    decode_only: bool,
+    /// Only the estimator variants, not the bytes-to-reading tables.
+    #[arg(long)]
+    skip_decode: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
@@ -39,18 +47,41 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if options.real_dir.is_none() {
         eprintln!("nusense bench: the real pair was not found (pass --real DIR); its columns stay empty");
     }
-    let bar = indicatif::ProgressBar::new_spinner();
-    bar.enable_steady_tick(std::time::Duration::from_millis(200));
-    let report = run_bench(&options, &mut |step: &str| bar.set_message(step.to_owned()))
-        .context("the benchmark could not run")?;
-    bar.finish_and_clear();
-
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
-    let markdown = report::markdown(&report);
     let write = |name: &str, text: &str| {
         let path = args.out.join(name);
         std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))
     };
+    let bar = indicatif::ProgressBar::new_spinner();
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    if !args.skip_decode {
+        let mut decode_options = if args.quick {
+            DecodeBenchOptions::quick()
+        } else {
+            DecodeBenchOptions::full()
+        };
+        decode_options.real_dir = options.real_dir.clone();
+        let decode = run_decode_bench(&decode_options, &mut |step: &str| bar.set_message(step.to_owned()))
+            .context("the bytes-to-reading benchmark could not run")?;
+        let markdown = nusense_bench::decode::markdown(&decode, &report::Machine::this());
+        write("decode.md", &markdown)?;
+        write("decode.json", &serde_json::to_string_pretty(&decode)?)?;
+        if args.json {
+            println!("{}", serde_json::to_string(&decode)?);
+        } else {
+            bar.suspend(|| println!("{markdown}"));
+        }
+        if args.decode_only {
+            bar.finish_and_clear();
+            println!("written: {}", args.out.join("{decode.md,decode.json}").display());
+            return Ok(ExitCode::SUCCESS);
+        }
+    }
+    let report = run_bench(&options, &mut |step: &str| bar.set_message(step.to_owned()))
+        .context("the benchmark could not run")?;
+    bar.finish_and_clear();
+
+    let markdown = report::markdown(&report);
     write("bench.md", &markdown)?;
     write("bench.json", &serde_json::to_string_pretty(&report)?)?;
     write("pareto.svg", &report::pareto_svg(&report))?;
