@@ -361,18 +361,14 @@ fn baseline(set: &FrameSet) -> Baseline {
     };
     let touch = decode(&set.touch).and_then(|t| {
         let lattice = estimator.detect(&t).ok()?;
-        Some((lattice, estimator.estimate(&t).ok()?.gamma))
+        Some((lattice, estimator.estimate(&t).ok()?.gamma.gamma))
     });
     let locations = set
         .presses
         .iter()
         .map(|(bytes, _)| {
             let reading = estimator.estimate(&decode(bytes)?).ok()?;
-            if reading.contact {
-                reading.contact_mm
-            } else {
-                None
-            }
+            reading.contact_mm()
         })
         .collect();
     Baseline { touch, locations }
@@ -481,7 +477,7 @@ fn measure_pathway(set: &FrameSet, pathway: Pathway, base: &Baseline, repeats: u
             result.corner_max_px = distances.iter().copied().reduce(f64::max);
         }
         if let Ok(reading) = pipeline.estimator.estimate(&image) {
-            result.gamma_ratio = (full_gamma.abs() > f64::EPSILON).then(|| reading.gamma / full_gamma);
+            result.gamma_ratio = (full_gamma.abs() > f64::EPSILON).then(|| reading.gamma.gamma / full_gamma);
         }
     }
 
@@ -490,8 +486,7 @@ fn measure_pathway(set: &FrameSet, pathway: Pathway, base: &Baseline, repeats: u
         let found = pipeline
             .decode(&jpeg(bytes))
             .and_then(|image| pipeline.estimator.estimate(&image).ok())
-            .filter(|r| r.contact)
-            .and_then(|r| r.contact_mm);
+            .and_then(|r| r.contact_mm());
         if let (Some(at), Some(contact)) = (found, truth.contacts.first()) {
             to_truth.push(distance(at, contact.centre_mm));
         }
