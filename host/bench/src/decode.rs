@@ -12,24 +12,12 @@ use std::time::Instant;
 
 use image::RgbImage;
 use nusense_capture::{DecodeOptions, Decoder, FramePixels, PixelRect, Scale};
-use nusense_estimator::{Estimator, Lattice, Mode, SensorConfig};
+use nusense_estimator::{Estimator, Lattice, Mode, SensorConfig, PATTERN_REGION_MARGIN_CELLS};
 use nusense_sim::{sweep, GroundTruth, Renderer, Scene, SensorModel};
 use serde::Serialize;
 
 use crate::metrics::{distance, quantile, rms};
 use crate::report::Machine;
-
-/// The pattern's region in later frames: the reference squares' box grown by this many cells (room for the pad's
-/// motion, and for the estimator's windows of 0.55 cell around each square).
-pub const REGION_MARGIN_CELLS: f64 = 1.5;
-
-/// The region (full-frame raw px) to decode when frames are decoded at `scale` for an estimator whose reference
-/// lattice is `reference` (in that scale's px).
-pub fn pattern_region(reference: &Lattice, scale: Scale, frame: (u32, u32)) -> Option<PixelRect> {
-    let (min, max) = reference.region_px(REGION_MARGIN_CELLS)?;
-    let d = f64::from(scale.divisor());
-    PixelRect::from_bounds([min[0] * d, min[1] * d], [max[0] * d, max[1] * d], frame)
-}
 
 #[derive(Clone, Debug)]
 pub struct DecodeBenchOptions {
@@ -390,7 +378,8 @@ impl Pipeline {
         let estimator =
             Estimator::new(SensorConfig::default(), pathway.mode, &reference.image).map_err(|e| e.to_string())?;
         let region = if pathway.region {
-            Some(pattern_region(estimator.reference_lattice(), pathway.scale, set.size).ok_or("no pattern region")?)
+            let (min, max) = estimator.pattern_region_px().ok_or("no pattern region")?;
+            Some(PixelRect::from_scaled_bounds(min, max, pathway.scale, set.size).ok_or("no pattern region")?)
         } else {
             None
         };
@@ -567,7 +556,7 @@ pub fn markdown(report: &DecodeReport, machine: &Machine) -> String {
          Accuracy against fast mode on a plain full decode (`image`): real pair, the touch frame's corners (RMS \
          and worst, full-size px) and gamma's ratio; simulated presses, the contact centre's RMSE against the truth \
          and its shift from the full decode's (RMS and worst, mm). Frames encoded here use quality {}.\n",
-        report.repeats, REGION_MARGIN_CELLS, report.camera_quality
+        report.repeats, PATTERN_REGION_MARGIN_CELLS, report.camera_quality
     );
     for set in &report.sets {
         let _ = writeln!(

@@ -17,16 +17,16 @@ fn real(name: &str) -> FramePixels {
 
 /// Reference lattice and touch lattice (raw px of the full frame) with frames decoded at `scale`, the touch frame
 /// only inside the reference's region.
-fn lattices(scale: Scale, region_margin: Option<f64>) -> (Lattice, Lattice) {
+fn lattices(scale: Scale, region: bool) -> (Lattice, Lattice) {
     let mut decoder = Decoder::new();
     let reference = decoder
         .decode(&real("reference_fisheye.jpg"), &DecodeOptions::scaled(scale))
         .unwrap();
     let mut estimator = Estimator::new(SensorConfig::default(), Mode::Fast, &reference.image).unwrap();
-    let region = region_margin.map(|margin| {
-        let (min, max) = estimator.reference_lattice().region_px(margin).expect("pattern found");
-        let d = f64::from(scale.divisor());
-        PixelRect::from_bounds([min[0] * d, min[1] * d], [max[0] * d, max[1] * d], (2048, 1536)).unwrap()
+    // The region the daemon decodes: the estimator's own.
+    let region = region.then(|| {
+        let (min, max) = estimator.pattern_region_px().expect("pattern found");
+        PixelRect::from_scaled_bounds(min, max, scale, (2048, 1536)).unwrap()
     });
     let touch = decoder
         .decode(&real("touch_fisheye.jpg"), &DecodeOptions { scale, region })
@@ -81,7 +81,7 @@ fn scaled_region_decodes_find_the_full_decodes_lattice() {
     let (full_reference, full_touch) = plain_full_decode();
     assert!(full_touch.corners_found() > 150);
     for scale in [Scale::Full, Scale::Half] {
-        let (reference, touch) = lattices(scale, Some(1.5));
+        let (reference, touch) = lattices(scale, true);
         for (what, full, found) in [
             ("reference", &full_reference, &reference),
             ("touch", &full_touch, &touch),

@@ -119,6 +119,10 @@ const CONTACT_SUPPORT: usize = 3;
 /// An edge direction (fast and paper modes) needs at least this fraction of the corners around the sheared region.
 const MIN_EDGE_COVERAGE: f64 = 0.9;
 
+/// Cells around the rest lattice's squares that later frames may need: room for the pad's motion under a press
+/// and for the tracker's windows (0.55 cell around each square).
+pub const PATTERN_REGION_MARGIN_CELLS: f64 = 1.5;
+
 impl Estimator {
     /// Finds the lattice in the rest frame once; frames are then measured against it.
     pub fn new(config: SensorConfig, mode: Mode, reference: &RgbImage) -> Result<Self, EstimateError> {
@@ -144,6 +148,13 @@ impl Estimator {
 
     pub fn reference_lattice(&self) -> &Lattice {
         &self.rest.lattice
+    }
+
+    /// The part of later frames the fast tracker reads, px of the rest frame (min, max): the rest lattice's box
+    /// grown by [`PATTERN_REGION_MARGIN_CELLS`]. Decoding only this part of a frame gives the same reading
+    /// (`nusense bench` measures the difference). `None` when the rest lattice is too sparse to say.
+    pub fn pattern_region_px(&self) -> Option<(Point2, Point2)> {
+        self.rest.lattice.region_px(PATTERN_REGION_MARGIN_CELLS)
     }
 
     pub fn config(&self) -> &SensorConfig {

@@ -36,7 +36,7 @@ pub use config::{
     SensorConfig, SurfaceConfig, Thresholds,
 };
 pub use error::EstimateError;
-pub use estimator::{Estimator, Mode};
+pub use estimator::{Estimator, Mode, PATTERN_REGION_MARGIN_CELLS};
 pub use lattice::{CornerObservation, Lattice, SquareObservation};
 pub use pad_map::{MapResidual, StoredPadMap};
 pub use reading::{

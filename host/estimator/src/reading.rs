@@ -176,6 +176,25 @@ pub struct Reading {
 }
 
 impl Reading {
+    /// Moves every image-space point by `factor`: a reading measured in a frame decoded at 1/2 scale, scaled by
+    /// 2, is in the full frame's raw px (the camera model scales with the frame, so undistorted px scale too).
+    /// Everything in mm, N or paper px is unchanged.
+    pub fn scale_px(&mut self, factor: f64) {
+        let scale = |p: &mut Point2| *p = [p[0] * factor, p[1] * factor];
+        if let Some(touch) = &mut self.touch {
+            for contact in std::iter::once(&mut touch.strongest).chain(&mut touch.others) {
+                scale(&mut contact.centre_px);
+                scale(&mut contact.centre_undistorted_px);
+            }
+        }
+        scale(&mut self.camera_motion.shift_px);
+        for vector in &mut self.shear_field {
+            for p in [&mut vector.reference_px, &mut vector.current_px].into_iter().flatten() {
+                scale(p);
+            }
+        }
+    }
+
     pub fn is_contact(&self) -> bool {
         self.touch.is_some()
     }

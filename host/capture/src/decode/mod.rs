@@ -128,6 +128,13 @@ impl PixelRect {
         })
     }
 
+    /// [`PixelRect::from_bounds`] for bounds in px of the frame decoded at `scale` (an estimator's region found
+    /// in a scaled frame), back in the full frame's raw px.
+    pub fn from_scaled_bounds(min: [f64; 2], max: [f64; 2], scale: Scale, frame: (u32, u32)) -> Option<Self> {
+        let d = f64::from(scale.divisor());
+        Self::from_bounds([min[0] * d, min[1] * d], [max[0] * d, max[1] * d], frame)
+    }
+
     fn right(&self) -> u32 {
         self.x + self.width
     }
