@@ -54,6 +54,14 @@ impl FramePixels {
         }
     }
 
+    /// The whole frame at full size, in RGB (the dashboard's picture, a frame to analyse offline).
+    pub fn to_rgb(&self) -> Result<RgbImage, DecodeError> {
+        match self {
+            FramePixels::Rgb(image) => Ok(image.as_ref().clone()),
+            pixels => Ok(Decoder::new().decode(pixels, &DecodeOptions::FULL)?.image),
+        }
+    }
+
     /// Bytes as delivered (what "bytes to reading" starts from).
     pub fn byte_len(&self) -> usize {
         match self {
@@ -93,10 +101,7 @@ impl Frame {
 
     /// The whole frame at full size, in RGB.
     pub fn to_rgb(&self) -> Result<RgbImage, DecodeError> {
-        match &self.pixels {
-            FramePixels::Rgb(image) => Ok(image.as_ref().clone()),
-            pixels => Ok(Decoder::new().decode(pixels, &DecodeOptions::FULL)?.image),
-        }
+        self.pixels.to_rgb()
     }
 }
 

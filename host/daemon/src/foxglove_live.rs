@@ -135,29 +135,30 @@ async fn publish(
         if let Some(frame) = pipeline.latest_processed().filter(|f| Some(f.frame_id) != last_frame) {
             last_frame = Some(frame.frame_id);
             let capture_time_us = frame.reading.message.capture_time_us;
-            let (width, height) = frame.image.dimensions();
+            let Ok((width, height)) = frame.pixels.dimensions() else {
+                continue;
+            };
             let resend = calibration_wanted.swap(false, Ordering::Relaxed);
             if resend || calibrated_size != Some((width, height)) {
                 calibrated_size = Some((width, height));
                 let calibration = messages::calibration(capture_time_us, &config, width, height);
                 log(Kind::Calibration, &calibration, capture_time_us);
             }
-            let jpeg = match frame.jpeg {
-                Some(jpeg) => jpeg,
+            let jpeg = match frame.pixels.jpeg() {
+                Some(jpeg) => jpeg.clone(),
                 None => {
-                    let image = frame.image.clone();
-                    let encoded = tokio::task::spawn_blocking(move || encode_jpeg(&image, LIVE_JPEG_QUALITY)).await;
+                    let pixels = frame.pixels.clone();
+                    let encoded = tokio::task::spawn_blocking(move || {
+                        pixels.to_rgb().map(|image| encode_jpeg(&image, LIVE_JPEG_QUALITY))
+                    })
+                    .await;
                     match encoded {
-                        Ok(jpeg) => Arc::new(jpeg),
-                        Err(_) => continue,
+                        Ok(Ok(jpeg)) => Arc::new(jpeg),
+                        _ => continue,
                     }
                 }
             };
-            log(
-                Kind::Frame,
-                &messages::frame(capture_time_us, &jpeg),
-                capture_time_us,
-            );
+            log(Kind::Frame, &messages::frame(capture_time_us, &jpeg), capture_time_us);
         }
         let time_us = published.message.capture_time_us;
         if let Some(annotations) = messages::annotations(&published) {

@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use nusense_daemon::pipeline::PublishedReading;
 use nusense_daemon::reading::SCHEMA_VERSION;
-use nusense_daemon::record::{encode_jpeg, RecordError, RecordItem, Recorder, RecorderOptions};
+use nusense_daemon::record::{encode_jpeg, FramePixels, RecordError, RecordItem, Recorder, RecorderOptions};
 use nusense_daemon::ReadingMessage;
 use nusense_estimator::{EstimateError, Estimator, Mode, SensorConfig};
 use nusense_geometry::SquareIndex;
@@ -590,8 +590,7 @@ fn record(
         recorder.record(RecordItem::Frame {
             frame_id: frame.frame_id,
             capture_time_us,
-            image: Arc::new(image),
-            jpeg: Some(Arc::new(jpeg)),
+            pixels: FramePixels::Jpeg(Arc::new(jpeg)),
         });
         let json = serde_json::to_string(&message).expect("a reading serialises");
         recorder.record(RecordItem::Reading(Arc::new(PublishedReading { message, json })));

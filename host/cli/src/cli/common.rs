@@ -7,7 +7,7 @@ use anyhow::Context;
 use nusense_capture::{
     CameraSelector, PixelFormat, V4l2Options, SIM_DEFAULT_FPS, SIM_DEFAULT_HEIGHT, SIM_DEFAULT_WIDTH,
 };
-use nusense_daemon::pipeline::{BoardChoice, FrameChoice};
+use nusense_daemon::pipeline::{BoardChoice, DecodeScale, FrameChoice, PipelineOptions};
 use nusense_estimator::{Mode, SensorConfig};
 
 /// Exit code of `analyze` and `replay` when some frames could not be measured (the others were).
@@ -49,6 +49,21 @@ pub struct SourceArgs {
     /// Start the replay over when it ends.
     #[arg(long = "loop")]
     pub looping: bool,
+    /// Scale the estimator's frames are decoded at: auto (1/2 of a 2048-px frame, full size up to 2047 px and in
+    /// paper mode), or 1, 2, 4, 8 for 1/n of the frame's width and height.
+    #[arg(long, default_value = "auto", value_name = "auto|1|2|4|8")]
+    pub decode_scale: DecodeScale,
+    /// Decode whole frames for the estimator, not only the pattern's region.
+    #[arg(long)]
+    pub decode_whole: bool,
+}
+
+/// The pipeline the source options ask for.
+pub fn pipeline_options(args: &SourceArgs, config: SensorConfig) -> PipelineOptions {
+    let mut options = PipelineOptions::new(config, args.mode);
+    options.decode_scale = args.decode_scale;
+    options.decode_region = !args.decode_whole;
+    options
 }
 
 /// What the frame-source options of `serve` and `record` select.

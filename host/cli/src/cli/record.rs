@@ -9,10 +9,12 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use nusense_daemon::pipeline::{open_sources, Pipeline, PipelineOptions};
+use nusense_daemon::pipeline::{open_sources, Pipeline};
 use nusense_daemon::record::{recover, RecorderOptions, SensorContext, DEFAULT_FLUSH_INTERVAL};
 
-use super::common::{board_choice, describe_start, frame_choice, init_logging, load_config, SourceArgs};
+use super::common::{
+    board_choice, describe_start, frame_choice, init_logging, load_config, pipeline_options, SourceArgs,
+};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -71,11 +73,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         config: config.clone(),
         identity,
     };
-    let pipeline = Pipeline::start(
-        sources.frames,
-        sources.board,
-        PipelineOptions::new(config, args.source.mode),
-    )?;
+    let pipeline = Pipeline::start(sources.frames, sources.board, pipeline_options(&args.source, config))?;
     let handle = pipeline.handle();
     let options = RecorderOptions {
         flush_interval: Duration::from_millis(args.flush_ms.max(10)),

@@ -9,10 +9,12 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use nusense_daemon::api::{self, AccessPolicy, AppState, RecordingsDir};
 use nusense_daemon::foxglove_live::FoxgloveLive;
-use nusense_daemon::pipeline::{open_sources, Pipeline, PipelineOptions};
+use nusense_daemon::pipeline::{open_sources, Pipeline};
 use tokio::signal::unix::{signal, SignalKind};
 
-use super::common::{board_choice, describe_start, frame_choice, init_logging, load_config, SourceArgs};
+use super::common::{
+    board_choice, describe_start, frame_choice, init_logging, load_config, pipeline_options, SourceArgs,
+};
 
 pub const DEFAULT_PORT: u16 = 8750;
 
@@ -72,7 +74,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let pipeline = Pipeline::start(
         sources.frames,
         sources.board,
-        PipelineOptions::new(config.clone(), args.source.mode),
+        pipeline_options(&args.source, config.clone()),
     )?;
     let handle = pipeline.handle();
     runtime.block_on(async move {

@@ -395,17 +395,19 @@ async fn encoded_frame(state: &AppState, frame: ProcessedFrame, overlay: bool) -
         return Ok(cached.jpeg);
     }
     let frame_id = frame.frame_id;
-    let jpeg = tokio::task::spawn_blocking(move || match (&frame.jpeg, overlay) {
-        (Some(jpeg), false) => jpeg.clone(),
+    // The estimator decoded only part of the frame: the whole picture is decoded here, for whoever looks.
+    let jpeg = tokio::task::spawn_blocking(move || match (frame.pixels.jpeg(), overlay) {
+        (Some(jpeg), false) => Ok(jpeg.clone()),
         _ => {
-            let mut image = frame.image.as_ref().clone();
+            let mut image = frame.pixels.to_rgb()?;
             if let (true, Some(estimate)) = (overlay, frame.reading.message.estimate.as_ref()) {
                 draw_overlay(&mut image, estimate);
             }
-            Arc::new(encode_jpeg(&image, VIEW_JPEG_QUALITY))
+            Ok::<_, nusense_capture::DecodeError>(Arc::new(encode_jpeg(&image, VIEW_JPEG_QUALITY)))
         }
     })
     .await
+    .map_err(ApiError::internal)?
     .map_err(ApiError::internal)?;
     state.encoded.lock().unwrap_or_else(PoisonError::into_inner)[slot] = Some(EncodedFrame {
         frame_id,

@@ -1,12 +1,20 @@
-//! The live pipeline: a capture thread feeds a bounded drop-oldest queue, an estimator thread turns frames
-//! into readings, and readings are published (latest value, a broadcast for WebSocket clients, the recorder).
+//! The live pipeline: a capture thread feeds a bounded drop-oldest queue with the camera's bytes, an estimator
+//! thread decodes each frame (only the scale and region the estimator reads) and turns it into a reading, and
+//! readings are published (latest value, a broadcast for WebSocket clients, the recorder). Latency is measured
+//! from the frame's capture timestamp, decoding included.
 //!
-//! The first frame, and the first frame after a tare, is the rest frame the estimator measures against.
+//! The first frame, and the first frame after a tare, is the rest frame the estimator measures against: it is
+//! decoded whole at the decode scale, and later frames only inside the pattern's region around its lattice
+//! (whole again after a frame that could not be measured, in case the pattern left the region). The whole frame
+//! is decoded at full size only when someone asks for the picture (`/api/v1/frame.jpg`, Foxglove); recordings
+//! keep the camera's JPEG bytes as they came.
 //!
 //! A recording that fails (a full disk) stops by itself: the pipeline keeps running and publishing, and the
 //! failure stays in the status until the next recording starts.
 
 mod board;
+#[cfg(test)]
+mod decode_tests;
 mod queue;
 mod sources;
 mod stats;
@@ -17,7 +25,6 @@ use std::sync::{Arc, Mutex, MutexGuard, PoisonError, RwLock};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use image::RgbImage;
 use nusense_board::BoardEvent;
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use serde::Serialize;
@@ -25,7 +32,9 @@ use tokio::sync::broadcast;
 
 use crate::reading::{ReadingMessage, SCHEMA_VERSION};
 use crate::record::{RecordError, RecordFailure, RecordItem, RecordSummary, Recorder, RecorderOptions};
-use nusense_capture::{unix_time_us, CaptureError, DecodeOptions, Decoder, FrameSource, SourceInfo};
+use nusense_capture::{
+    unix_time_us, CaptureError, DecodeOptions, Decoder, FramePixels, FrameSource, PixelRect, Scale, SourceInfo,
+};
 
 pub use board::{Board, BoardError, BoardKind, BoardStatus, LedCommand, LedState, LinkedBoard, NoBoard, LED_LIMIT_MA};
 pub use queue::DropOldestQueue;
@@ -44,9 +53,9 @@ pub struct PublishedReading {
 #[derive(Clone, Debug)]
 pub struct ProcessedFrame {
     pub frame_id: u64,
-    pub image: Arc<RgbImage>,
-    /// The camera's own JPEG of this frame, when it sent one.
-    pub jpeg: Option<Arc<Vec<u8>>>,
+    /// The frame as the camera delivered it (its JPEG bytes, when it sent JPEG): decoded whole only when the
+    /// picture is asked for.
+    pub pixels: FramePixels,
     pub reading: Arc<PublishedReading>,
 }
 
@@ -65,6 +74,45 @@ fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
     mutex.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
+/// The scale frames are decoded at for the estimator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum DecodeScale {
+    /// The smallest scale that keeps the decoded frame at least [`MIN_DECODED_WIDTH`] px wide (1/2 for a
+    /// 2048x1536 frame, full size at 640x480); full size for the paper's pipeline, whose parameters are in px.
+    Auto,
+    Fixed(Scale),
+}
+
+/// Narrowest decoded frame the fast tracker is given: at 1024 px across the pattern's cells are still about 45 px
+/// wide, and `nusense bench` shows the lattice at 1/2 of a 2048-px frame within 0.1 px of the full decode's.
+pub const MIN_DECODED_WIDTH: u32 = 1024;
+
+impl DecodeScale {
+    pub fn for_frame(self, mode: Mode, width: u32) -> Scale {
+        match (self, mode) {
+            (DecodeScale::Fixed(scale), _) => scale,
+            (DecodeScale::Auto, Mode::Paper) => Scale::Full,
+            (DecodeScale::Auto, _) => Scale::ALL
+                .into_iter()
+                .rev()
+                .find(|scale| width / scale.divisor() >= MIN_DECODED_WIDTH)
+                .unwrap_or(Scale::Full),
+        }
+    }
+}
+
+impl std::str::FromStr for DecodeScale {
+    type Err = String;
+
+    /// `auto`, or a scale as [`Scale`] reads it (`2`, `1/2`, ...).
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        match text.trim() {
+            "auto" => Ok(DecodeScale::Auto),
+            other => other.parse().map(DecodeScale::Fixed),
+        }
+    }
+}
+
 #[derive(Clone)]
 pub struct PipelineOptions {
     pub config: SensorConfig,
@@ -73,6 +121,10 @@ pub struct PipelineOptions {
     pub queue_len: usize,
     /// Readings a WebSocket client may fall behind by before it misses some.
     pub broadcast_len: usize,
+    pub decode_scale: DecodeScale,
+    /// Decode only the pattern's region of frames after the rest frame (fast and inverse modes: the paper's
+    /// detector searches its own region of interest).
+    pub decode_region: bool,
 }
 
 impl PipelineOptions {
@@ -82,6 +134,8 @@ impl PipelineOptions {
             mode,
             queue_len: 2,
             broadcast_len: 64,
+            decode_scale: DecodeScale::Auto,
+            decode_region: true,
         }
     }
 }
@@ -115,9 +169,39 @@ struct Counters {
     frames_captured: AtomicU64,
     frames_processed: AtomicU64,
     capture_errors: AtomicU64,
+    decode_errors: AtomicU64,
     estimate_errors: AtomicU64,
     encode_errors: AtomicU64,
     tares: AtomicU64,
+}
+
+/// How the estimator's frames are decoded now, and the frames that did not decode.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct DecodeStatus {
+    /// Frame px per decoded px along each axis (1, 2, 4 or 8); `None` before the first frame.
+    pub scale: Option<Scale>,
+    /// The part of the frame decoded (full-size raw px); `None`: the whole frame.
+    pub region: Option<PixelRect>,
+    /// Frames that did not decode (a truncated or corrupt JPEG, a short YUYV buffer); each is skipped.
+    pub errors: u64,
+    pub last_error: Option<String>,
+}
+
+/// Each stage's share of the latency over the latest frames, ms.
+struct StageWindows {
+    capture_to_decode: LatencyWindow,
+    decode_to_estimate: LatencyWindow,
+    estimate_to_publish: LatencyWindow,
+}
+
+/// Per-stage latency percentiles for the status.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct StageLatency {
+    /// Capture timestamp to the frame decoded (queueing and decoding).
+    pub capture_to_decode: LatencySummary,
+    pub decode_to_estimate: LatencySummary,
+    /// Serialising, recording and broadcasting the reading.
+    pub estimate_to_publish: LatencySummary,
 }
 
 #[derive(Clone, Debug, Default, Serialize)]
@@ -154,6 +238,8 @@ struct Shared {
     queue: DropOldestQueue<QueuedFrame>,
     counters: Counters,
     latency: Mutex<LatencyWindow>,
+    stage_latency: Mutex<StageWindows>,
+    decode: Mutex<DecodeStatus>,
     latest: RwLock<Option<ProcessedFrame>>,
     readings: broadcast::Sender<Arc<PublishedReading>>,
     tare_requested: AtomicBool,
@@ -235,8 +321,7 @@ struct QueuedFrame {
     frame_id: u64,
     captured_at: Instant,
     capture_time_us: u64,
-    image: Arc<RgbImage>,
-    jpeg: Option<Arc<Vec<u8>>>,
+    pixels: FramePixels,
 }
 
 /// Cheap to clone; what the API holds.
@@ -267,6 +352,12 @@ impl Pipeline {
             queue: DropOldestQueue::new(options.queue_len),
             counters: Counters::default(),
             latency: Mutex::new(LatencyWindow::new(LATENCY_WINDOW)),
+            stage_latency: Mutex::new(StageWindows {
+                capture_to_decode: LatencyWindow::new(LATENCY_WINDOW),
+                decode_to_estimate: LatencyWindow::new(LATENCY_WINDOW),
+                estimate_to_publish: LatencyWindow::new(LATENCY_WINDOW),
+            }),
+            decode: Mutex::new(DecodeStatus::default()),
             latest: RwLock::new(None),
             readings,
             tare_requested: AtomicBool::new(false),
@@ -285,10 +376,16 @@ impl Pipeline {
                 .map_err(|e| PipelineError::Thread("capture", e))?,
         );
         let estimate_shared = shared.clone();
+        let stage = EstimateStage {
+            config: options.config,
+            mode: options.mode,
+            decode_scale: options.decode_scale,
+            decode_region: options.decode_region && options.mode != Mode::Paper,
+        };
         threads.push(
             std::thread::Builder::new()
                 .name("estimator".into())
-                .spawn(move || estimate_loop(options.config, options.mode, &estimate_shared))
+                .spawn(move || stage.run(&estimate_shared))
                 .map_err(|e| PipelineError::Thread("estimator", e))?,
         );
         if let Some(events) = board.events() {
@@ -335,38 +432,23 @@ impl Drop for Pipeline {
 fn capture_loop(mut source: Box<dyn FrameSource>, shared: &Shared) {
     let mut next_id: u64 = 0;
     let mut backoff = REOPEN_BACKOFF_MIN;
-    let mut decoder = Decoder::new();
     while !shared.stop.load(Ordering::Relaxed) {
-        let decoded = source.next_frame().and_then(|frame| {
-            let image = decoder
-                .decode(&frame.pixels, &DecodeOptions::FULL)
-                .map_err(|source| CaptureError::Decode {
-                    origin: lock(&shared.source_info).name.clone(),
-                    source,
-                })?
-                .image;
-            Ok((frame, image))
-        });
-        match decoded {
-            Ok((frame, image)) => {
+        match source.next_frame() {
+            Ok(frame) => {
                 backoff = REOPEN_BACKOFF_MIN;
                 let frame_id = next_id;
                 next_id += 1;
                 shared.counters.frames_captured.fetch_add(1, Ordering::Relaxed);
-                let image = Arc::new(image);
-                let jpeg = frame.pixels.jpeg().cloned();
                 shared.record(|| RecordItem::Frame {
                     frame_id,
                     capture_time_us: frame.capture_time_us,
-                    image: image.clone(),
-                    jpeg: jpeg.clone(),
+                    pixels: frame.pixels.clone(),
                 });
                 shared.queue.push(QueuedFrame {
                     frame_id,
                     captured_at: frame.captured_at,
                     capture_time_us: frame.capture_time_us,
-                    image,
-                    jpeg,
+                    pixels: frame.pixels,
                 });
             }
             Err(CaptureError::EndOfStream) => {
@@ -400,7 +482,7 @@ fn capture_loop(mut source: Box<dyn FrameSource>, shared: &Shared) {
                 }
             }
             Err(error) => {
-                // A frame that does not decode is lost; the next one may be fine.
+                // A frame that cannot be read is lost; the next one may be fine.
                 shared.counters.capture_errors.fetch_add(1, Ordering::Relaxed);
                 lock(&shared.capture_state).last_error = Some(error.to_string());
                 tracing::warn!("capture: {error}");
@@ -416,56 +498,150 @@ fn sleep_unless_stopped(duration: Duration, shared: &Shared) {
     }
 }
 
-fn estimate_loop(config: SensorConfig, mode: Mode, shared: &Shared) {
-    let mut estimator: Option<Estimator> = None;
-    let mut reference_frame_id = None;
-    while !shared.stop.load(Ordering::Relaxed) {
-        let Some(frame) = shared.queue.pop_timeout(POLL_INTERVAL) else {
-            continue;
-        };
-        let dequeued_at = Instant::now();
-        let mut error = None;
-        if shared.tare_requested.swap(false, Ordering::Relaxed) {
-            estimator = None;
-        }
-        if estimator.is_none() {
-            match Estimator::new(config.clone(), mode, &frame.image) {
-                Ok(new_estimator) => {
-                    estimator = Some(new_estimator);
-                    reference_frame_id = Some(frame.frame_id);
-                    shared.counters.tares.fetch_add(1, Ordering::Relaxed);
+/// The estimator's thread: decodes what the estimator reads, estimates, publishes.
+struct EstimateStage {
+    config: SensorConfig,
+    mode: Mode,
+    decode_scale: DecodeScale,
+    decode_region: bool,
+}
+
+/// The estimator and how frames are decoded for it.
+struct Measuring {
+    estimator: Estimator,
+    /// The rest frame's decode scale: every later frame is decoded at the same size.
+    scale: Scale,
+    /// The pattern's part of the frame, full-size raw px.
+    region: Option<PixelRect>,
+    reference_frame_id: u64,
+}
+
+impl Measuring {
+    fn region_of(estimator: &Estimator, scale: Scale, frame: (u32, u32)) -> Option<PixelRect> {
+        let (min, max) = estimator.pattern_region_px()?;
+        PixelRect::from_scaled_bounds(min, max, scale, frame)
+    }
+}
+
+impl EstimateStage {
+    fn run(self, shared: &Shared) {
+        let mut decoder = Decoder::new();
+        let mut measuring: Option<Measuring> = None;
+        // Until a frame measures (the first, or after one that failed), frames are decoded whole.
+        let mut last_measured = false;
+        while !shared.stop.load(Ordering::Relaxed) {
+            let Some(frame) = shared.queue.pop_timeout(POLL_INTERVAL) else {
+                continue;
+            };
+            let dequeued_at = Instant::now();
+            if shared.tare_requested.swap(false, Ordering::Relaxed) {
+                measuring = None;
+            }
+            let options = match &measuring {
+                Some(m) => DecodeOptions {
+                    scale: m.scale,
+                    region: m.region.filter(|_| last_measured),
+                },
+                None => {
+                    let width = frame.pixels.dimensions().map_or(0, |(width, _)| width);
+                    DecodeOptions::scaled(self.decode_scale.for_frame(self.mode, width))
                 }
-                Err(e) => error = Some(format!("no rest frame yet: {e}")),
+            };
+            let decoded = match decoder.decode(&frame.pixels, &options) {
+                Ok(decoded) => decoded,
+                Err(source) => {
+                    // A truncated or corrupt frame is skipped (and counted); the next one may be fine.
+                    let error = CaptureError::Decode {
+                        origin: format!("frame {} of {}", frame.frame_id, lock(&shared.source_info).name),
+                        source,
+                    };
+                    tracing::warn!("decode: {error}");
+                    shared.counters.decode_errors.fetch_add(1, Ordering::Relaxed);
+                    shared.counters.frames_processed.fetch_add(1, Ordering::Relaxed);
+                    lock(&shared.decode).last_error = Some(error.to_string());
+                    continue;
+                }
+            };
+            let decoded_at = Instant::now();
+            {
+                let mut status = lock(&shared.decode);
+                status.scale = Some(decoded.scale);
+                status.region = options.region;
             }
-        }
-        let estimate = match estimator.as_mut().map(|estimator| estimator.estimate(&frame.image)) {
-            Some(Ok(reading)) => Some(reading),
-            Some(Err(e)) => {
-                error = Some(e.to_string());
-                None
+            let mut error = None;
+            if measuring.is_none() {
+                let frame_size = (decoded.frame_width, decoded.frame_height);
+                match Estimator::new(self.config.clone(), self.mode, &decoded.image) {
+                    Ok(estimator) => {
+                        let region = self
+                            .decode_region
+                            .then(|| Measuring::region_of(&estimator, decoded.scale, frame_size))
+                            .flatten();
+                        measuring = Some(Measuring {
+                            estimator,
+                            scale: decoded.scale,
+                            region,
+                            reference_frame_id: frame.frame_id,
+                        });
+                        shared.counters.tares.fetch_add(1, Ordering::Relaxed);
+                    }
+                    Err(e) => error = Some(format!("no rest frame yet: {e}")),
+                }
             }
-            None => None,
-        };
-        if error.is_some() {
-            shared.counters.estimate_errors.fetch_add(1, Ordering::Relaxed);
+            let estimate = match measuring.as_mut() {
+                None => None,
+                Some(m) => match m.estimator.estimate(&decoded.image) {
+                    Ok(mut reading) => {
+                        if reading.retared && self.decode_region {
+                            // A new rest lattice: the region follows it.
+                            m.region = Measuring::region_of(
+                                &m.estimator,
+                                m.scale,
+                                (decoded.frame_width, decoded.frame_height),
+                            );
+                        }
+                        reading.scale_px(f64::from(decoded.scale.divisor()));
+                        Some(reading)
+                    }
+                    Err(e) => {
+                        error = Some(e.to_string());
+                        None
+                    }
+                },
+            };
+            last_measured = estimate.is_some();
+            if error.is_some() {
+                shared.counters.estimate_errors.fetch_add(1, Ordering::Relaxed);
+            }
+            shared.counters.frames_processed.fetch_add(1, Ordering::Relaxed);
+            let estimated_at = Instant::now();
+            let captured_at = frame.captured_at;
+            let since_capture = |t: Instant| t.saturating_duration_since(captured_at).as_secs_f64() * 1e3;
+            let message = ReadingMessage {
+                schema_version: SCHEMA_VERSION,
+                frame_id: frame.frame_id,
+                file: None,
+                capture_time_us: frame.capture_time_us,
+                processed_time_us: unix_time_us(),
+                latency_ms: since_capture(estimated_at),
+                queue_ms: since_capture(dequeued_at),
+                reference_frame_id: measuring.as_ref().map(|m| m.reference_frame_id),
+                estimate,
+                error,
+                led: shared.board.led_state(),
+            };
+            lock(&shared.latency).push(message.latency_ms);
+            publish(shared, frame, message);
+            let published_at = Instant::now();
+            let mut stages = lock(&shared.stage_latency);
+            stages.capture_to_decode.push(since_capture(decoded_at));
+            stages
+                .decode_to_estimate
+                .push(estimated_at.duration_since(decoded_at).as_secs_f64() * 1e3);
+            stages
+                .estimate_to_publish
+                .push(published_at.duration_since(estimated_at).as_secs_f64() * 1e3);
         }
-        shared.counters.frames_processed.fetch_add(1, Ordering::Relaxed);
-        let latency = frame.captured_at.elapsed();
-        let message = ReadingMessage {
-            schema_version: SCHEMA_VERSION,
-            frame_id: frame.frame_id,
-            file: None,
-            capture_time_us: frame.capture_time_us,
-            processed_time_us: unix_time_us(),
-            latency_ms: latency.as_secs_f64() * 1e3,
-            queue_ms: dequeued_at.duration_since(frame.captured_at).as_secs_f64() * 1e3,
-            reference_frame_id,
-            estimate,
-            error,
-            led: shared.board.led_state(),
-        };
-        lock(&shared.latency).push(message.latency_ms);
-        publish(shared, frame, message);
     }
 }
 
@@ -499,8 +675,7 @@ fn publish(shared: &Shared, frame: QueuedFrame, mut message: ReadingMessage) {
     shared.record(|| RecordItem::Reading(published.clone()));
     *shared.latest.write().unwrap_or_else(PoisonError::into_inner) = Some(ProcessedFrame {
         frame_id: frame.frame_id,
-        image: frame.image,
-        jpeg: frame.jpeg,
+        pixels: frame.pixels,
         reading: published.clone(),
     });
     // No subscribers is fine: nobody is watching.
@@ -558,7 +733,10 @@ pub struct PipelineStatus {
     /// Readings and telemetry messages that could not be written as JSON ([`EncodeError`]): logged, not sent.
     pub encode_errors: u64,
     pub tares: u64,
+    /// Capture timestamp to reading, decoding included.
     pub latency_ms: LatencySummary,
+    pub stage_latency_ms: StageLatency,
+    pub decode: DecodeStatus,
     /// The recording running now.
     pub recording: Option<RecordingStatus>,
     /// How the last recording failed, when it stopped by itself (cleared when the next one starts).
@@ -667,6 +845,18 @@ impl PipelineHandle {
             encode_errors: shared.counters.encode_errors.load(Ordering::Relaxed),
             tares: shared.counters.tares.load(Ordering::Relaxed),
             latency_ms: lock(&shared.latency).summary(),
+            stage_latency_ms: {
+                let stages = lock(&shared.stage_latency);
+                StageLatency {
+                    capture_to_decode: stages.capture_to_decode.summary(),
+                    decode_to_estimate: stages.decode_to_estimate.summary(),
+                    estimate_to_publish: stages.estimate_to_publish.summary(),
+                }
+            },
+            decode: DecodeStatus {
+                errors: shared.counters.decode_errors.load(Ordering::Relaxed),
+                ..lock(&shared.decode).clone()
+            },
             recording,
             recording_failure,
         }

@@ -19,6 +19,8 @@ mod writer;
 
 pub use messages::SHEAR_DRAW_GAIN;
 pub(crate) use messages::{channel_table, Kind};
+/// What [`RecordItem::Frame`] holds: the frame as its source delivered it.
+pub use nusense_capture::FramePixels;
 pub use reader::{
     ends_finished, read_recording, ChannelInfo, RecordedFrame, RecordedMessage, RecordedMetadata, Recording,
     RecordingReader, SchemaInfo,
@@ -159,8 +161,7 @@ mod tests {
             recorder.record(RecordItem::Frame {
                 frame_id,
                 capture_time_us: time_us,
-                image: image(),
-                jpeg: None,
+                pixels: nusense_capture::FramePixels::Rgb(image()),
             });
             recorder.record(RecordItem::Reading(published(frame_id, time_us)));
         }
@@ -306,8 +307,7 @@ mod tests {
             recorder.record(RecordItem::Frame {
                 frame_id,
                 capture_time_us: frame_id,
-                image: Arc::new(image::RgbImage::new(1, 1)),
-                jpeg: Some(jpeg.clone()),
+                pixels: nusense_capture::FramePixels::Jpeg(jpeg.clone()),
             });
         }
         let stats = recorder.stats();

@@ -17,6 +17,7 @@ use serde::Serialize;
 use super::messages::{self, channel_table, Kind};
 use super::{RecordError, RecordFailure};
 use crate::pipeline::PublishedReading;
+use nusense_capture::FramePixels;
 
 /// How long a chunk may stay open by default: a power cut loses at most this much (plus the time the disk takes
 /// to complete the fsync), a SIGKILL at most the same (the kernel keeps what was written).
@@ -98,13 +99,12 @@ const FILE_BUFFER_BYTES: usize = 64 * 1024;
 /// What goes into a recording. JSON payloads are serialised once by the producer and shared.
 #[derive(Clone, Debug)]
 pub enum RecordItem {
-    /// `jpeg` is the camera's own compressed frame, recorded as it is; only when a source gave none does the
-    /// writer thread compress `image`, keeping that cost off the capture path.
+    /// The frame as the source delivered it: a camera's JPEG is recorded as it is; only a source without one
+    /// (YUYV, the simulator) has the writer thread compress it, keeping that cost off the capture path.
     Frame {
         frame_id: u64,
         capture_time_us: u64,
-        image: Arc<image::RgbImage>,
-        jpeg: Option<Arc<Vec<u8>>>,
+        pixels: FramePixels,
     },
     /// The published reading: its JSON on the reading channel, and its annotations over the frame.
     Reading(Arc<PublishedReading>),
@@ -118,8 +118,7 @@ impl RecordItem {
     /// What the item holds in memory while it waits: what the queue bound counts.
     fn queued_bytes(&self) -> u64 {
         let bytes = match self {
-            RecordItem::Frame { jpeg: Some(jpeg), .. } => jpeg.len(),
-            RecordItem::Frame { image, .. } => image.as_raw().len(),
+            RecordItem::Frame { pixels, .. } => pixels.byte_len(),
             RecordItem::Reading(published) => {
                 let corners = published.message.estimate.as_ref().map_or(0, |e| e.shear_field.len());
                 published.json.len() + corners * std::mem::size_of::<nusense_estimator::ShearVector>()
@@ -405,15 +404,30 @@ impl WriterThread {
             RecordItem::Frame {
                 frame_id,
                 capture_time_us,
-                image,
-                jpeg,
+                pixels,
             } => {
-                let jpeg = match jpeg {
-                    Some(jpeg) => jpeg,
-                    None => Arc::new(encode_jpeg(&image, FRAME_JPEG_QUALITY)),
+                let (jpeg, size) = match &pixels {
+                    // A camera's bytes are recorded as they came, even a frame that does not decode.
+                    FramePixels::Jpeg(jpeg) => (jpeg.clone(), pixels.dimensions().ok()),
+                    FramePixels::Rgb(image) => (
+                        Arc::new(encode_jpeg(image, FRAME_JPEG_QUALITY)),
+                        Some(image.dimensions()),
+                    ),
+                    FramePixels::Yuyv { .. } => match pixels.to_rgb() {
+                        Ok(image) => (
+                            Arc::new(encode_jpeg(&image, FRAME_JPEG_QUALITY)),
+                            Some(image.dimensions()),
+                        ),
+                        Err(error) => {
+                            tracing::warn!("recording: frame {frame_id} is not recorded: {error}");
+                            self.stats.dropped.fetch_add(1, Ordering::Relaxed);
+                            return Ok(());
+                        }
+                    },
                 };
-                let size = image.dimensions();
-                if let (Some(sensor), false) = (&self.options.sensor, self.calibrated_size == Some(size)) {
+                if let (Some(sensor), Some(size)) =
+                    (&self.options.sensor, size.filter(|s| self.calibrated_size != Some(*s)))
+                {
                     let calibration = messages::calibration(capture_time_us, &sensor.config, size.0, size.1);
                     self.calibrated_size = Some(size);
                     let sequence = self.next_sequence(Kind::Calibration);

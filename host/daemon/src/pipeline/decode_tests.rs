@@ -1,0 +1,127 @@
+//! The pipeline decodes only what the estimator reads, and a frame that does not decode costs only that frame.
+
+use std::path::Path;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use nusense_capture::{ImageFolder, Scale};
+use nusense_estimator::{Estimator, Mode, SensorConfig};
+
+use super::{DecodeScale, NoBoard, Pipeline, PipelineOptions, PublishedReading};
+
+fn real(name: &str) -> Vec<u8> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../estimator/tests/data/real")
+        .join(name);
+    std::fs::read(path).expect("the real pair ships with the project")
+}
+
+fn full_decode(bytes: &[u8]) -> image::RgbImage {
+    image::load_from_memory(bytes).expect("a whole JPEG").to_rgb8()
+}
+
+#[test]
+fn auto_scale_keeps_the_decoded_frame_at_least_1024_px_wide() {
+    let auto = DecodeScale::Auto;
+    assert_eq!(auto.for_frame(Mode::Fast, 2048), Scale::Half);
+    assert_eq!(auto.for_frame(Mode::Inverse, 4096), Scale::Quarter);
+    assert_eq!(auto.for_frame(Mode::Fast, 1280), Scale::Full);
+    assert_eq!(auto.for_frame(Mode::Fast, 640), Scale::Full);
+    assert_eq!(auto.for_frame(Mode::Paper, 2048), Scale::Full);
+    assert_eq!(
+        DecodeScale::Fixed(Scale::Eighth).for_frame(Mode::Fast, 640),
+        Scale::Eighth
+    );
+}
+
+/// The real pair through the pipeline with a truncated frame between them: that frame is a typed decode error,
+/// counted in the status, and the frames after it are measured. The touch frame, decoded at 1/2 scale inside
+/// the pattern's region, gives the corners and contact a plain full decode gives, in the full frame's raw px.
+#[test]
+fn a_truncated_frame_is_a_decode_error_and_the_pipeline_goes_on() {
+    let folder = tempfile::tempdir().unwrap();
+    let (reference, touch) = (real("reference_fisheye.jpg"), real("touch_fisheye.jpg"));
+    for (name, bytes) in [
+        ("0.jpg", &reference[..]),
+        ("1.jpg", &touch[..touch.len() / 2]),
+        ("2.jpg", &touch[..]),
+        ("3.jpg", &touch[..]),
+    ] {
+        std::fs::write(folder.path().join(name), bytes).unwrap();
+    }
+    let source = ImageFolder::open(folder.path(), 5.0, false).unwrap();
+    let mut options = PipelineOptions::new(SensorConfig::default(), Mode::Fast);
+    // Nothing dropped however slow this build is: every frame must reach the estimator.
+    options.queue_len = 8;
+    let pipeline = Pipeline::start(Box::new(source), Arc::new(NoBoard), options).unwrap();
+    let handle = pipeline.handle();
+    let mut readings = handle.subscribe();
+    let deadline = Instant::now() + Duration::from_secs(300);
+    let mut published: Vec<Arc<PublishedReading>> = Vec::new();
+    while published.last().is_none_or(|p| p.message.frame_id != 3) && Instant::now() < deadline {
+        match readings.try_recv() {
+            Ok(reading) => published.push(reading),
+            Err(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    }
+    let frame_ids: Vec<u64> = published.iter().map(|p| p.message.frame_id).collect();
+    assert_eq!(
+        frame_ids,
+        [0, 2, 3],
+        "the truncated frame has no reading, the others do"
+    );
+    let status = handle.status();
+    assert_eq!(status.decode.errors, 1);
+    let decode_error = status.decode.last_error.clone().unwrap_or_default();
+    assert!(
+        decode_error.contains("frame 1") && decode_error.contains("truncated"),
+        "{decode_error}"
+    );
+    assert_eq!(
+        (status.frames_captured, status.frames_processed, status.frames_dropped),
+        (4, 4, 0)
+    );
+    assert_eq!(status.estimate_errors, 0);
+    assert_eq!(status.decode.scale, Some(Scale::Half));
+    let region = status
+        .decode
+        .region
+        .expect("later frames decode only the pattern's region");
+    assert!(
+        region.width * region.height < 2048 * 1536 * 3 / 4,
+        "{region:?} is the pattern's part of the frame"
+    );
+    assert_eq!(status.stage_latency_ms.capture_to_decode.samples, 3);
+    assert_eq!(status.stage_latency_ms.estimate_to_publish.samples, 3);
+
+    let last = &published[2].message;
+    assert_eq!(last.reference_frame_id, Some(0));
+    let reading = last.estimate.as_ref().expect("the touch frame is measured");
+    let mut estimator = Estimator::new(SensorConfig::default(), Mode::Fast, &full_decode(&reference)).unwrap();
+    let expected = estimator.estimate(&full_decode(&touch)).unwrap();
+    let distances: Vec<f64> = expected
+        .shear_field
+        .iter()
+        .zip(&reading.shear_field)
+        .filter_map(|(a, b)| {
+            let (a, b) = (a.current_px?, b.current_px?);
+            Some((a[0] - b[0]).hypot(a[1] - b[1]))
+        })
+        .collect();
+    assert!(distances.len() > 150, "{} corners in both", distances.len());
+    let rms = (distances.iter().map(|d| d * d).sum::<f64>() / distances.len() as f64).sqrt();
+    assert!(rms <= 0.1, "corners {rms:.3} px RMS from the full decode's");
+    // The real touch is a press near the pad's centre: both decodes find it, at the same place.
+    let (found, full) = (
+        reading.contact_mm().expect("contact found"),
+        expected.contact_mm().expect("contact found in the full decode"),
+    );
+    let shift = (found[0] - full[0]).hypot(found[1] - full[1]);
+    assert!(shift <= 0.05, "contact {shift:.3} mm from the full decode's");
+    let (found, full) = (reading.contact_px().unwrap(), expected.contact_px().unwrap());
+    let shift_px = (found[0] - full[0]).hypot(found[1] - full[1]);
+    assert!(
+        shift_px <= 2.0,
+        "contact {shift_px:.2} raw px from the full decode's: px not scaled back?"
+    );
+}
