@@ -3,6 +3,7 @@
 
 mod api;
 mod browser;
+mod corrupt;
 mod daemon;
 mod lifecycle;
 mod load;

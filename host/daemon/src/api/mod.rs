@@ -243,6 +243,13 @@ fn problems(pipeline: &PipelineStatus, board: &BoardStatus, latest_error: Option
     if let Some(error) = latest_error {
         problems.push(format!("estimator: {error}"));
     }
+    if pipeline.decode.errors > 0 {
+        problems.push(format!(
+            "camera: {} frames did not decode and were skipped (last: {})",
+            pipeline.decode.errors,
+            pipeline.decode.last_error.as_deref().unwrap_or("unknown")
+        ));
+    }
     if pipeline.encode_errors > 0 {
         problems.push(format!(
             "{} messages could not be written as JSON and were not sent (see the daemon's log)",
