@@ -36,8 +36,6 @@ use nusense_estimator::calibration::{
 use nusense_estimator::{Estimator, MapResidual, Mode, SensorConfig, StoredPadMap};
 use serde::Serialize;
 
-use super::common::load_config;
-
 #[derive(clap::Args)]
 pub struct Args {
     /// CSV of (gamma, force) pairs.
@@ -165,8 +163,10 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         },
         None => None,
     };
+    // The text just read is the config the fits start from (its modulus) and the one they are written into.
     let config = match (&existing, &args.config) {
-        (Some(_), Some(path)) => load_config(Some(path))?,
+        (Some(text), Some(path)) => SensorConfig::from_toml_str(text)
+            .with_context(|| format!("loading the sensor configuration {}", path.display()))?,
         _ => SensorConfig::default(),
     };
     let fits = fit_all(&args, &config)?;
