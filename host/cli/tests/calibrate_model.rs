@@ -2,6 +2,7 @@
 //! and a force/torque log, and the pad map fitted on a rest frame, each written into the sensor config and then
 //! used by the estimator on presses the calibration never saw.
 
+use std::ffi::OsStr;
 use std::path::Path;
 use std::process::Command;
 
@@ -101,16 +102,27 @@ fn write_session(dir: &Path, readings: &[Reading]) -> (std::path::PathBuf, std::
     (readings_path, log_path)
 }
 
-fn calibrate(args: &[&str], extra: &[&Path]) -> serde_json::Value {
+/// `nusense calibrate --json ARGS...`, which must succeed; its report.
+fn calibrate(args: &[&OsStr]) -> serde_json::Value {
     let out = Command::new(env!("CARGO_BIN_EXE_nusense"))
-        .arg("calibrate")
-        .arg("--json")
+        .args(["calibrate", "--json"])
         .args(args)
-        .args(extra)
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// Calibrates from a session's readings and force log, written into `config`.
+fn calibrate_session(readings: &Path, log: &Path, config: &Path) -> serde_json::Value {
+    calibrate(&[
+        "--readings".as_ref(),
+        readings.as_os_str(),
+        "--ft-log".as_ref(),
+        log.as_os_str(),
+        "--config".as_ref(),
+        config.as_os_str(),
+    ])
 }
 
 fn config_with_modulus(kpa: f64) -> SensorConfig {
@@ -139,16 +151,7 @@ fn the_fitted_modulus_makes_unseen_presses_read_their_force() {
             format!("# bench sensor\n[elastic]\nshear_modulus_kpa = {start_kpa}\n"),
         )
         .unwrap();
-        let report = calibrate(
-            &["--readings"],
-            &[
-                &readings_path,
-                Path::new("--ft-log"),
-                &log_path,
-                Path::new("--config"),
-                &config_path,
-            ],
-        );
+        let report = calibrate_session(&readings_path, &log_path, &config_path);
         let modulus = &report["modulus"];
         assert_eq!(modulus["points"], TRAINING.len(), "{report}");
         assert_eq!(modulus["shear_modulus_kpa_before"], start_kpa, "{report}");
@@ -203,16 +206,7 @@ fn one_calibration_reads_unseen_presses_within_the_issue_target() {
     let readings = estimate_all(&SensorConfig::default(), &frames.rest, &frames.training);
     let (readings_path, log_path) = write_session(dir.path(), &readings);
     let config_path = dir.path().join("sensor.toml");
-    calibrate(
-        &["--readings"],
-        &[
-            &readings_path,
-            Path::new("--ft-log"),
-            &log_path,
-            Path::new("--config"),
-            &config_path,
-        ],
-    );
+    calibrate_session(&readings_path, &log_path, &config_path);
     let rms = held_out_force_rms(&SensorConfig::load(&config_path).unwrap(), &frames);
     assert!(rms <= 0.3, "held-out force RMS {rms:.3} N");
 }
@@ -225,7 +219,12 @@ fn the_pad_map_fitted_on_a_rest_frame_is_stored_and_reproduces_the_fresh_fit() {
     frames.rest.save(&rest_path).unwrap();
     let config_path = dir.path().join("sensor.toml");
     std::fs::write(&config_path, "# bench sensor\n[calibration]\na = 3.09\nb = -1.14\n").unwrap();
-    let report = calibrate(&["--rest"], &[&rest_path, Path::new("--config"), &config_path]);
+    let report = calibrate(&[
+        "--rest".as_ref(),
+        rest_path.as_os_str(),
+        "--config".as_ref(),
+        config_path.as_os_str(),
+    ]);
     assert!(
         report["a"].is_null() && report["modulus"].is_null(),
         "only the map was asked for: {report}"
