@@ -9,7 +9,7 @@ mod daemon;
 
 use std::time::Duration;
 
-use daemon::{press, Daemon, Options};
+use daemon::{pipeline_counters, press, Daemon, Options};
 use futures_util::StreamExt;
 use nusense_daemon::pipeline::summarise;
 use serde_json::Value;
@@ -59,7 +59,6 @@ fn main() {
             }
         }
         let status = daemon.status().await;
-        let pipeline = &status["pipeline"];
         println!(
             "nusense serve latency, simulator 640x480 at 30 fps, {frames} readings ({with_estimate} with an estimate)"
         );
@@ -74,12 +73,6 @@ fn main() {
             let s = summarise(samples);
             println!("| {name:<39} | {:>7.2} | {:>7.2} | {:>7.2} |", s.p50, s.p99, s.max);
         }
-        println!(
-            "pipeline: {} frames captured, {} processed, {} dropped (drop-oldest), {} estimate errors",
-            pipeline["frames_captured"],
-            pipeline["frames_processed"],
-            pipeline["frames_dropped"],
-            pipeline["estimate_errors"]
-        );
+        println!("{}", pipeline_counters(&status));
     });
 }

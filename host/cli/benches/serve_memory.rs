@@ -19,7 +19,7 @@ mod daemon;
 
 use std::time::{Duration, Instant};
 
-use daemon::{render_folder, Daemon, Options};
+use daemon::{pipeline_counters, render_folder, Daemon, Options};
 use futures_util::StreamExt;
 use serde_json::json;
 
@@ -166,14 +166,7 @@ fn main() {
         viewer.abort();
         reader.abort();
         let status = daemon.status().await;
-        let pipeline = &status["pipeline"];
-        println!(
-            "pipeline: {} frames captured, {} processed, {} dropped (drop-oldest), {} estimate errors",
-            pipeline["frames_captured"],
-            pipeline["frames_processed"],
-            pipeline["frames_dropped"],
-            pipeline["estimate_errors"]
-        );
+        println!("{}", pipeline_counters(&status));
         samples.sort_by(f64::total_cmp);
         let median = samples.get(samples.len() / 2).copied().unwrap_or(f64::NAN);
         let passed = peak < LIMIT_MB;

@@ -298,6 +298,18 @@ pub async fn json_of(response: reqwest::Response) -> (u16, Value) {
 }
 
 /// The rest scene: nothing touches the pad.
+/// The pipeline's frame counters in a status, as the benchmarks print them.
+pub fn pipeline_counters(status: &Value) -> String {
+    let pipeline = &status["pipeline"];
+    format!(
+        "pipeline: {} frames captured, {} processed, {} dropped (drop-oldest), {} estimate errors",
+        pipeline["frames_captured"],
+        pipeline["frames_processed"],
+        pipeline["frames_dropped"],
+        pipeline["estimate_errors"]
+    )
+}
+
 pub fn rest() -> Scene {
     Scene::default()
 }
