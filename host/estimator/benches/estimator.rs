@@ -14,13 +14,20 @@ use nusense_estimator::{Estimator, Mode, SensorConfig};
 
 fn load(name: &str) -> RgbImage {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real");
-    image::open(dir.join(name)).expect("the real frames are part of the shared data").to_rgb8()
+    image::open(dir.join(name))
+        .expect("the real frames are part of the shared data")
+        .to_rgb8()
 }
 
 fn sizes() -> Vec<(&'static str, RgbImage, RgbImage)> {
     let (reference, touch) = (load("reference_fisheye.jpg"), load("touch_fisheye.jpg"));
     let scaled = |image: &RgbImage, d: u32| {
-        imageops::resize(image, image.width() / d, image.height() / d, imageops::FilterType::Triangle)
+        imageops::resize(
+            image,
+            image.width() / d,
+            image.height() / d,
+            imageops::FilterType::Triangle,
+        )
     };
     vec![
         ("2048x1536", reference.clone(), touch.clone()),
@@ -33,26 +40,49 @@ fn fast_stages(c: &mut Criterion, label: &str, reference: &RgbImage, touch: &Rgb
     let config = SensorConfig::default();
     let mut estimator = Estimator::new(config.clone(), Mode::Fast, reference).expect("reference");
     let lattice = estimator.detect(touch).expect("touch");
-    let registration = register(estimator.reference_lattice(), &lattice, config.thresholds.max_displacement_cells);
+    let registration = register(
+        estimator.reference_lattice(),
+        &lattice,
+        config.thresholds.max_displacement_cells,
+    );
     let mapping = estimator.mapping().clone();
     let paper = |c: Option<[f64; 2]>| c.map(|p| mapping.to_paper(p)).unwrap_or([0.0, 0.0]);
     let valid: Vec<bool> = registration.corners.iter().map(|c| c.valid).collect();
-    let reference_px: Vec<[f64; 2]> =
-        estimator.reference_lattice().corners.iter().map(|c| paper(c.undistorted_px)).collect();
+    let reference_px: Vec<[f64; 2]> = estimator
+        .reference_lattice()
+        .corners
+        .iter()
+        .map(|c| paper(c.undistorted_px))
+        .collect();
     let current_px: Vec<[f64; 2]> = lattice.corners.iter().map(|c| paper(c.undistorted_px)).collect();
-    let reference_valid: Vec<bool> =
-        estimator.reference_lattice().corners.iter().map(|c| c.undistorted_px.is_some()).collect();
+    let reference_valid: Vec<bool> = estimator
+        .reference_lattice()
+        .corners
+        .iter()
+        .map(|c| c.undistorted_px.is_some())
+        .collect();
     let sampler = ShearSampler::new(11, 15, &config.surface, &reference_px, &reference_valid).expect("surface");
     let field: Vec<FieldPoint> = reference_px
         .iter()
         .zip(&current_px)
-        .map(|(r, c)| FieldPoint { position: *r, displacement: [c[0] - r[0], c[1] - r[1]] })
+        .map(|(r, c)| FieldPoint {
+            position: *r,
+            displacement: [c[0] - r[0], c[1] - r[1]],
+        })
         .collect();
 
     let mut group = c.benchmark_group(format!("fast/{label}"));
-    group.bench_function("1 detect (track lattice)", |b| b.iter(|| estimator.detect(black_box(touch)).unwrap()));
+    group.bench_function("1 detect (track lattice)", |b| {
+        b.iter(|| estimator.detect(black_box(touch)).unwrap())
+    });
     group.bench_function("2 register", |b| {
-        b.iter(|| register(estimator.reference_lattice(), black_box(&lattice), config.thresholds.max_displacement_cells))
+        b.iter(|| {
+            register(
+                estimator.reference_lattice(),
+                black_box(&lattice),
+                config.thresholds.max_displacement_cells,
+            )
+        })
     });
     group.bench_function("3 surface + gamma", |b| {
         b.iter(|| gamma(&sampler.sample(black_box(&current_px), &valid).unwrap(), 1.0 / 18000.0))
@@ -64,7 +94,9 @@ fn fast_stages(c: &mut Criterion, label: &str, reference: &RgbImage, touch: &Rgb
             divergence_centre(&field, &residuals)
         })
     });
-    group.bench_function("frame (estimate)", |b| b.iter(|| estimator.estimate(black_box(touch)).unwrap()));
+    group.bench_function("frame (estimate)", |b| {
+        b.iter(|| estimator.estimate(black_box(touch)).unwrap())
+    });
     group.finish();
 }
 
@@ -82,16 +114,26 @@ fn paper_frame(c: &mut Criterion, label: &str, reference: &RgbImage, touch: &Rgb
 /// The published pipeline's stages (paper mode), each on its own input from the stage before.
 fn paper_stages(c: &mut Criterion, label: &str, touch: &RgbImage) {
     use nusense_estimator::paper::PaperDetector;
-    let Ok(detector) = PaperDetector::new(&SensorConfig::default(), touch.width(), touch.height()) else { return };
-    let Ok(gray) = detector.undistorted_roi_gray(touch) else { return };
+    let Ok(detector) = PaperDetector::new(&SensorConfig::default(), touch.width(), touch.height()) else {
+        return;
+    };
+    let Ok(gray) = detector.undistorted_roi_gray(touch) else {
+        return;
+    };
     let edges = detector.edge_map(&gray);
     let quads = detector.quads(&edges);
     let mut group = c.benchmark_group(format!("paper/{label}"));
     group.sample_size(10);
-    group.bench_function("1 remap + grey", |b| b.iter(|| detector.undistorted_roi_gray(black_box(touch))));
-    group.bench_function("2 bilateral + Sobel + closing", |b| b.iter(|| detector.edge_map(black_box(&gray))));
+    group.bench_function("1 remap + grey", |b| {
+        b.iter(|| detector.undistorted_roi_gray(black_box(touch)))
+    });
+    group.bench_function("2 bilateral + Sobel + closing", |b| {
+        b.iter(|| detector.edge_map(black_box(&gray)))
+    });
     group.bench_function("3 contours + quads", |b| b.iter(|| detector.quads(black_box(&edges))));
-    group.bench_function("4 pairing + lattice indices", |b| b.iter(|| detector.index(touch, black_box(&quads))));
+    group.bench_function("4 pairing + lattice indices", |b| {
+        b.iter(|| detector.index(touch, black_box(&quads)))
+    });
     group.finish();
 }
 

@@ -18,7 +18,11 @@ impl Bench {
     fn new(model: SensorModel, config: SensorConfig) -> Self {
         let renderer = Renderer::new(model).expect("model");
         let (reference, _) = renderer.render(&Scene::rest(), LEDS, 0).expect("rest");
-        Self { renderer, reference, config }
+        Self {
+            renderer,
+            reference,
+            config,
+        }
     }
 
     fn estimator(&self, mode: Mode) -> Estimator {
@@ -73,7 +77,10 @@ fn main() {
                     noise.push(r.test.noise_mm);
                     floor.push(r.test.detection_floor_n);
                     if seed == 1 {
-                        println!("rest {mode}: stat {:.1} thr {:.1} p {:.3}", r.test.statistic, r.test.threshold, r.test.p_value);
+                        println!(
+                            "rest {mode}: stat {:.1} thr {:.1} p {:.3}",
+                            r.test.statistic, r.test.threshold, r.test.p_value
+                        );
                     }
                 }
             }
@@ -117,7 +124,10 @@ fn main() {
     if wants("forces") {
         for mode in modes {
             for (label, make) in [
-                ("sphere5", Box::new(|f: f64, p: [f64; 2]| Contact::sphere(5.0, p, f)) as Box<dyn Fn(f64, [f64; 2]) -> Contact>),
+                (
+                    "sphere5",
+                    Box::new(|f: f64, p: [f64; 2]| Contact::sphere(5.0, p, f)) as Box<dyn Fn(f64, [f64; 2]) -> Contact>,
+                ),
                 ("punch3", Box::new(|f: f64, p: [f64; 2]| Contact::flat_punch(3.0, p, f))),
             ] {
                 let mut pairs = Vec::new();
@@ -129,7 +139,10 @@ fn main() {
                 }
                 let scale = pairs.iter().map(|p| p.0 * p.1).sum::<f64>() / pairs.iter().map(|p| p.1 * p.1).sum::<f64>();
                 let errors: Vec<f64> = pairs.iter().map(|p| p.1 * scale - p.0).collect();
-                println!("forces {mode} {label}: one scale {scale:.3}, RMS error {:.3} N", rms(&errors));
+                println!(
+                    "forces {mode} {label}: one scale {scale:.3}, RMS error {:.3} N",
+                    rms(&errors)
+                );
                 for p in &pairs {
                     print!("({:.0}:{:.2}) ", p.0, p.1 * scale);
                 }
@@ -148,7 +161,9 @@ fn main() {
                 let mut estimator = bench.estimator(mode);
                 let (rest, _) = moved.render(&Scene::rest(), LEDS, 7).unwrap();
                 let r = estimator.estimate(&rest).ok();
-                let (press, truth) = moved.render(&Scene::with_contact(Contact::sphere(5.0, [4.0, -3.0], 4.0)), LEDS, 8).unwrap();
+                let (press, truth) = moved
+                    .render(&Scene::with_contact(Contact::sphere(5.0, [4.0, -3.0], 4.0)), LEDS, 8)
+                    .unwrap();
                 let p = estimator.estimate(&press).ok();
                 println!(
                     "rotation {mode} {degrees} deg: rest contact {:?} rot {:?}; press {:?} N at {:?} (truth {:?}), rot {:?}",
@@ -165,7 +180,10 @@ fn main() {
 
     if wants("two") {
         let scene = Scene {
-            contacts: vec![Contact::sphere(3.0, [-5.0, 2.0], 3.0), Contact::sphere(3.0, [5.0, 2.0], 2.0)],
+            contacts: vec![
+                Contact::sphere(3.0, [-5.0, 2.0], 3.0),
+                Contact::sphere(3.0, [5.0, 2.0], 2.0),
+            ],
             ..Scene::default()
         };
         let (r, _) = bench.read(Mode::Inverse, &scene, 9);
@@ -183,20 +201,30 @@ fn main() {
             contact.tangential_force_n = [1.5 * c, 1.5 * s];
             let (r, _) = bench.read(Mode::Inverse, &Scene::with_contact(contact), 10);
             if let Some(v) = r.as_ref().and_then(|r| r.touch.as_ref()).and_then(|t| t.force_vector_n) {
-                println!("shear {angle}: vector {v:.3?}, direction {:.1} deg", v[1].atan2(v[0]).to_degrees().rem_euclid(360.0));
+                println!(
+                    "shear {angle}: vector {v:.3?}, direction {:.1} deg",
+                    v[1].atan2(v[0]).to_degrees().rem_euclid(360.0)
+                );
             }
         }
         let mut twist = Contact::sphere(5.0, [0.0, 0.0], 5.0);
         twist.torsion_nmm = 5.0;
         let (r, _) = bench.read(Mode::Inverse, &Scene::with_contact(twist), 11);
-        println!("twist 5 N mm: torque {:?}", r.and_then(|r| r.touch.and_then(|t| t.torque_nmm)));
+        println!(
+            "twist 5 N mm: torque {:?}",
+            r.and_then(|r| r.touch.and_then(|t| t.torque_nmm))
+        );
     }
 
     if wants("edges") {
         for mode in modes {
             let mut errors = Vec::new();
             for angle in [0.0, 15.0, 30.0, 45.0, 60.0, 75.0, 90.0, 120.0, 165.0] {
-                let (r, _) = bench.read(mode, &Scene::with_contact(Contact::edge(20.0, 1.0, angle, [0.0, 0.0], 8.0)), 12);
+                let (r, _) = bench.read(
+                    mode,
+                    &Scene::with_contact(Contact::edge(20.0, 1.0, angle, [0.0, 0.0], 8.0)),
+                    12,
+                );
                 let found = r.and_then(|r| r.edge_angle_deg());
                 let e = found.map(|f| {
                     let d = (f - angle).rem_euclid(180.0);
@@ -214,7 +242,11 @@ fn main() {
             for f in [0.1, 0.2, 0.3, 0.5, 0.75, 1.0] {
                 let mut hits = 0;
                 for seed in 0..4 {
-                    let (r, _) = bench.read(mode, &Scene::with_contact(Contact::sphere(5.0, [3.0, 2.0], f)), 200 + seed);
+                    let (r, _) = bench.read(
+                        mode,
+                        &Scene::with_contact(Contact::sphere(5.0, [3.0, 2.0], f)),
+                        200 + seed,
+                    );
                     hits += usize::from(r.is_some_and(|r| r.is_contact()));
                 }
                 line += &format!("{f} N: {hits}/4  ");
@@ -223,4 +255,3 @@ fn main() {
         }
     }
 }
-

@@ -12,7 +12,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut estimator = nusense_estimator::Estimator::new(Default::default(), mode, &reference)?;
     println!("reference: {:.1} ms", started.elapsed().as_secs_f64() * 1e3);
     let lattice = estimator.reference_lattice();
-    println!("reference squares {} corners {}", lattice.squares_found(), lattice.corners_found());
+    println!(
+        "reference squares {} corners {}",
+        lattice.squares_found(),
+        lattice.corners_found()
+    );
     let repeats: usize = args.get(4).map(|s| s.parse()).transpose()?.unwrap_or(1);
     let started = std::time::Instant::now();
     let mut reading = estimator.estimate(&frame)?;

@@ -37,7 +37,11 @@ pub enum CalibrationError {
     #[error("no column named {wanted} in the header (columns: {found})")]
     MissingColumn { wanted: String, found: String },
     #[error("no reading lies within {max_skew_s} s of a force sample ({readings} readings, {forces} force samples)")]
-    NoOverlap { readings: usize, forces: usize, max_skew_s: f64 },
+    NoOverlap {
+        readings: usize,
+        forces: usize,
+        max_skew_s: f64,
+    },
     #[error("the sensor config: {0}")]
     Config(String),
 }
@@ -55,7 +59,11 @@ pub struct FitOptions {
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { bisquare_c: 4.685, confidence: 0.95, max_iterations: 200 }
+        Self {
+            bisquare_c: 4.685,
+            confidence: 0.95,
+            max_iterations: 200,
+        }
     }
 }
 
@@ -85,23 +93,39 @@ pub fn fit_force_line(samples: &[CalibrationSample], options: &FitOptions) -> Re
     if !(options.confidence > 0.0 && options.confidence < 1.0) {
         return Err(CalibrationError::BadConfidence(options.confidence));
     }
-    if let Some((index, s)) = samples.iter().enumerate().find(|(_, s)| !(s.gamma.is_finite() && s.force_n.is_finite()))
+    if let Some((index, s)) = samples
+        .iter()
+        .enumerate()
+        .find(|(_, s)| !(s.gamma.is_finite() && s.force_n.is_finite()))
     {
-        return Err(CalibrationError::NotFinite { index, gamma: s.gamma, force_n: s.force_n });
+        return Err(CalibrationError::NotFinite {
+            index,
+            gamma: s.gamma,
+            force_n: s.force_n,
+        });
     }
     let distinct = distinct_count(samples);
     const NEEDED: usize = 3;
     if distinct < NEEDED {
-        return Err(CalibrationError::TooFewPoints { found: distinct, needed: NEEDED });
+        return Err(CalibrationError::TooFewPoints {
+            found: distinct,
+            needed: NEEDED,
+        });
     }
     let x: Vec<f64> = samples.iter().map(|s| s.gamma).collect();
     let y: Vec<f64> = samples.iter().map(|s| s.force_n).collect();
-    let (x_min, x_max) = x.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let (x_min, x_max) = x
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
     if x_max - x_min <= 1e-12 * x_max.abs().max(x_min.abs()).max(1e-300) {
         return Err(CalibrationError::GammaConstant { gamma: x_min });
     }
     let n = x.len();
-    let c = if options.bisquare_c > 0.0 && options.bisquare_c.is_finite() { options.bisquare_c } else { 4.685 };
+    let c = if options.bisquare_c > 0.0 && options.bisquare_c.is_finite() {
+        options.bisquare_c
+    } else {
+        4.685
+    };
 
     let (mut a, mut b) = theil_sen(&x, &y).ok_or(CalibrationError::GammaConstant { gamma: x_min })?;
     // The residual scale stays at that of the Theil-Sen start (the MM-estimation recipe): re-estimating it each
@@ -155,7 +179,10 @@ pub fn fit_force_line(samples: &[CalibrationSample], options: &FitOptions) -> Re
 }
 
 fn distinct_count(samples: &[CalibrationSample]) -> usize {
-    let mut keys: Vec<(u64, u64)> = samples.iter().map(|s| (s.gamma.to_bits(), s.force_n.to_bits())).collect();
+    let mut keys: Vec<(u64, u64)> = samples
+        .iter()
+        .map(|s| (s.gamma.to_bits(), s.force_n.to_bits()))
+        .collect();
     keys.sort_unstable();
     keys.dedup();
     keys.len()
@@ -220,7 +247,12 @@ fn weighted_line(x: &[f64], y: &[f64], w: &[f64]) -> Option<(f64, f64)> {
     let mx = x.iter().zip(w).map(|(a, b)| a * b).sum::<f64>() / sw;
     let my = y.iter().zip(w).map(|(a, b)| a * b).sum::<f64>() / sw;
     let sxx: f64 = x.iter().zip(w).map(|(&xi, &wi)| wi * (xi - mx) * (xi - mx)).sum();
-    let sxy: f64 = x.iter().zip(y).zip(w).map(|((&xi, &yi), &wi)| wi * (xi - mx) * (yi - my)).sum();
+    let sxy: f64 = x
+        .iter()
+        .zip(y)
+        .zip(w)
+        .map(|((&xi, &yi), &wi)| wi * (xi - mx) * (yi - my))
+        .sum();
     if !(sxx > 0.0) {
         return None;
     }
@@ -394,20 +426,31 @@ fn split_csv(line: &str) -> Vec<&str> {
 
 /// The finite number in column `col` of a CSV line's `fields`; `what` names the column in the error.
 fn number_at(fields: &[&str], col: usize, line: usize, what: &str) -> Result<f64, CalibrationError> {
-    let field = fields.get(col).ok_or_else(|| CalibrationError::Parse { line, message: format!("no {what} column") })?;
+    let field = fields.get(col).ok_or_else(|| CalibrationError::Parse {
+        line,
+        message: format!("no {what} column"),
+    })?;
     field
         .parse::<f64>()
         .ok()
         .filter(|v| v.is_finite())
-        .ok_or_else(|| CalibrationError::Parse { line, message: format!("{what} `{field}` is not a finite number") })
+        .ok_or_else(|| CalibrationError::Parse {
+            line,
+            message: format!("{what} `{field}` is not a finite number"),
+        })
 }
 
 fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
-    text.lines().enumerate().map(|(i, l)| (i + 1, l.trim())).filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+    text.lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
 }
 
 fn find_column(header: &[&str], names: &[&str]) -> Option<usize> {
-    header.iter().position(|h| names.iter().any(|n| h.eq_ignore_ascii_case(n)))
+    header
+        .iter()
+        .position(|h| names.iter().any(|n| h.eq_ignore_ascii_case(n)))
 }
 
 /// (gamma, force) pairs from CSV: a header naming `gamma` and `force` (or `force_n`), or no header and the
@@ -419,10 +462,15 @@ pub fn parse_pairs_csv(text: &str) -> Result<Vec<CalibrationSample>, Calibration
         Some(&(_, first)) if split_csv(first)[0].parse::<f64>().is_err() => {
             let header = split_csv(first);
             let found = header.join(", ");
-            let gamma = find_column(&header, &["gamma"])
-                .ok_or_else(|| CalibrationError::MissingColumn { wanted: "gamma".into(), found: found.clone() })?;
-            let force = find_column(&header, &["force", "force_n", "f", "f_n"])
-                .ok_or(CalibrationError::MissingColumn { wanted: "force (or force_n)".into(), found })?;
+            let gamma = find_column(&header, &["gamma"]).ok_or_else(|| CalibrationError::MissingColumn {
+                wanted: "gamma".into(),
+                found: found.clone(),
+            })?;
+            let force =
+                find_column(&header, &["force", "force_n", "f", "f_n"]).ok_or(CalibrationError::MissingColumn {
+                    wanted: "force (or force_n)".into(),
+                    found,
+                })?;
             lines.next();
             (gamma, force)
         }
@@ -432,7 +480,10 @@ pub fn parse_pairs_csv(text: &str) -> Result<Vec<CalibrationSample>, Calibration
         .map(|(line, text)| {
             let fields = split_csv(text);
             let get = |col: usize, what: &str| number_at(&fields, col, line, what);
-            Ok(CalibrationSample { gamma: get(gamma_col, "gamma")?, force_n: get(force_col, "force")? })
+            Ok(CalibrationSample {
+                gamma: get(gamma_col, "gamma")?,
+                force_n: get(force_col, "force")?,
+            })
         })
         .collect()
 }
@@ -467,8 +518,10 @@ pub struct TimedGamma {
 /// `_us` suffix giving the unit; seconds otherwise) and `fx`, `fy`, `fz`; other columns are ignored.
 pub fn parse_force_log_csv(text: &str, component: ForceComponent) -> Result<Vec<ForceSample>, CalibrationError> {
     let mut lines = data_lines(text);
-    let (_, header_line) =
-        lines.next().ok_or(CalibrationError::MissingColumn { wanted: "a header".into(), found: String::new() })?;
+    let (_, header_line) = lines.next().ok_or(CalibrationError::MissingColumn {
+        wanted: "a header".into(),
+        found: String::new(),
+    })?;
     let header = split_csv(header_line);
     let found = header.join(", ");
     let time_columns: [(&str, f64); 12] = [
@@ -488,10 +541,15 @@ pub fn parse_force_log_csv(text: &str, component: ForceComponent) -> Result<Vec<
     let (time_col, time_unit) = time_columns
         .iter()
         .find_map(|&(name, unit)| find_column(&header, &[name]).map(|c| (c, unit)))
-        .ok_or_else(|| CalibrationError::MissingColumn { wanted: "timestamp".into(), found: found.clone() })?;
+        .ok_or_else(|| CalibrationError::MissingColumn {
+            wanted: "timestamp".into(),
+            found: found.clone(),
+        })?;
     let column = |name: &str| {
-        find_column(&header, &[name])
-            .ok_or_else(|| CalibrationError::MissingColumn { wanted: name.into(), found: found.clone() })
+        find_column(&header, &[name]).ok_or_else(|| CalibrationError::MissingColumn {
+            wanted: name.into(),
+            found: found.clone(),
+        })
     };
     let needed: Vec<(usize, &str)> = match component {
         ForceComponent::Fx => vec![(column("fx")?, "fx")],
@@ -530,17 +588,27 @@ pub fn align_by_time(
     forces: &[ForceSample],
     max_skew_s: f64,
 ) -> Result<Alignment, CalibrationError> {
-    let times: Vec<f64> = readings.iter().map(|r| if r.gamma.is_finite() { r.time_s } else { f64::NAN }).collect();
+    let times: Vec<f64> = readings
+        .iter()
+        .map(|r| if r.gamma.is_finite() { r.time_s } else { f64::NAN })
+        .collect();
     let mut samples = Vec::new();
     let mut dropped = 0;
     for (r, force) in readings.iter().zip(forces_at_times(&times, forces, max_skew_s)) {
         match force {
-            Some(force_n) => samples.push(CalibrationSample { gamma: r.gamma, force_n }),
+            Some(force_n) => samples.push(CalibrationSample {
+                gamma: r.gamma,
+                force_n,
+            }),
             None => dropped += 1,
         }
     }
     if samples.is_empty() {
-        return Err(CalibrationError::NoOverlap { readings: readings.len(), forces: forces.len(), max_skew_s });
+        return Err(CalibrationError::NoOverlap {
+            readings: readings.len(),
+            forces: forces.len(),
+            max_skew_s,
+        });
     }
     Ok(Alignment { samples, dropped })
 }
@@ -548,8 +616,11 @@ pub fn align_by_time(
 /// The log's force at each of `times` (seconds, the log's clock), by [`align_by_time`]'s rule; `None` where no
 /// force sample lies within `max_skew_s` or the time is not finite.
 pub fn forces_at_times(times: &[f64], forces: &[ForceSample], max_skew_s: f64) -> Vec<Option<f64>> {
-    let mut forces: Vec<ForceSample> =
-        forces.iter().copied().filter(|f| f.time_s.is_finite() && f.force_n.is_finite()).collect();
+    let mut forces: Vec<ForceSample> = forces
+        .iter()
+        .copied()
+        .filter(|f| f.time_s.is_finite() && f.force_n.is_finite())
+        .collect();
     forces.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
     times
         .iter()
@@ -585,7 +656,9 @@ pub fn forces_at_times(times: &[f64], forces: &[ForceSample], max_skew_s: f64) -
 /// and the layout; the result must still be a valid config.
 pub fn update_config_toml(text: &str, a: f64, b: f64) -> Result<String, CalibrationError> {
     if !(a.is_finite() && b.is_finite()) {
-        return Err(CalibrationError::Config(format!("refusing to write a non-finite calibration (a = {a}, b = {b})")));
+        return Err(CalibrationError::Config(format!(
+            "refusing to write a non-finite calibration (a = {a}, b = {b})"
+        )));
     }
     edit_config(text, |document| {
         let table = table_mut(document, "calibration")?;
@@ -598,7 +671,9 @@ pub fn update_config_toml(text: &str, a: f64, b: f64) -> Result<String, Calibrat
 /// Sets `elastic.shear_modulus_kpa` (what [`modulus::fit_modulus_scale`] calibrates), keeping everything else.
 pub fn set_config_shear_modulus(text: &str, kpa: f64) -> Result<String, CalibrationError> {
     if !(kpa.is_finite() && kpa > 0.0) {
-        return Err(CalibrationError::Config(format!("refusing to write a shear modulus of {kpa} kPa")));
+        return Err(CalibrationError::Config(format!(
+            "refusing to write a shear modulus of {kpa} kPa"
+        )));
     }
     edit_config(text, |document| {
         table_mut(document, "elastic")?.insert("shear_modulus_kpa", toml_edit::value(kpa));
@@ -609,10 +684,12 @@ pub fn set_config_shear_modulus(text: &str, kpa: f64) -> Result<String, Calibrat
 /// Replaces the config's `[pad_map]` with `map` (the rest frame's fitted raw px -> pad mm map), keeping everything
 /// else.
 pub fn set_config_pad_map(text: &str, map: &crate::StoredPadMap) -> Result<String, CalibrationError> {
-    map.validate().map_err(|reason| CalibrationError::Config(format!("refusing to write the pad map: {reason}")))?;
+    map.validate()
+        .map_err(|reason| CalibrationError::Config(format!("refusing to write the pad map: {reason}")))?;
     let serialised = toml::to_string(map).map_err(|e| CalibrationError::Config(e.to_string()))?;
-    let parsed: toml_edit::DocumentMut =
-        serialised.parse().map_err(|e: toml_edit::TomlError| CalibrationError::Config(e.to_string()))?;
+    let parsed: toml_edit::DocumentMut = serialised
+        .parse()
+        .map_err(|e: toml_edit::TomlError| CalibrationError::Config(e.to_string()))?;
     edit_config(text, |document| {
         let mut table = parsed.as_table().clone();
         table.set_implicit(false);
@@ -626,8 +703,9 @@ fn edit_config(
     text: &str,
     edit: impl FnOnce(&mut toml_edit::DocumentMut) -> Result<(), CalibrationError>,
 ) -> Result<String, CalibrationError> {
-    let mut document: toml_edit::DocumentMut =
-        text.parse().map_err(|e: toml_edit::TomlError| CalibrationError::Config(e.to_string()))?;
+    let mut document: toml_edit::DocumentMut = text
+        .parse()
+        .map_err(|e: toml_edit::TomlError| CalibrationError::Config(e.to_string()))?;
     edit(&mut document)?;
     let updated = document.to_string();
     crate::SensorConfig::from_toml_str(&updated).map_err(|e| CalibrationError::Config(e.to_string()))?;
@@ -658,7 +736,10 @@ mod tests {
     fn line(a: f64, b: f64, gammas: impl Iterator<Item = f64>, amplitude: f64) -> Vec<CalibrationSample> {
         gammas
             .enumerate()
-            .map(|(i, g)| CalibrationSample { gamma: g, force_n: a * g + b + noise(i, amplitude) })
+            .map(|(i, g)| CalibrationSample {
+                gamma: g,
+                force_n: a * g + b + noise(i, amplitude),
+            })
             .collect()
     }
 
@@ -695,7 +776,10 @@ mod tests {
     #[test]
     fn a_high_leverage_outlier_does_not_tilt_the_line() {
         let mut samples = line(2.0, 0.5, (0..15).map(|i| 1.0 + 0.2 * f64::from(i)), 0.02);
-        samples.push(CalibrationSample { gamma: 20.0, force_n: 0.0 });
+        samples.push(CalibrationSample {
+            gamma: 20.0,
+            force_n: 0.0,
+        });
         let fit = fit_force_line(&samples, &FitOptions::default()).unwrap();
         assert!((fit.a - 2.0).abs() < 0.05 && (fit.b - 0.5).abs() < 0.1, "{fit:?}");
     }
@@ -710,8 +794,13 @@ mod tests {
                 .map(|i| {
                     let g = 0.5 + 0.1 * f64::from(i);
                     // Sum of uniforms: roughly Gaussian noise, different in every trial.
-                    let e: f64 = (0..4).map(|k| noise(trial * 1000 + i as usize * 7 + k * 131 + 1, 0.1)).sum();
-                    CalibrationSample { gamma: g, force_n: 3.0 * g - 1.0 + e }
+                    let e: f64 = (0..4)
+                        .map(|k| noise(trial * 1000 + i as usize * 7 + k * 131 + 1, 0.1))
+                        .sum();
+                    CalibrationSample {
+                        gamma: g,
+                        force_n: 3.0 * g - 1.0 + e,
+                    }
                 })
                 .collect();
             let fit = fit_force_line(&samples, &FitOptions::default()).unwrap();
@@ -720,14 +809,20 @@ mod tests {
             }
         }
         assert!(misses <= 25, "{misses} of {trials} intervals missed");
-        assert!(misses >= 1, "intervals so wide they never miss are useless: {misses} of {trials}");
+        assert!(
+            misses >= 1,
+            "intervals so wide they never miss are useless: {misses} of {trials}"
+        );
     }
 
     #[test]
     fn degenerate_data_gives_typed_errors() {
         let p = |g: f64, f: f64| CalibrationSample { gamma: g, force_n: f };
         let options = FitOptions::default();
-        assert_eq!(fit_force_line(&[], &options), Err(CalibrationError::TooFewPoints { found: 0, needed: 3 }));
+        assert_eq!(
+            fit_force_line(&[], &options),
+            Err(CalibrationError::TooFewPoints { found: 0, needed: 3 })
+        );
         assert!(matches!(
             fit_force_line(&[p(1.0, 1.0), p(2.0, 2.0)], &options),
             Err(CalibrationError::TooFewPoints { found: 2, .. })
@@ -746,7 +841,13 @@ mod tests {
             Err(CalibrationError::NotFinite { index: 1, .. })
         ));
         assert!(matches!(
-            fit_force_line(&[p(1.0, 1.0), p(2.0, 2.0), p(3.0, 3.5)], &FitOptions { confidence: 1.0, ..options }),
+            fit_force_line(
+                &[p(1.0, 1.0), p(2.0, 2.0), p(3.0, 3.5)],
+                &FitOptions {
+                    confidence: 1.0,
+                    ..options
+                }
+            ),
             Err(CalibrationError::BadConfidence(_))
         ));
     }
@@ -755,21 +856,43 @@ mod tests {
     fn three_points_fit_with_finite_numbers() {
         let fit = fit_force_line(
             &[
-                CalibrationSample { gamma: 1.0, force_n: 2.0 },
-                CalibrationSample { gamma: 2.0, force_n: 4.1 },
-                CalibrationSample { gamma: 3.0, force_n: 5.9 },
+                CalibrationSample {
+                    gamma: 1.0,
+                    force_n: 2.0,
+                },
+                CalibrationSample {
+                    gamma: 2.0,
+                    force_n: 4.1,
+                },
+                CalibrationSample {
+                    gamma: 3.0,
+                    force_n: 5.9,
+                },
             ],
             &FitOptions::default(),
         )
         .unwrap();
-        for v in [fit.a, fit.b, fit.a_interval[0], fit.a_interval[1], fit.b_interval[0], fit.b_interval[1]] {
+        for v in [
+            fit.a,
+            fit.b,
+            fit.a_interval[0],
+            fit.a_interval[1],
+            fit.b_interval[0],
+            fit.b_interval[1],
+        ] {
             assert!(v.is_finite(), "{fit:?}");
         }
     }
 
     #[test]
     fn t_quantiles_match_tables() {
-        for (dof, expected) in [(1.0, 12.706), (2.0, 4.303), (5.0, 2.571), (30.0, 2.042), (1000.0, 1.962)] {
+        for (dof, expected) in [
+            (1.0, 12.706),
+            (2.0, 4.303),
+            (5.0, 2.571),
+            (30.0, 2.042),
+            (1000.0, 1.962),
+        ] {
             let t = student_t_quantile(0.975, dof);
             assert!((t - expected).abs() < 2e-3, "dof {dof}: {t}");
         }
@@ -781,20 +904,50 @@ mod tests {
         let with = parse_pairs_csv("# a comment\nforce_n, gamma\n1.5, 0.8\n3.0,1.3e0\n").unwrap();
         assert_eq!(
             with,
-            vec![CalibrationSample { gamma: 0.8, force_n: 1.5 }, CalibrationSample { gamma: 1.3, force_n: 3.0 }]
+            vec![
+                CalibrationSample {
+                    gamma: 0.8,
+                    force_n: 1.5
+                },
+                CalibrationSample {
+                    gamma: 1.3,
+                    force_n: 3.0
+                }
+            ]
         );
         let without = parse_pairs_csv("0.8,1.5\n1.3,3\n").unwrap();
         assert_eq!(without, with);
-        assert!(matches!(parse_pairs_csv("gamma,force\n0.8,abc\n"), Err(CalibrationError::Parse { line: 2, .. })));
-        assert!(matches!(parse_pairs_csv("g,force\n"), Err(CalibrationError::MissingColumn { .. })));
-        assert!(matches!(parse_pairs_csv("0.8,inf\n"), Err(CalibrationError::Parse { .. })));
+        assert!(matches!(
+            parse_pairs_csv("gamma,force\n0.8,abc\n"),
+            Err(CalibrationError::Parse { line: 2, .. })
+        ));
+        assert!(matches!(
+            parse_pairs_csv("g,force\n"),
+            Err(CalibrationError::MissingColumn { .. })
+        ));
+        assert!(matches!(
+            parse_pairs_csv("0.8,inf\n"),
+            Err(CalibrationError::Parse { .. })
+        ));
     }
 
     #[test]
     fn parses_force_logs_with_units_and_components() {
         let log = "timestamp_ms,fx,fy,fz,tx\n1000,0.3,0.4,-1.2,0\n1010,0,0,-2,0\n";
         let abs = parse_force_log_csv(log, ForceComponent::AbsFz).unwrap();
-        assert_eq!(abs, vec![ForceSample { time_s: 1.0, force_n: 1.2 }, ForceSample { time_s: 1.01, force_n: 2.0 }]);
+        assert_eq!(
+            abs,
+            vec![
+                ForceSample {
+                    time_s: 1.0,
+                    force_n: 1.2
+                },
+                ForceSample {
+                    time_s: 1.01,
+                    force_n: 2.0
+                }
+            ]
+        );
         let norm = parse_force_log_csv(log, ForceComponent::Norm).unwrap();
         assert!((norm[0].force_n - (0.09f64 + 0.16 + 1.44).sqrt()).abs() < 1e-12);
         assert!(matches!(
@@ -809,12 +962,25 @@ mod tests {
 
     #[test]
     fn aligns_by_interpolation_within_the_skew() {
-        let forces: Vec<ForceSample> =
-            (0..11).map(|i| ForceSample { time_s: 0.01 * f64::from(i), force_n: f64::from(i) }).collect();
+        let forces: Vec<ForceSample> = (0..11)
+            .map(|i| ForceSample {
+                time_s: 0.01 * f64::from(i),
+                force_n: f64::from(i),
+            })
+            .collect();
         let readings = [
-            TimedGamma { time_s: 0.025, gamma: 1.0 },  // halfway between 2 and 3
-            TimedGamma { time_s: 0.1004, gamma: 2.0 }, // just after the log, within skew
-            TimedGamma { time_s: 0.5, gamma: 3.0 },    // far outside
+            TimedGamma {
+                time_s: 0.025,
+                gamma: 1.0,
+            }, // halfway between 2 and 3
+            TimedGamma {
+                time_s: 0.1004,
+                gamma: 2.0,
+            }, // just after the log, within skew
+            TimedGamma {
+                time_s: 0.5,
+                gamma: 3.0,
+            }, // far outside
         ];
         let aligned = align_by_time(&readings, &forces, 0.006).unwrap();
         assert_eq!(aligned.dropped, 1);
@@ -824,7 +990,14 @@ mod tests {
         // A gap in the log wider than twice the skew drops readings in its middle.
         let gappy = [forces[0], forces[10]];
         assert!(matches!(
-            align_by_time(&[TimedGamma { time_s: 0.05, gamma: 1.0 }], &gappy, 0.002),
+            align_by_time(
+                &[TimedGamma {
+                    time_s: 0.05,
+                    gamma: 1.0
+                }],
+                &gappy,
+                0.002
+            ),
             Err(CalibrationError::NoOverlap { .. })
         ));
     }
@@ -833,16 +1006,25 @@ mod tests {
     fn config_update_keeps_other_keys_and_comments() {
         let text = "# my sensor\n[surface]\ndegree_u = 3 # smoother\n\n[calibration]\nalpha = 0.0001\na = 1.0\n";
         let updated = update_config_toml(text, 2.5, -0.75).unwrap();
-        assert!(updated.contains("# my sensor") && updated.contains("degree_u = 3 # smoother"), "{updated}");
+        assert!(
+            updated.contains("# my sensor") && updated.contains("degree_u = 3 # smoother"),
+            "{updated}"
+        );
         let config = crate::SensorConfig::from_toml_str(&updated).unwrap();
-        assert_eq!((config.calibration.a, config.calibration.b, config.calibration.alpha), (2.5, -0.75, 0.0001));
+        assert_eq!(
+            (config.calibration.a, config.calibration.b, config.calibration.alpha),
+            (2.5, -0.75, 0.0001)
+        );
         assert_eq!(config.surface.degree_u, 3);
         // An empty config gains a calibration table.
         let fresh = crate::SensorConfig::from_toml_str(&update_config_toml("", 1.0, 2.0).unwrap()).unwrap();
         assert_eq!((fresh.calibration.a, fresh.calibration.b), (1.0, 2.0));
         assert!(update_config_toml("calibration = 3\n", 1.0, 2.0).is_err());
         assert!(update_config_toml("", f64::NAN, 2.0).is_err());
-        assert!(update_config_toml("[surface]\ndegree_u = 99\n", 1.0, 2.0).is_err(), "an invalid config stays invalid");
+        assert!(
+            update_config_toml("[surface]\ndegree_u = 99\n", 1.0, 2.0).is_err(),
+            "an invalid config stays invalid"
+        );
     }
 
     #[test]
@@ -865,16 +1047,28 @@ mod tests {
                 y: [-1e-3, 2e-4, -3e-5, 4e-6, 0.0, 7e-7, -2e-8],
             },
             homography: [0.05, 1e-4, -25.0, -2e-4, 0.051, -19.0, 1e-6, -2e-6, 1.0],
-            residual: crate::MapResidual { rms_mm: 0.011, max_mm: 0.04, points: 163, outliers: 2 },
+            residual: crate::MapResidual {
+                rms_mm: 0.011,
+                max_mm: 0.04,
+                points: 163,
+                outliers: 2,
+            },
         };
         let with_map = set_config_pad_map(&updated, &map).unwrap();
         let config = crate::SensorConfig::from_toml_str(&with_map).unwrap();
         assert_eq!(config.pad_map, Some(map), "{with_map}");
         assert_eq!(config.elastic.shear_modulus_kpa, 31.25);
         // Writing it again replaces the table rather than adding a second one.
-        let moved = crate::StoredPadMap { homography: [0.06, 0.0, -20.0, 0.0, 0.06, -15.0, 0.0, 0.0, 1.0], ..map };
+        let moved = crate::StoredPadMap {
+            homography: [0.06, 0.0, -20.0, 0.0, 0.06, -15.0, 0.0, 0.0, 1.0],
+            ..map
+        };
         let again = set_config_pad_map(&with_map, &moved).unwrap();
-        assert_eq!(crate::SensorConfig::from_toml_str(&again).unwrap().pad_map, Some(moved), "{again}");
+        assert_eq!(
+            crate::SensorConfig::from_toml_str(&again).unwrap().pad_map,
+            Some(moved),
+            "{again}"
+        );
         let broken = crate::StoredPadMap { width: 0, ..map };
         assert!(set_config_pad_map(text, &broken).is_err());
     }

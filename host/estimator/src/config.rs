@@ -18,7 +18,12 @@ pub enum ConfigError {
     #[error("sensor config{}: {message}", file_suffix(path))]
     Parse { path: Option<PathBuf>, message: String },
     #[error("sensor config{}: `{key}` = {value} is not allowed; {allowed}", file_suffix(path))]
-    Invalid { path: Option<PathBuf>, key: &'static str, value: String, allowed: &'static str },
+    Invalid {
+        path: Option<PathBuf>,
+        key: &'static str,
+        value: String,
+        allowed: &'static str,
+    },
 }
 
 fn file_suffix(path: &Option<PathBuf>) -> String {
@@ -36,10 +41,18 @@ impl ConfigError {
 
     fn with_path(self, file: &Path) -> Self {
         match self {
-            Self::Parse { message, .. } => Self::Parse { path: Some(file.to_owned()), message },
-            Self::Invalid { key, value, allowed, .. } => {
-                Self::Invalid { path: Some(file.to_owned()), key, value, allowed }
-            }
+            Self::Parse { message, .. } => Self::Parse {
+                path: Some(file.to_owned()),
+                message,
+            },
+            Self::Invalid {
+                key, value, allowed, ..
+            } => Self::Invalid {
+                path: Some(file.to_owned()),
+                key,
+                value,
+                allowed,
+            },
             other => other,
         }
     }
@@ -58,7 +71,12 @@ pub struct Roi {
 
 impl Default for Roi {
     fn default() -> Self {
-        Self { x: 390, y: 203, width: 1335, height: 1000 }
+        Self {
+            x: 390,
+            y: 203,
+            width: 1335,
+            height: 1000,
+        }
     }
 }
 
@@ -102,7 +120,11 @@ pub struct ForceCalibration {
 
 impl Default for ForceCalibration {
     fn default() -> Self {
-        Self { a: 3.09, b: -1.14, alpha: 1.0 / 18000.0 }
+        Self {
+            a: 3.09,
+            b: -1.14,
+            alpha: 1.0 / 18000.0,
+        }
     }
 }
 
@@ -118,7 +140,11 @@ pub struct SurfaceConfig {
 
 impl Default for SurfaceConfig {
     fn default() -> Self {
-        Self { degree_u: 1, degree_v: 1, uv_step: 0.015 }
+        Self {
+            degree_u: 1,
+            degree_v: 1,
+            uv_step: 0.015,
+        }
     }
 }
 
@@ -257,7 +283,10 @@ pub struct RetareConfig {
 
 impl Default for RetareConfig {
     fn default() -> Self {
-        Self { motion_mm: 0.1, frames: 30 }
+        Self {
+            motion_mm: 0.1,
+            frames: 30,
+        }
     }
 }
 
@@ -300,7 +329,12 @@ impl Default for SensorConfig {
 }
 
 fn invalid(key: &'static str, value: impl std::fmt::Display, allowed: &'static str) -> ConfigError {
-    ConfigError::Invalid { path: None, key, value: value.to_string(), allowed }
+    ConfigError::Invalid {
+        path: None,
+        key,
+        value: value.to_string(),
+        allowed,
+    }
 }
 
 fn finite_positive(key: &'static str, v: f64) -> Result<(), ConfigError> {
@@ -329,16 +363,20 @@ fn fraction(key: &'static str, v: f64) -> Result<(), ConfigError> {
 
 impl SensorConfig {
     pub fn from_toml_str(text: &str) -> Result<Self, ConfigError> {
-        let config: Self =
-            toml::from_str(text).map_err(|e| ConfigError::Parse { path: None, message: e.to_string() })?;
+        let config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: None,
+            message: e.to_string(),
+        })?;
         config.validate()?;
         Ok(config)
     }
 
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ConfigError> {
         let path = path.as_ref();
-        let text =
-            std::fs::read_to_string(path).map_err(|source| ConfigError::Io { path: path.to_owned(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
         Self::from_toml_str(&text).map_err(|e| e.with_path(path))
     }
 
@@ -351,27 +389,44 @@ impl SensorConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         let cam = &self.camera;
         if cam.width < 16 || cam.height < 16 {
-            return Err(invalid("camera.width", format!("{} x {}", cam.width, cam.height), "frame sides >= 16 px"));
+            return Err(invalid(
+                "camera.width",
+                format!("{} x {}", cam.width, cam.height),
+                "frame sides >= 16 px",
+            ));
         }
         finite_positive("camera.fx", cam.fx)?;
         finite_positive("camera.fy", cam.fy)?;
         finite("camera.cx", cam.cx)?;
         finite("camera.cy", cam.cy)?;
         if cam.distortion.iter().any(|k| !k.is_finite()) {
-            return Err(invalid("camera.distortion", format!("{:?}", cam.distortion), "four finite numbers"));
+            return Err(invalid(
+                "camera.distortion",
+                format!("{:?}", cam.distortion),
+                "four finite numbers",
+            ));
         }
         nusense_geometry::FisheyeCamera::new(*cam)
             .map_err(|e| invalid("camera.distortion", format!("{:?}", cam.distortion), leak_reason(e)))?;
         let pad = &self.pad;
         if pad.rows < 3 || pad.cols < 3 {
-            return Err(invalid("pad.rows", format!("{} x {}", pad.rows, pad.cols), "at least 3 x 3 cells"));
+            return Err(invalid(
+                "pad.rows",
+                format!("{} x {}", pad.rows, pad.cols),
+                "at least 3 x 3 cells",
+            ));
         }
         finite_positive("pad.width_mm", pad.width_mm)?;
         finite_positive("pad.height_mm", pad.height_mm)?;
         if self.roi.width == 0 || self.roi.height == 0 {
-            return Err(invalid("roi.width", format!("{} x {}", self.roi.width, self.roi.height), "a non-empty ROI"));
+            return Err(invalid(
+                "roi.width",
+                format!("{} x {}", self.roi.width, self.roi.height),
+                "a non-empty ROI",
+            ));
         }
-        if self.roi.x.saturating_add(self.roi.width) > cam.width || self.roi.y.saturating_add(self.roi.height) > cam.height
+        if self.roi.x.saturating_add(self.roi.width) > cam.width
+            || self.roi.y.saturating_add(self.roi.height) > cam.height
         {
             return Err(invalid(
                 "roi.x",
@@ -391,10 +446,18 @@ impl SensorConfig {
         let s = &self.surface;
         let (net_rows, net_cols) = (usize::from(pad.corner_rows()), usize::from(pad.corner_cols()));
         if s.degree_u < 1 || s.degree_u >= net_rows {
-            return Err(invalid("surface.degree_u", s.degree_u, "1 ..= corner rows - 1 (10 on the real pad)"));
+            return Err(invalid(
+                "surface.degree_u",
+                s.degree_u,
+                "1 ..= corner rows - 1 (10 on the real pad)",
+            ));
         }
         if s.degree_v < 1 || s.degree_v >= net_cols {
-            return Err(invalid("surface.degree_v", s.degree_v, "1 ..= corner columns - 1 (14 on the real pad)"));
+            return Err(invalid(
+                "surface.degree_v",
+                s.degree_v,
+                "1 ..= corner columns - 1 (14 on the real pad)",
+            ));
         }
         if !(s.uv_step.is_finite() && s.uv_step >= 0.001 && s.uv_step <= 1.0) {
             return Err(invalid("surface.uv_step", s.uv_step, "0.001 ..= 1"));
@@ -411,7 +474,11 @@ impl SensorConfig {
         fraction("paper.polygon_epsilon_fraction", p.polygon_epsilon_fraction)?;
         finite_positive("paper.quad_min_area_px2", p.quad_min_area_px2)?;
         if !(p.quad_max_area_px2.is_finite() && p.quad_max_area_px2 > p.quad_min_area_px2) {
-            return Err(invalid("paper.quad_max_area_px2", p.quad_max_area_px2, "finite and > paper.quad_min_area_px2"));
+            return Err(invalid(
+                "paper.quad_max_area_px2",
+                p.quad_max_area_px2,
+                "finite and > paper.quad_min_area_px2",
+            ));
         }
         fraction("paper.quad_min_solidity", p.quad_min_solidity)?;
         finite_positive("paper.pair_distance_px", p.pair_distance_px)?;
@@ -434,16 +501,23 @@ impl SensorConfig {
         finite_positive("inverse.traction_prior_n", i.traction_prior_n)?;
         finite_positive("inverse.noise_floor_mm", i.noise_floor_mm)?;
         finite_positive("inverse.noise_floor_px", i.noise_floor_px)?;
-        if !(i.false_alarm_probability.is_finite() && i.false_alarm_probability > 0.0 && i.false_alarm_probability < 0.5)
+        if !(i.false_alarm_probability.is_finite()
+            && i.false_alarm_probability > 0.0
+            && i.false_alarm_probability < 0.5)
         {
-            return Err(invalid("inverse.false_alarm_probability", i.false_alarm_probability, "strictly between 0 and 0.5"));
+            return Err(invalid(
+                "inverse.false_alarm_probability",
+                i.false_alarm_probability,
+                "strictly between 0 and 0.5",
+            ));
         }
         finite_positive("retare.motion_mm", self.retare.motion_mm)?;
         if self.retare.frames == 0 {
             return Err(invalid("retare.frames", 0, ">= 1"));
         }
         if let Some(map) = &self.pad_map {
-            map.validate().map_err(|reason| invalid("pad_map", reason, "a map written by `nusense calibrate`"))?;
+            map.validate()
+                .map_err(|reason| invalid("pad_map", reason, "a map written by `nusense calibrate`"))?;
         }
         Ok(())
     }

@@ -26,10 +26,16 @@ pub struct AffineMotion {
 }
 
 impl AffineMotion {
-    pub const ZERO: Self = Self { x: [0.0; 3], y: [0.0; 3] };
+    pub const ZERO: Self = Self {
+        x: [0.0; 3],
+        y: [0.0; 3],
+    };
 
     pub fn predict(&self, p: Point2) -> Point2 {
-        [self.x[0] * p[0] + self.x[1] * p[1] + self.x[2], self.y[0] * p[0] + self.y[1] * p[1] + self.y[2]]
+        [
+            self.x[0] * p[0] + self.x[1] * p[1] + self.x[2],
+            self.y[0] * p[0] + self.y[1] * p[1] + self.y[2],
+        ]
     }
 
     pub fn residual(&self, point: &FieldPoint) -> Point2 {
@@ -133,7 +139,9 @@ pub fn divergence_centre(points: &[FieldPoint], residuals: &[Point2]) -> Option<
         .iter()
         .zip(residuals)
         .filter(|(_, &r)| norm(r) >= 0.3 * peak)
-        .map(|(p, &r)| norm(r).powi(2) * ((p.position[0] - centroid[0]).powi(2) + (p.position[1] - centroid[1]).powi(2)))
+        .map(|(p, &r)| {
+            norm(r).powi(2) * ((p.position[0] - centroid[0]).powi(2) + (p.position[1] - centroid[1]).powi(2))
+        })
         .sum::<f64>()
         / sw)
         .sqrt();
@@ -179,7 +187,10 @@ mod tests {
     fn a_rigid_shift_leaves_no_residual() {
         let points: Vec<FieldPoint> = radial_field([0.0, 0.0], [0.0, 0.0])
             .into_iter()
-            .map(|p| FieldPoint { position: p.position, displacement: [4.0, 2.5] })
+            .map(|p| FieldPoint {
+                position: p.position,
+                displacement: [4.0, 2.5],
+            })
             .collect();
         let motion = fit_affine_motion(&points).unwrap();
         assert!(points.iter().all(|p| norm(motion.residual(p)) < 1e-9));

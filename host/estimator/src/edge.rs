@@ -15,14 +15,23 @@ pub struct EdgeEstimate {
 }
 
 impl EdgeEstimate {
-    pub const NONE: Self = Self { angle_deg: None, confidence: 0.0, region_centre_mm: [0.0, 0.0], region_radius_mm: 0.0 };
+    pub const NONE: Self = Self {
+        angle_deg: None,
+        confidence: 0.0,
+        region_centre_mm: [0.0, 0.0],
+        region_radius_mm: 0.0,
+    };
 
     /// Scales the confidence by the fraction of the region that was actually seen; a partly seen region can
     /// look elongated only because of its holes, so below `min_coverage` no direction is claimed.
     pub fn with_coverage(self, coverage: f64, min_coverage: f64, min_confidence: f64) -> Self {
         let confidence = self.confidence * coverage.clamp(0.0, 1.0);
         let keep = coverage >= min_coverage && confidence >= min_confidence;
-        Self { angle_deg: self.angle_deg.filter(|_| keep), confidence, ..self }
+        Self {
+            angle_deg: self.angle_deg.filter(|_| keep),
+            confidence,
+            ..self
+        }
     }
 }
 
@@ -55,8 +64,16 @@ pub fn edge_direction(samples: &[(Point2, f64)], fraction: f64, min_confidence: 
         return EdgeEstimate::NONE;
     }
     let confidence = (1.0 - minor.max(0.0) / major).clamp(0.0, 1.0);
-    let region_radius_mm = chosen.iter().map(|s| (s.0[0] - mx).hypot(s.0[1] - my)).fold(0.0, f64::max);
-    let region = EdgeEstimate { angle_deg: None, confidence, region_centre_mm: [mx, my], region_radius_mm };
+    let region_radius_mm = chosen
+        .iter()
+        .map(|s| (s.0[0] - mx).hypot(s.0[1] - my))
+        .fold(0.0, f64::max);
+    let region = EdgeEstimate {
+        angle_deg: None,
+        confidence,
+        region_centre_mm: [mx, my],
+        region_radius_mm,
+    };
     if confidence < min_confidence {
         return region;
     }
@@ -64,7 +81,10 @@ pub fn edge_direction(samples: &[(Point2, f64)], fraction: f64, min_confidence: 
     let degrees = angle.to_degrees().rem_euclid(180.0);
     // rem_euclid can return exactly 180.0 for tiny negative angles.
     let degrees = if degrees >= 180.0 { 0.0 } else { degrees };
-    EdgeEstimate { angle_deg: Some(degrees), ..region }
+    EdgeEstimate {
+        angle_deg: Some(degrees),
+        ..region
+    }
 }
 
 #[cfg(test)]

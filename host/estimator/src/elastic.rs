@@ -52,7 +52,11 @@ pub struct Radial {
 impl std::ops::Add for Radial {
     type Output = Self;
     fn add(self, o: Self) -> Self {
-        Self { a: self.a + o.a, b: self.b + o.b, c: self.c + o.c }
+        Self {
+            a: self.a + o.a,
+            b: self.b + o.b,
+            c: self.c + o.c,
+        }
     }
 }
 
@@ -72,7 +76,9 @@ impl PointKernel {
         let nu = config.poisson_ratio;
         let depth = config.cover_mm;
         if !(mu > 0.0 && (0.0..=0.5).contains(&nu) && depth > 0.0) {
-            return Err(ElasticError::Degenerate("needs a positive modulus and depth and 0 <= nu <= 0.5"));
+            return Err(ElasticError::Degenerate(
+                "needs a positive modulus and depth and 0 <= nu <= 0.5",
+            ));
         }
         let correction = match config.model {
             ElasticModel::HalfSpace => None,
@@ -83,7 +89,12 @@ impl PointKernel {
                 Some(tabulate_layer_correction(mu, nu, depth, depth + config.gel_mm))
             }
         };
-        Ok(Self { shear_modulus_n_per_mm2: mu, poisson_ratio: nu, depth_mm: depth, correction })
+        Ok(Self {
+            shear_modulus_n_per_mm2: mu,
+            poisson_ratio: nu,
+            depth_mm: depth,
+            correction,
+        })
     }
 
     /// a, b, c at in-plane distance `r` (mm).
@@ -106,8 +117,15 @@ impl PointKernel {
     pub fn response(&self, offset: Point2) -> [[f64; 3]; 2] {
         let r = offset[0].hypot(offset[1]);
         let Radial { a, b, c } = self.radial(r);
-        let (ux, uy) = if r > 1e-12 { (offset[0] / r, offset[1] / r) } else { (0.0, 0.0) };
-        [[a + b * ux * ux, b * ux * uy, c * ux], [b * ux * uy, a + b * uy * uy, c * uy]]
+        let (ux, uy) = if r > 1e-12 {
+            (offset[0] / r, offset[1] / r)
+        } else {
+            (0.0, 0.0)
+        };
+        [
+            [a + b * ux * ux, b * ux * uy, c * ux],
+            [b * ux * uy, a + b * uy * uy, c * uy],
+        ]
     }
 }
 
@@ -138,7 +156,11 @@ pub struct Spectra {
 /// U = (a + b k z) e^(-kz), W = (-a - kappa b - b k z) e^(-kz), solved by hand.
 pub fn half_space_spectra(k: f64, nu: f64, d: f64) -> Spectra {
     let e = (-k * d).exp();
-    Spectra { ll: ((1.0 - nu) - 0.5 * k * d) * e, ln: (0.5 * (1.0 - 2.0 * nu) - 0.5 * k * d) * e, tt: e }
+    Spectra {
+        ll: ((1.0 - nu) - 0.5 * k * d) * e,
+        ln: (0.5 * (1.0 - 2.0 * nu) - 0.5 * k * d) * e,
+        tt: e,
+    }
 }
 
 /// The bonded layer's spectra (thickness `h`, observed at depth `d`): top loaded, bottom clamped.
@@ -190,7 +212,11 @@ pub fn hankel(spectra: &[Spectra], dk: f64, r: f64) -> Radial {
     }
     let h = dk / 3.0;
     let tau = std::f64::consts::TAU;
-    Radial { a: a * h / (2.0 * tau), b: b * h / tau, c: -c * h / tau }
+    Radial {
+        a: a * h / (2.0 * tau),
+        b: b * h / tau,
+        c: -c * h / tau,
+    }
 }
 
 /// Samples `f` every `dk` over [0, k_max] with an odd number of points (Simpson).
@@ -207,13 +233,21 @@ fn tabulate_layer_correction(mu: f64, nu: f64, d: f64, h: f64) -> Vec<Radial> {
     let dk = std::f64::consts::TAU / TABLE_REACH_MM / POINTS_PER_PERIOD;
     let spectra = sample_spectra(k_max, dk, |k| {
         let (layer, half) = (layer_spectra(k, nu, d, h), half_space_spectra(k, nu, d));
-        Spectra { ll: layer.ll - half.ll, ln: layer.ln - half.ln, tt: layer.tt - half.tt }
+        Spectra {
+            ll: layer.ll - half.ll,
+            ln: layer.ln - half.ln,
+            tt: layer.tt - half.tt,
+        }
     });
     let steps = (TABLE_REACH_MM / TABLE_STEP_MM).ceil() as usize + 3;
     (0..steps)
         .map(|i| {
             let r = hankel(&spectra, dk, i as f64 * TABLE_STEP_MM);
-            Radial { a: r.a / mu, b: r.b / mu, c: r.c / mu }
+            Radial {
+                a: r.a / mu,
+                b: r.b / mu,
+                c: r.c / mu,
+            }
         })
         .collect()
 }
@@ -226,11 +260,23 @@ fn catmull_rom(table: &[Radial], at: f64) -> Radial {
     let p2 = table[i + 1];
     let p3 = table[i + 2];
     // Mirror at r = 0: a is even in r, b and c vanish there with even / odd symmetry.
-    let p0 = if i == 0 { Radial { a: table[1].a, b: table[1].b, c: -table[1].c } } else { table[i - 1] };
+    let p0 = if i == 0 {
+        Radial {
+            a: table[1].a,
+            b: table[1].b,
+            c: -table[1].c,
+        }
+    } else {
+        table[i - 1]
+    };
     let cubic = |p0: f64, p1: f64, p2: f64, p3: f64| {
         p1 + 0.5 * t * (p2 - p0 + t * (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3 + t * (3.0 * (p1 - p2) + p3 - p0)))
     };
-    Radial { a: cubic(p0.a, p1.a, p2.a, p3.a), b: cubic(p0.b, p1.b, p2.b, p3.b), c: cubic(p0.c, p1.c, p2.c, p3.c) }
+    Radial {
+        a: cubic(p0.a, p1.a, p2.a, p3.a),
+        b: cubic(p0.b, p1.b, p2.b, p3.b),
+        c: cubic(p0.c, p1.c, p2.c, p3.c),
+    }
 }
 
 /// A rectangular cell of uniform traction.
@@ -282,7 +328,9 @@ impl PadResponse {
                 regularised[(i, i)] += ridge;
             }
             let lu = regularised.lu();
-            let reactions = lu.solve(&g_bt).ok_or(ElasticError::Degenerate("border reactions are singular"))?;
+            let reactions = lu
+                .solve(&g_bt)
+                .ok_or(ElasticError::Degenerate("border reactions are singular"))?;
             matrix -= g_ob * reactions;
         }
         if matrix.iter().any(|v| !v.is_finite()) {
@@ -336,7 +384,10 @@ fn cell_matrix(kernel: &PointKernel, to: &[Point2], cells: &[Cell]) -> DMatrix<f
             let mut sum = [[0.0; 3]; 2];
             for &(gx, wx) in &GAUSS {
                 for &(gy, wy) in &GAUSS {
-                    let q = [cell.centre_mm[0] + gx * cell.size_mm[0], cell.centre_mm[1] + gy * cell.size_mm[1]];
+                    let q = [
+                        cell.centre_mm[0] + gx * cell.size_mm[0],
+                        cell.centre_mm[1] + gy * cell.size_mm[1],
+                    ];
                     let r = kernel.response([p[0] - q[0], p[1] - q[1]]);
                     for row in 0..2 {
                         for col in 0..3 {
@@ -357,7 +408,9 @@ fn cell_matrix(kernel: &PointKernel, to: &[Point2], cells: &[Cell]) -> DMatrix<f
 
 /// Displacements (mm) at `observations` from forces `forces` (N, 3 per cell), for tests and the simulator checks.
 pub fn apply(response: &PadResponse, forces: &[f64]) -> Vec<f64> {
-    (&response.matrix * DVector::from_column_slice(forces)).as_slice().to_vec()
+    (&response.matrix * DVector::from_column_slice(forces))
+        .as_slice()
+        .to_vec()
 }
 
 #[cfg(test)]
@@ -380,9 +433,18 @@ mod tests {
                 let numeric = hankel(&spectra, dk, r);
                 let exact = half_space_radial(1.0, nu, d, r);
                 let scale = exact.a.abs();
-                assert!(close(numeric.a, exact.a, 1e-4 * scale), "nu {nu} r {r}: a {numeric:?} vs {exact:?}");
-                assert!(close(numeric.b, exact.b, 1e-4 * scale), "nu {nu} r {r}: b {numeric:?} vs {exact:?}");
-                assert!(close(numeric.c, exact.c, 1e-4 * scale), "nu {nu} r {r}: c {numeric:?} vs {exact:?}");
+                assert!(
+                    close(numeric.a, exact.a, 1e-4 * scale),
+                    "nu {nu} r {r}: a {numeric:?} vs {exact:?}"
+                );
+                assert!(
+                    close(numeric.b, exact.b, 1e-4 * scale),
+                    "nu {nu} r {r}: b {numeric:?} vs {exact:?}"
+                );
+                assert!(
+                    close(numeric.c, exact.c, 1e-4 * scale),
+                    "nu {nu} r {r}: c {numeric:?} vs {exact:?}"
+                );
             }
         }
     }
@@ -393,7 +455,10 @@ mod tests {
             for k in [0.3, 1.0, 4.0] {
                 let thick = layer_spectra(k, nu, 1.5, 200.0);
                 let half = half_space_spectra(k, nu, 1.5);
-                assert!(close(thick.ll, half.ll, 1e-9) && close(thick.ln, half.ln, 1e-9), "k {k}: {thick:?} {half:?}");
+                assert!(
+                    close(thick.ll, half.ll, 1e-9) && close(thick.ln, half.ln, 1e-9),
+                    "k {k}: {thick:?} {half:?}"
+                );
                 assert!(close(thick.tt, half.tt, 1e-9));
             }
         }
@@ -412,31 +477,56 @@ mod tests {
     fn the_layer_kernel_is_the_half_space_near_the_load_and_vanishes_far_away() {
         let config = ElasticConfig::default();
         let layer = PointKernel::new(&config).unwrap();
-        let half = PointKernel::new(&ElasticConfig { model: ElasticModel::HalfSpace, ..config }).unwrap();
+        let half = PointKernel::new(&ElasticConfig {
+            model: ElasticModel::HalfSpace,
+            ..config
+        })
+        .unwrap();
         let h = config.cover_mm + config.gel_mm;
         // Right above the load the rigid base stiffens the response, but only somewhat.
         let (near_l, near_h) = (layer.radial(0.0), half.radial(0.0));
-        assert!(near_l.a > 0.3 * near_h.a && near_l.a < near_h.a, "{near_l:?} {near_h:?}");
+        assert!(
+            near_l.a > 0.3 * near_h.a && near_l.a < near_h.a,
+            "{near_l:?} {near_h:?}"
+        );
         // The normal load pushes the pattern outward at depth, in both models.
         assert!(layer.radial(config.cover_mm).c > 0.0 && half.radial(config.cover_mm).c > 0.0);
         // Ten thicknesses away the layer has forgotten the load; the half-space has not (1 / r).
         let far = layer.radial(10.0 * h);
-        assert!(far.a.abs() < 1e-3 * near_l.a && far.c.abs() < 1e-3 * near_l.a, "{far:?}");
+        assert!(
+            far.a.abs() < 1e-3 * near_l.a && far.c.abs() < 1e-3 * near_l.a,
+            "{far:?}"
+        );
         assert!(half.radial(10.0 * h).a > 0.02 * near_h.a);
         // The table is smooth: interpolation between nodes agrees with a direct transform.
         let k_max = SPECTRUM_DECAY / (2.0 * h - config.cover_mm);
         let dk = std::f64::consts::TAU / TABLE_REACH_MM / POINTS_PER_PERIOD;
         let spectra = sample_spectra(k_max, dk, |k| {
-            let (l, s) = (layer_spectra(k, 0.5, config.cover_mm, h), half_space_spectra(k, 0.5, config.cover_mm));
-            Spectra { ll: l.ll - s.ll, ln: l.ln - s.ln, tt: l.tt - s.tt }
+            let (l, s) = (
+                layer_spectra(k, 0.5, config.cover_mm, h),
+                half_space_spectra(k, 0.5, config.cover_mm),
+            );
+            Spectra {
+                ll: l.ll - s.ll,
+                ln: l.ln - s.ln,
+                tt: l.tt - s.tt,
+            }
         });
         let mu = config.shear_modulus_kpa * 1e-3;
         for r in [0.05, 1.234, 3.377, 7.91] {
             let direct = hankel(&spectra, dk, r);
-            let direct = half_space_radial(mu, 0.5, config.cover_mm, r) + Radial { a: direct.a / mu, b: direct.b / mu, c: direct.c / mu };
+            let direct = half_space_radial(mu, 0.5, config.cover_mm, r)
+                + Radial {
+                    a: direct.a / mu,
+                    b: direct.b / mu,
+                    c: direct.c / mu,
+                };
             let table = layer.radial(r);
             let scale = near_l.a;
-            assert!(close(direct.a, table.a, 1e-5 * scale) && close(direct.b, table.b, 1e-5 * scale), "{r}");
+            assert!(
+                close(direct.a, table.a, 1e-5 * scale) && close(direct.b, table.b, 1e-5 * scale),
+                "{r}"
+            );
             assert!(close(direct.c, table.c, 1e-5 * scale), "{r}");
         }
     }
@@ -444,21 +534,40 @@ mod tests {
     #[test]
     #[ignore = "known failure: 13 mm from the clamp the response changes by 1.3 %, above the 1 % this test asks"]
     fn a_clamped_border_holds_the_border_still() {
-        let config = ElasticConfig { model: ElasticModel::BondedLayer, bonded_border: true, ..ElasticConfig::default() };
+        let config = ElasticConfig {
+            model: ElasticModel::BondedLayer,
+            bonded_border: true,
+            ..ElasticConfig::default()
+        };
         let kernel = PointKernel::new(&config).unwrap();
         let half = [20.0, 15.0];
         let on_border: Vec<Point2> = (0..9).map(|i| [-16.0 + 4.0 * i as f64, 15.0]).collect();
-        let cells = [Cell { centre_mm: [0.0, 12.0], size_mm: [3.0, 3.0] }];
+        let cells = [Cell {
+            centre_mm: [0.0, 12.0],
+            size_mm: [3.0, 3.0],
+        }];
         let free = PadResponse::new(&kernel, &on_border, &cells, None).unwrap();
         let clamped = PadResponse::new(&kernel, &on_border, &cells, Some(half)).unwrap();
         let largest = |m: &DMatrix<f64>| m.iter().map(|v| v.abs()).fold(0.0, f64::max);
-        assert!(largest(&clamped.matrix) < 0.1 * largest(&free.matrix), "{} vs {}", largest(&clamped.matrix), largest(&free.matrix));
+        assert!(
+            largest(&clamped.matrix) < 0.1 * largest(&free.matrix),
+            "{} vs {}",
+            largest(&clamped.matrix),
+            largest(&free.matrix)
+        );
         // Far from the border the clamp changes little.
         let inside = [[0.0, 2.0]];
-        let centre = [Cell { centre_mm: [0.0, 0.0], size_mm: [3.0, 3.0] }];
+        let centre = [Cell {
+            centre_mm: [0.0, 0.0],
+            size_mm: [3.0, 3.0],
+        }];
         let free = PadResponse::new(&kernel, &inside, &centre, None).unwrap();
         let clamped = PadResponse::new(&kernel, &inside, &centre, Some(half)).unwrap();
         let change = (&free.matrix - &clamped.matrix).abs().max();
-        assert!(change < 0.01 * largest(&free.matrix), "{change} of {}", largest(&free.matrix));
+        assert!(
+            change < 0.01 * largest(&free.matrix),
+            "{change} of {}",
+            largest(&free.matrix)
+        );
     }
 }

@@ -8,8 +8,15 @@ use crate::Mode;
 
 #[derive(Debug, Error)]
 pub enum EstimateError {
-    #[error("the frame is {found_width} x {found_height} px but the reference is {expected_width} x {expected_height} px")]
-    FrameSizeMismatch { expected_width: u32, expected_height: u32, found_width: u32, found_height: u32 },
+    #[error(
+        "the frame is {found_width} x {found_height} px but the reference is {expected_width} x {expected_height} px"
+    )]
+    FrameSizeMismatch {
+        expected_width: u32,
+        expected_height: u32,
+        found_width: u32,
+        found_height: u32,
+    },
     #[error("the frame is {width} x {height} px, too small to hold the pad's pattern (need at least {min} px a side)")]
     FrameTooSmall { width: u32, height: u32, min: u32 },
     #[error("no pattern in view: {reason}")]

@@ -143,7 +143,15 @@ impl Estimator {
         let camera = camera_for(&config, width, height)?;
         let rest = Rest::new(&config, camera, squares, &corners)?;
         let model = InverseModel::shared(&config)?;
-        Ok(Self { config, mode, detector, rest, model, moved_frames: 0, retare_count: 0 })
+        Ok(Self {
+            config,
+            mode,
+            detector,
+            rest,
+            model,
+            moved_frames: 0,
+            retare_count: 0,
+        })
     }
 
     pub fn reference_lattice(&self) -> &Lattice {
@@ -196,7 +204,11 @@ impl Estimator {
             }
         };
         let lattice = build_lattice(&self.config, &self.rest.mapping, squares, &corners);
-        Ok(FrameLattice { lattice, squares_found, recovered })
+        Ok(FrameLattice {
+            lattice,
+            squares_found,
+            recovered,
+        })
     }
 
     pub fn estimate(&mut self, frame: &RgbImage) -> Result<Reading, EstimateError> {
@@ -212,11 +224,22 @@ impl Estimator {
                 found_height: height,
             });
         }
-        let FrameLattice { lattice, squares_found, recovered } = self.detect_frame(frame)?;
-        let registration = register(&self.rest.lattice, &lattice, self.config.thresholds.max_displacement_cells);
+        let FrameLattice {
+            lattice,
+            squares_found,
+            recovered,
+        } = self.detect_frame(frame)?;
+        let registration = register(
+            &self.rest.lattice,
+            &lattice,
+            self.config.thresholds.max_displacement_cells,
+        );
         let needed = min_valid(&self.config);
         if registration.valid_count() < needed {
-            return Err(EstimateError::TooFewPoints { found: registration.valid_count(), needed });
+            return Err(EstimateError::TooFewPoints {
+                found: registration.valid_count(),
+                needed,
+            });
         }
         let (mut reading, moved_mm) = self.measure(&lattice, &registration)?;
         reading.recovered = recovered;
@@ -231,8 +254,12 @@ impl Estimator {
     /// Also returns the largest displacement the camera motion gave a corner, mm.
     fn measure(&self, lattice: &Lattice, registration: &Registration) -> Result<(Reading, f64), EstimateError> {
         let valid: Vec<bool> = registration.corners.iter().map(|c| c.valid).collect();
-        let current_mm: Vec<Option<Point2>> =
-            lattice.corners.iter().zip(&valid).map(|(c, &ok)| if ok { c.mm } else { None }).collect();
+        let current_mm: Vec<Option<Point2>> = lattice
+            .corners
+            .iter()
+            .zip(&valid)
+            .map(|(c, &ok)| if ok { c.mm } else { None })
+            .collect();
         let motion = self.remove_motion(&current_mm, &valid)?;
         let floor_mm = self.rest.noise_floor_mm;
         let noise_mm = self.model.frame_noise_mm(&motion.stage, floor_mm).max(floor_mm);
@@ -242,13 +269,26 @@ impl Estimator {
             .corners
             .iter()
             .zip(&valid)
-            .map(|(c, &ok)| if ok { c.undistorted_px.map(|p| self.rest.mapping.to_paper(p)) } else { None })
+            .map(|(c, &ok)| {
+                if ok {
+                    c.undistorted_px.map(|p| self.rest.mapping.to_paper(p))
+                } else {
+                    None
+                }
+            })
             .map(|p| p.unwrap_or([0.0, 0.0]))
             .collect();
         let compensated_paper_px: Vec<Point2> = (0..valid.len())
             .map(|i| {
-                let at = [self.rest.corners_mm[i][0] + motion.displacement[2 * i], self.rest.corners_mm[i][1] + motion.displacement[2 * i + 1]];
-                let p = if valid[i] { self.rest.mapping.mm_to_undistorted(at) } else { None };
+                let at = [
+                    self.rest.corners_mm[i][0] + motion.displacement[2 * i],
+                    self.rest.corners_mm[i][1] + motion.displacement[2 * i + 1],
+                ];
+                let p = if valid[i] {
+                    self.rest.mapping.mm_to_undistorted(at)
+                } else {
+                    None
+                };
                 p.map(|p| self.rest.mapping.to_paper(p)).unwrap_or([0.0, 0.0])
             })
             .collect();
@@ -268,8 +308,14 @@ impl Estimator {
         let (touch, pressure_map) = if self.mode == Mode::Inverse {
             self.inverse_touch(&motion, &valid, &outcome)
         } else {
-            let field = PaperField { compensated_paper_px: &compensated_paper_px, samples: &samples };
-            (self.line_touch(&field, &valid, &outcome, line.model_n, registration), None)
+            let field = PaperField {
+                compensated_paper_px: &compensated_paper_px,
+                samples: &samples,
+            };
+            (
+                self.line_touch(&field, &valid, &outcome, line.model_n, registration),
+                None,
+            )
         };
         let shear_field = registration
             .corners
@@ -321,7 +367,9 @@ impl Estimator {
             elapsed_ms: 0.0,
         };
         if reading.numbers().iter().any(|v| !v.is_finite()) {
-            return Err(EstimateError::NoPattern { reason: "the measurement is not finite (degenerate lattice)".into() });
+            return Err(EstimateError::NoPattern {
+                reason: "the measurement is not finite (degenerate lattice)".into(),
+            });
         }
         Ok((reading, motion.largest_mm))
     }
@@ -337,13 +385,18 @@ impl Estimator {
             .flat_map(|(c, r)| c.map_or([0.0, 0.0], |c| [c[0] - r[0], c[1] - r[1]]))
             .collect();
         let first = self.model.stage1(&raw, valid);
-        let degenerate = || EstimateError::NoPattern { reason: "the pad's motion is degenerate".into() };
+        let degenerate = || EstimateError::NoPattern {
+            reason: "the pad's motion is degenerate".into(),
+        };
         let coarse = Homography::from_matrix(self.model.motion_homography(&first.motion)).ok_or_else(degenerate)?;
         let back = coarse.inverse().ok_or_else(degenerate)?;
         let compensated: Vec<f64> = current_mm
             .iter()
             .zip(rest)
-            .flat_map(|(c, r)| c.and_then(|c| back.apply(c)).map_or([0.0, 0.0], |c| [c[0] - r[0], c[1] - r[1]]))
+            .flat_map(|(c, r)| {
+                c.and_then(|c| back.apply(c))
+                    .map_or([0.0, 0.0], |c| [c[0] - r[0], c[1] - r[1]])
+            })
             .collect();
         let stage = self.model.stage1(&compensated, valid);
         let fine = Homography::from_matrix(self.model.motion_homography(&stage.motion)).ok_or_else(degenerate)?;
@@ -356,19 +409,41 @@ impl Estimator {
         }
         let reported = camera_motion(&total, rest, &self.rest.mapping);
         let largest_mm = largest_displacement_mm(&total, rest);
-        Ok(Compensated { data: compensated, displacement, stage, reported, largest_mm })
+        Ok(Compensated {
+            data: compensated,
+            displacement,
+            stage,
+            reported,
+            largest_mm,
+        })
     }
 
     /// Contact from the traction inverse.
-    fn inverse_touch(&self, motion: &Compensated, valid: &[bool], outcome: &TestOutcome) -> (Option<Touch>, Option<PressureMap>) {
+    fn inverse_touch(
+        &self,
+        motion: &Compensated,
+        valid: &[bool],
+        outcome: &TestOutcome,
+    ) -> (Option<Touch>, Option<PressureMap>) {
         let cells = self.model.cells();
         let zero_map = self.pressure_map(&vec![0.0; 3 * cells.len()]);
         if !outcome.contact {
             return (None, Some(zero_map));
         }
-        let Stage2 { regions: kept, tractions, .. } =
-            self.model.stage2(&motion.data, valid, &motion.stage, outcome.noise_mm, outcome.detection_floor_n);
-        let Some(first) = kept.first() else { return (None, Some(zero_map)) };
+        let Stage2 {
+            regions: kept,
+            tractions,
+            ..
+        } = self.model.stage2(
+            &motion.data,
+            valid,
+            &motion.stage,
+            outcome.noise_mm,
+            outcome.detection_floor_n,
+        );
+        let Some(first) = kept.first() else {
+            return (None, Some(zero_map));
+        };
         let contacts: Vec<ContactRegion> = kept.iter().filter_map(|r| self.region_at(r)).collect();
         if contacts.is_empty() {
             return (None, Some(zero_map));
@@ -395,7 +470,10 @@ impl Estimator {
             force_n: force[2],
             force_vector_n: Some(force),
             torque_nmm: Some(torque),
-            edge: EdgeReading { angle_deg: moments.angle_deg, confidence: moments.confidence },
+            edge: EdgeReading {
+                angle_deg: moments.angle_deg,
+                confidence: moments.confidence,
+            },
         };
         (Some(touch), Some(self.pressure_map(&tractions)))
     }
@@ -469,7 +547,10 @@ impl Estimator {
             force_n: line_n,
             force_vector_n: None,
             torque_nmm: None,
-            edge: EdgeReading { angle_deg: edge.angle_deg, confidence: edge.confidence },
+            edge: EdgeReading {
+                angle_deg: edge.angle_deg,
+                confidence: edge.confidence,
+            },
         })
     }
 
@@ -490,7 +571,11 @@ impl Estimator {
             })
             .collect();
         let thresholds = &self.config.thresholds;
-        let edge = edge_direction(&sheared, thresholds.edge_sample_fraction, thresholds.edge_min_confidence);
+        let edge = edge_direction(
+            &sheared,
+            thresholds.edge_sample_fraction,
+            thresholds.edge_min_confidence,
+        );
         let coverage = self.coverage(&registration.corners, edge.region_centre_mm, edge.region_radius_mm);
         edge.with_coverage(coverage, MIN_EDGE_COVERAGE, thresholds.edge_min_confidence)
     }
@@ -575,12 +660,21 @@ impl Rest {
         let lattice = build_lattice(config, &mapping, squares, corners);
         let needed = min_valid(config);
         if lattice.corners_found() < needed {
-            return Err(EstimateError::TooFewPoints { found: lattice.corners_found(), needed });
+            return Err(EstimateError::TooFewPoints {
+                found: lattice.corners_found(),
+                needed,
+            });
         }
-        let corners_mm: Vec<Point2> =
-            lattice.corners.iter().map(|c| c.mm.unwrap_or_else(|| pad.corner_mm(c.index))).collect();
-        let paper_px: Vec<Point2> =
-            lattice.corners.iter().map(|c| c.undistorted_px.map(|p| mapping.to_paper(p)).unwrap_or([0.0, 0.0])).collect();
+        let corners_mm: Vec<Point2> = lattice
+            .corners
+            .iter()
+            .map(|c| c.mm.unwrap_or_else(|| pad.corner_mm(c.index)))
+            .collect();
+        let paper_px: Vec<Point2> = lattice
+            .corners
+            .iter()
+            .map(|c| c.undistorted_px.map(|p| mapping.to_paper(p)).unwrap_or([0.0, 0.0]))
+            .collect();
         let valid: Vec<bool> = lattice.corners.iter().map(|c| c.undistorted_px.is_some()).collect();
         let sampler = ShearSampler::new(
             usize::from(pad.corner_rows()),
@@ -589,9 +683,18 @@ impl Rest {
             &paper_px,
             &valid,
         )?;
-        let floor_px_mm = mapping.mm_per_px_at_centre().map_or(0.0, |scale| config.inverse.noise_floor_px * scale);
+        let floor_px_mm = mapping
+            .mm_per_px_at_centre()
+            .map_or(0.0, |scale| config.inverse.noise_floor_px * scale);
         let noise_floor_mm = config.inverse.noise_floor_mm.max(floor_px_mm);
-        Ok(Self { lattice, mapping, corners_mm, paper_px, sampler, noise_floor_mm })
+        Ok(Self {
+            lattice,
+            mapping,
+            corners_mm,
+            paper_px,
+            sampler,
+            noise_floor_mm,
+        })
     }
 }
 
@@ -648,7 +751,12 @@ fn build_lattice(
             let mm = undistorted_px.and_then(|p| mapping.undistorted_to_mm(p));
             // A corner is found only if it makes it through every frame: raw, undistorted and pad.
             let found = mm.is_some();
-            CornerObservation { index, raw_px: raw_px.filter(|_| found), undistorted_px: undistorted_px.filter(|_| found), mm }
+            CornerObservation {
+                index,
+                raw_px: raw_px.filter(|_| found),
+                undistorted_px: undistorted_px.filter(|_| found),
+                mm,
+            }
         })
         .collect();
     Lattice { pad, squares, corners }

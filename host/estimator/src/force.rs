@@ -14,7 +14,9 @@ pub struct ForceReading {
 }
 
 pub fn force(calibration: &ForceCalibration, gamma: f64) -> ForceReading {
-    ForceReading { model_n: calibration.a * gamma + calibration.b }
+    ForceReading {
+        model_n: calibration.a * gamma + calibration.b,
+    }
 }
 
 #[cfg(test)]

@@ -15,7 +15,11 @@ fn normaliser(points: &[Point2]) -> [[f64; 3]; 3] {
     let mx = points.iter().map(|p| p[0]).sum::<f64>() / n;
     let my = points.iter().map(|p| p[1]).sum::<f64>() / n;
     let spread = points.iter().map(|p| (p[0] - mx).hypot(p[1] - my)).sum::<f64>() / n;
-    let s = if spread > 0.0 { std::f64::consts::SQRT_2 / spread } else { 1.0 };
+    let s = if spread > 0.0 {
+        std::f64::consts::SQRT_2 / spread
+    } else {
+        1.0
+    };
     [[s, 0.0, -s * mx], [0.0, s, -s * my], [0.0, 0.0, 1.0]]
 }
 
@@ -24,7 +28,10 @@ fn apply(m: &[[f64; 3]; 3], p: Point2) -> Option<Point2> {
     if w.abs() < 1e-12 {
         return None;
     }
-    let q = [(m[0][0] * p[0] + m[0][1] * p[1] + m[0][2]) / w, (m[1][0] * p[0] + m[1][1] * p[1] + m[1][2]) / w];
+    let q = [
+        (m[0][0] * p[0] + m[0][1] * p[1] + m[0][2]) / w,
+        (m[1][0] * p[0] + m[1][1] * p[1] + m[1][2]) / w,
+    ];
     (q[0].is_finite() && q[1].is_finite()).then_some(q)
 }
 
@@ -45,7 +52,11 @@ fn mul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
 
 fn invert_similarity(t: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
     let s = t[0][0];
-    [[1.0 / s, 0.0, -t[0][2] / s], [0.0, 1.0 / s, -t[1][2] / s], [0.0, 0.0, 1.0]]
+    [
+        [1.0 / s, 0.0, -t[0][2] / s],
+        [0.0, 1.0 / s, -t[1][2] / s],
+        [0.0, 0.0, 1.0],
+    ]
 }
 
 impl Homography {
@@ -109,16 +120,32 @@ impl Homography {
         }
         let cofactor = |r0: usize, r1: usize, c0: usize, c1: usize| h[r0][c0] * h[r1][c1] - h[r0][c1] * h[r1][c0];
         let inv = [
-            [cofactor(1, 2, 1, 2) / det, -cofactor(0, 2, 1, 2) / det, cofactor(0, 1, 1, 2) / det],
-            [-cofactor(1, 2, 0, 2) / det, cofactor(0, 2, 0, 2) / det, -cofactor(0, 1, 0, 2) / det],
-            [cofactor(1, 2, 0, 1) / det, -cofactor(0, 2, 0, 1) / det, cofactor(0, 1, 0, 1) / det],
+            [
+                cofactor(1, 2, 1, 2) / det,
+                -cofactor(0, 2, 1, 2) / det,
+                cofactor(0, 1, 1, 2) / det,
+            ],
+            [
+                -cofactor(1, 2, 0, 2) / det,
+                cofactor(0, 2, 0, 2) / det,
+                -cofactor(0, 1, 0, 2) / det,
+            ],
+            [
+                cofactor(1, 2, 0, 1) / det,
+                -cofactor(0, 2, 0, 1) / det,
+                cofactor(0, 1, 0, 1) / det,
+            ],
         ];
-        Self::from_matrix([inv[0][0], inv[0][1], inv[0][2], inv[1][0], inv[1][1], inv[1][2], inv[2][0], inv[2][1], inv[2][2]])
+        Self::from_matrix([
+            inv[0][0], inv[0][1], inv[0][2], inv[1][0], inv[1][1], inv[1][2], inv[2][0], inv[2][1], inv[2][2],
+        ])
     }
 
     /// `self` after `first`: p -> self(first(p)).
     pub fn after(&self, first: &Self) -> Self {
-        Self { h: mul(&self.h, &first.h) }
+        Self {
+            h: mul(&self.h, &first.h),
+        }
     }
 }
 
@@ -129,7 +156,9 @@ mod tests {
     #[test]
     fn recovers_a_perspective_map() {
         let truth = [[1.2, 0.1, 5.0], [-0.05, 0.9, -3.0], [1e-4, -2e-4, 1.0]];
-        let from: Vec<Point2> = (0..5).flat_map(|i| (0..4).map(move |j| [i as f64 * 50.0, j as f64 * 40.0])).collect();
+        let from: Vec<Point2> = (0..5)
+            .flat_map(|i| (0..4).map(move |j| [i as f64 * 50.0, j as f64 * 40.0]))
+            .collect();
         let to: Vec<Point2> = from.iter().map(|&p| apply(&truth, p).unwrap()).collect();
         let h = Homography::fit(&from, &to).unwrap();
         for (&p, &q) in from.iter().zip(&to) {

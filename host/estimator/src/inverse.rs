@@ -174,10 +174,16 @@ impl InverseModel {
         let size = [pad.pitch_x_mm(), pad.pitch_y_mm()];
         let cells: Vec<Cell> = (0..pad.rows)
             .flat_map(|row| (0..pad.cols).map(move |col| nusense_geometry::SquareIndex { row, col }))
-            .map(|cell| Cell { centre_mm: pad.square_centre_mm(cell), size_mm: size })
+            .map(|cell| Cell {
+                centre_mm: pad.square_centre_mm(cell),
+                size_mm: size,
+            })
             .collect();
         let border = (config.elastic.model == ElasticModel::BondedLayer && config.elastic.bonded_border).then(|| {
-            [pad.width_mm / 2.0 + config.elastic.border_margin_mm, pad.height_mm / 2.0 + config.elastic.border_margin_mm]
+            [
+                pad.width_mm / 2.0 + config.elastic.border_margin_mm,
+                pad.height_mm / 2.0 + config.elastic.border_margin_mm,
+            ]
         });
         let a = PadResponse::new(&kernel, &corners, &cells, border)?.matrix;
         let observations = a.nrows();
@@ -191,22 +197,31 @@ impl InverseModel {
         for i in 0..observations {
             k[(i, i)] += lambda;
         }
-        k.view_mut((0, observations), (observations, MOTION_PARAMETERS)).copy_from(&b);
-        k.view_mut((observations, 0), (MOTION_PARAMETERS, observations)).copy_from(&b.transpose());
-        let inverse = k.try_inverse().ok_or(ElasticError::Degenerate("the kriging system is singular"))?;
+        k.view_mut((0, observations), (observations, MOTION_PARAMETERS))
+            .copy_from(&b);
+        k.view_mut((observations, 0), (MOTION_PARAMETERS, observations))
+            .copy_from(&b.transpose());
+        let inverse = k
+            .try_inverse()
+            .ok_or(ElasticError::Degenerate("the kriging system is singular"))?;
         let s = inverse.columns(0, observations).into_owned();
         let s11 = s.rows(0, observations).into_owned();
 
         // The test: Q = P0 - lambda^2 S11^2 with P0 the projection off the motion basis.
         let btb = b.transpose() * &b;
-        let btb_inv = btb.clone().try_inverse().ok_or(ElasticError::Degenerate("the motion basis is degenerate"))?;
+        let btb_inv = btb
+            .clone()
+            .try_inverse()
+            .ok_or(ElasticError::Degenerate("the motion basis is degenerate"))?;
         let p0 = DMatrix::identity(observations, observations) - &b * &btb_inv * b.transpose();
         let s11_sq = &s11 * &s11;
         let q = &p0 - &s11_sq * (lambda * lambda);
         let trace = q.trace();
         let trace_sq = q.iter().map(|v| v * v).sum::<f64>();
         if !(trace > 0.0 && trace_sq > 0.0) {
-            return Err(ElasticError::Degenerate("the tractions explain nothing beyond the motion"));
+            return Err(ElasticError::Degenerate(
+                "the tractions explain nothing beyond the motion",
+            ));
         }
         let residual_share = (0..observations / 2)
             .map(|i| lambda * lambda * (s11_sq[(2 * i, 2 * i)] + s11_sq[(2 * i + 1, 2 * i + 1)]))
@@ -261,7 +276,9 @@ impl InverseModel {
     fn central_cells(&self) -> Vec<usize> {
         let distance = |c: &Cell| c.centre_mm[0].hypot(c.centre_mm[1]);
         let nearest = self.cells.iter().map(distance).fold(f64::MAX, f64::min);
-        (0..self.cells.len()).filter(|&j| distance(&self.cells[j]) <= nearest + 1e-9).collect()
+        (0..self.cells.len())
+            .filter(|&j| distance(&self.cells[j]) <= nearest + 1e-9)
+            .collect()
     }
 
     /// Displacement (mm) that motion parameters `m` give the pad point `p` (mm).
@@ -312,7 +329,13 @@ impl InverseModel {
             .map(|i| valid[i].then(|| [self.lambda * y[2 * i], self.lambda * y[2 * i + 1]]))
             .collect();
         let rss_full: f64 = residuals.iter().flatten().map(|r| r[0] * r[0] + r[1] * r[1]).sum();
-        Stage1 { tractions, motion, residuals, rss_rigid: self.rigid_rss(&d0, valid), rss_full }
+        Stage1 {
+            tractions,
+            motion,
+            residuals,
+            rss_rigid: self.rigid_rss(&d0, valid),
+            rss_full,
+        }
     }
 
     /// Residual sum of squares of the motion basis alone, over valid corners.
@@ -380,7 +403,9 @@ impl InverseModel {
         }
         normalised.sort_unstable_by(|a, b| (a.0 / a.1.max(1e-300)).total_cmp(&(b.0 / b.1.max(1e-300))));
         let keep = ((normalised.len() as f64) * (1.0 - NOISE_TRIM)).ceil() as usize;
-        let (sum, share) = normalised[..keep].iter().fold((0.0, 0.0), |(s, g), (r, share)| (s + r, g + share));
+        let (sum, share) = normalised[..keep]
+            .iter()
+            .fold((0.0, 0.0), |(s, g), (r, share)| (s + r, g + share));
         if !(share > 0.0) {
             return 0.0;
         }
@@ -410,30 +435,44 @@ impl InverseModel {
     /// force than `min_force_n` (the detection floor) are not contacts.
     pub fn stage2(&self, d: &[f64], valid: &[bool], seed: &Stage1, noise_mm: f64, min_force_n: f64) -> Stage2 {
         let cells = self.cells.len();
-        let empty = Stage2 { tractions: vec![0.0; 3 * cells], motion: seed.motion, regions: Vec::new() };
+        let empty = Stage2 {
+            tractions: vec![0.0; 3 * cells],
+            motion: seed.motion,
+            regions: Vec::new(),
+        };
         let groups = self.loaded_groups(seed, noise_mm);
         if groups.is_empty() {
             return empty;
         }
-        let Some((tractions, motion)) = self.constrained_solve(d, valid, seed, &groups) else { return empty };
+        let Some((tractions, motion)) = self.constrained_solve(d, valid, seed, &groups) else {
+            return empty;
+        };
         let mut support: Vec<usize> = groups.iter().flatten().copied().collect();
         support.sort_unstable();
-        let regions: Vec<Region> =
-            self.regions(&tractions, &support).into_iter().filter(|r| r.force_vector_n[2] >= min_force_n).collect();
+        let regions: Vec<Region> = self
+            .regions(&tractions, &support)
+            .into_iter()
+            .filter(|r| r.force_vector_n[2] >= min_force_n)
+            .collect();
         // Tractions outside the contacts are not reported (they are below the floor).
         let mut kept = vec![0.0; 3 * cells];
         for (j, f) in regions.iter().flat_map(|r| &r.cells) {
             kept[3 * j..3 * j + 3].copy_from_slice(f);
         }
-        Stage2 { tractions: kept, motion, regions }
+        Stage2 {
+            tractions: kept,
+            motion,
+            regions,
+        }
     }
 
     /// Cells where stage 1 finds pressure above its noise, with a ring around them, as connected groups.
     fn loaded_groups(&self, seed: &Stage1, noise_mm: f64) -> Vec<Vec<usize>> {
         let cells = self.cells.len();
         let (cols, rows) = (usize::from(self.pad.cols), usize::from(self.pad.rows));
-        let loaded: Vec<bool> =
-            (0..cells).map(|j| seed.tractions[3 * j + 2] > SUPPORT_SIGMAS * noise_mm * self.pressure_noise[j]).collect();
+        let loaded: Vec<bool> = (0..cells)
+            .map(|j| seed.tractions[3 * j + 2] > SUPPORT_SIGMAS * noise_mm * self.pressure_noise[j])
+            .collect();
         let support: Vec<bool> = (0..cells)
             .map(|j| {
                 let (r, c) = ((j / cols) as isize, (j % cols) as isize);
@@ -498,11 +537,28 @@ impl InverseModel {
                 vec![1.0 / group.len() as f64; group.len()]
             };
             let centre = [
-                group.iter().zip(&weights).map(|(&j, w)| w * self.cells[j].centre_mm[0]).sum::<f64>(),
-                group.iter().zip(&weights).map(|(&j, w)| w * self.cells[j].centre_mm[1]).sum::<f64>(),
+                group
+                    .iter()
+                    .zip(&weights)
+                    .map(|(&j, w)| w * self.cells[j].centre_mm[0])
+                    .sum::<f64>(),
+                group
+                    .iter()
+                    .zip(&weights)
+                    .map(|(&j, w)| w * self.cells[j].centre_mm[1])
+                    .sum::<f64>(),
             ];
-            let arm = |j: usize| [self.cells[j].centre_mm[0] - centre[0], self.cells[j].centre_mm[1] - centre[1]];
-            let inertia: f64 = group.iter().zip(&weights).map(|(&j, w)| w * (arm(j)[0].powi(2) + arm(j)[1].powi(2))).sum();
+            let arm = |j: usize| {
+                [
+                    self.cells[j].centre_mm[0] - centre[0],
+                    self.cells[j].centre_mm[1] - centre[1],
+                ]
+            };
+            let inertia: f64 = group
+                .iter()
+                .zip(&weights)
+                .map(|(&j, w)| w * (arm(j)[0].powi(2) + arm(j)[1].powi(2)))
+                .sum();
             unknowns.push(group.iter().zip(&weights).map(|(&j, &w)| (3 * j, w)).collect());
             unknowns.push(group.iter().zip(&weights).map(|(&j, &w)| (3 * j + 1, w)).collect());
             let n = group.len() as f64;
@@ -630,13 +686,23 @@ impl InverseModel {
             .into_iter()
             .filter(|m| !m.is_empty())
             .map(|m| {
-                let cells: Vec<(usize, [f64; 3])> =
-                    m.iter().map(|&j| (j, [tractions[3 * j], tractions[3 * j + 1], tractions[3 * j + 2]])).collect();
+                let cells: Vec<(usize, [f64; 3])> = m
+                    .iter()
+                    .map(|&j| (j, [tractions[3 * j], tractions[3 * j + 1], tractions[3 * j + 2]]))
+                    .collect();
                 let force: [f64; 3] = std::array::from_fn(|k| cells.iter().map(|c| c.1[k]).sum());
                 let fz = force[2].max(1e-300);
                 let centre = [
-                    cells.iter().map(|(j, f)| f[2] * self.cells[*j].centre_mm[0]).sum::<f64>() / fz,
-                    cells.iter().map(|(j, f)| f[2] * self.cells[*j].centre_mm[1]).sum::<f64>() / fz,
+                    cells
+                        .iter()
+                        .map(|(j, f)| f[2] * self.cells[*j].centre_mm[0])
+                        .sum::<f64>()
+                        / fz,
+                    cells
+                        .iter()
+                        .map(|(j, f)| f[2] * self.cells[*j].centre_mm[1])
+                        .sum::<f64>()
+                        / fz,
                 ];
                 let torque = cells
                     .iter()
@@ -646,8 +712,18 @@ impl InverseModel {
                     })
                     .sum();
                 let squares: f64 = cells.iter().map(|c| c.1[2] * c.1[2]).sum();
-                let area_mm2 = if squares > 0.0 { force[2] * force[2] / squares * cell_area } else { 0.0 };
-                Region { centre_mm: centre, force_vector_n: force, torque_nmm: torque, area_mm2, cells }
+                let area_mm2 = if squares > 0.0 {
+                    force[2] * force[2] / squares * cell_area
+                } else {
+                    0.0
+                };
+                Region {
+                    centre_mm: centre,
+                    force_vector_n: force,
+                    torque_nmm: torque,
+                    area_mm2,
+                    cells,
+                }
             })
             .collect();
         regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
@@ -658,7 +734,10 @@ impl InverseModel {
     pub fn moments(&self, region: &Region, min_confidence: f64) -> Moments {
         let weight: f64 = region.cells.iter().map(|c| c.1[2].max(0.0)).sum();
         if !(weight > 0.0) || region.cells.len() < 3 {
-            return Moments { angle_deg: None, confidence: 0.0 };
+            return Moments {
+                angle_deg: None,
+                confidence: 0.0,
+            };
         }
         let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
         for (j, f) in &region.cells {
@@ -676,40 +755,62 @@ impl InverseModel {
         let root = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
         let (major, minor) = (half_trace + root, half_trace - root);
         if !(major > 0.0) {
-            return Moments { angle_deg: None, confidence: 0.0 };
+            return Moments {
+                angle_deg: None,
+                confidence: 0.0,
+            };
         }
         let confidence = (1.0 - minor.max(0.0) / major).clamp(0.0, 1.0);
         let angle = (0.5 * (2.0 * sxy).atan2(sxx - syy)).to_degrees().rem_euclid(180.0);
         let angle = if angle >= 180.0 { 0.0 } else { angle };
-        Moments { angle_deg: (confidence >= min_confidence).then_some(angle), confidence }
+        Moments {
+            angle_deg: (confidence >= min_confidence).then_some(angle),
+            confidence,
+        }
     }
 
     /// Pressure in kPa on the cell grid (row-major), from tractions.
     pub fn pressure_kpa(&self, tractions: &[f64]) -> Vec<f64> {
         let area = self.pad.pitch_x_mm() * self.pad.pitch_y_mm();
-        (0..self.cells.len()).map(|j| tractions[3 * j + 2] / area * 1e3).collect()
+        (0..self.cells.len())
+            .map(|j| tractions[3 * j + 2] / area * 1e3)
+            .collect()
     }
 }
 
 /// The 3 x 3 block around (r, c) inside the grid, the cell itself included.
 fn neighbourhood(r: isize, c: isize, rows: usize, cols: usize) -> impl Iterator<Item = (usize, usize)> {
-    (-1..=1).flat_map(move |dr| (-1..=1).map(move |dc| (r + dr, c + dc))).filter_map(move |(nr, nc)| {
-        (nr >= 0 && nc >= 0 && (nr as usize) < rows && (nc as usize) < cols).then_some((nr as usize, nc as usize))
-    })
+    (-1..=1)
+        .flat_map(move |dr| (-1..=1).map(move |dc| (r + dr, c + dc)))
+        .filter_map(move |(nr, nc)| {
+            (nr >= 0 && nc >= 0 && (nr as usize) < rows && (nc as usize) < cols).then_some((nr as usize, nc as usize))
+        })
 }
 
 fn motion_rows(p: Point2, length: f64) -> [[f64; MOTION_PARAMETERS]; 2] {
     let (x, y) = (p[0] / length, p[1] / length);
-    [[1.0, 0.0, x * length, y * length, 0.0, 0.0, -x * x * length, -x * y * length], [
-        0.0,
-        1.0,
-        0.0,
-        0.0,
-        x * length,
-        y * length,
-        -x * y * length,
-        -y * y * length,
-    ]]
+    [
+        [
+            1.0,
+            0.0,
+            x * length,
+            y * length,
+            0.0,
+            0.0,
+            -x * x * length,
+            -x * y * length,
+        ],
+        [
+            0.0,
+            1.0,
+            0.0,
+            0.0,
+            x * length,
+            y * length,
+            -x * y * length,
+            -y * y * length,
+        ],
+    ]
 }
 
 fn motion_basis(points: &[Point2], length: f64) -> DMatrix<f64> {
@@ -766,7 +867,11 @@ fn active_set(h: &DMatrix<f64>, g: &DVector<f64>, constrained: &[bool]) -> Optio
                 None => return Some(x),
             }
         } else {
-            let step = infeasible.iter().map(|&i| x[i] / (x[i] - z[i])).fold(1.0, f64::min).clamp(0.0, 1.0);
+            let step = infeasible
+                .iter()
+                .map(|&i| x[i] / (x[i] - z[i]))
+                .fold(1.0, f64::min)
+                .clamp(0.0, 1.0);
             x = &x + (&z - &x) * step;
             for i in 0..n {
                 if constrained[i] && free[i] && x[i] <= 1e-12 {
@@ -781,15 +886,41 @@ fn active_set(h: &DMatrix<f64>, g: &DVector<f64>, constrained: &[bool]) -> Optio
 
 /// Standard normal quantile (Acklam's rational approximation, relative error below 1.2e-9).
 pub fn normal_quantile(p: f64) -> f64 {
-    const A: [f64; 6] = [-3.969_683_028_665_376e1, 2.209_460_984_245_205e2, -2.759_285_104_469_687e2, 1.383_577_518_672_69e2, -3.066_479_806_614_716e1, 2.506_628_277_459_239];
-    const B: [f64; 5] = [-5.447_609_879_822_406e1, 1.615_858_368_580_409e2, -1.556_989_798_598_866e2, 6.680_131_188_771_972e1, -1.328_068_155_288_572e1];
-    const C: [f64; 6] = [-7.784_894_002_430_293e-3, -3.223_964_580_411_365e-1, -2.400_758_277_161_838, -2.549_732_539_343_734, 4.374_664_141_464_968, 2.938_163_982_698_783];
-    const D: [f64; 4] = [7.784_695_709_041_462e-3, 3.224_671_290_700_398e-1, 2.445_134_137_142_996, 3.754_408_661_907_416];
+    const A: [f64; 6] = [
+        -3.969_683_028_665_376e1,
+        2.209_460_984_245_205e2,
+        -2.759_285_104_469_687e2,
+        1.383_577_518_672_69e2,
+        -3.066_479_806_614_716e1,
+        2.506_628_277_459_239,
+    ];
+    const B: [f64; 5] = [
+        -5.447_609_879_822_406e1,
+        1.615_858_368_580_409e2,
+        -1.556_989_798_598_866e2,
+        6.680_131_188_771_972e1,
+        -1.328_068_155_288_572e1,
+    ];
+    const C: [f64; 6] = [
+        -7.784_894_002_430_293e-3,
+        -3.223_964_580_411_365e-1,
+        -2.400_758_277_161_838,
+        -2.549_732_539_343_734,
+        4.374_664_141_464_968,
+        2.938_163_982_698_783,
+    ];
+    const D: [f64; 4] = [
+        7.784_695_709_041_462e-3,
+        3.224_671_290_700_398e-1,
+        2.445_134_137_142_996,
+        3.754_408_661_907_416,
+    ];
     let p = p.clamp(1e-300, 1.0 - 1e-16);
     let low = 0.024_25;
     if p < low {
         let q = (-2.0 * p.ln()).sqrt();
-        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5]) / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
     } else if p <= 1.0 - low {
         let q = p - 0.5;
         let r = q * q;
@@ -884,7 +1015,11 @@ mod tests {
             assert!((found[k] - total[k]).abs() < 0.02 * total[2], "{found:?} vs {total:?}");
         }
         for k in 0..MOTION_PARAMETERS {
-            assert!((stage2.motion[k] - motion[k]).abs() < 1e-3, "{:?} vs {motion:?}", stage2.motion);
+            assert!(
+                (stage2.motion[k] - motion[k]).abs() < 1e-3,
+                "{:?} vs {motion:?}",
+                stage2.motion
+            );
         }
         // A missing corner under the press changes little.
         let mut holes = valid.clone();
@@ -893,7 +1028,11 @@ mod tests {
         let stage = model.stage1(&d, &holes);
         assert_eq!(stage.residuals[80], None);
         let stage2 = model.stage2(&d, &holes, &stage, 0.002, 0.1);
-        assert!((stage2.regions[0].force_vector_n[2] - total[2]).abs() < 0.05 * total[2], "{:?}", stage2.regions);
+        assert!(
+            (stage2.regions[0].force_vector_n[2] - total[2]).abs() < 0.05 * total[2],
+            "{:?}",
+            stage2.regions
+        );
     }
 
     #[test]
@@ -925,19 +1064,29 @@ mod tests {
         assert!(!outcome.contact && outcome.p_value > 1e-4, "{outcome:?}");
         // The floor scales with the noise.
         let quieter = model.test(&stage, noise / 5.0);
-        assert!((quieter.detection_floor_n * 5.0 / outcome.detection_floor_n - 1.0).abs() < 1e-9, "{outcome:?}");
+        assert!(
+            (quieter.detection_floor_n * 5.0 / outcome.detection_floor_n - 1.0).abs() < 1e-9,
+            "{outcome:?}"
+        );
     }
 
     #[test]
     fn two_presses_apart_are_two_regions_and_an_edge_has_a_direction() {
         let model = model();
         let (a, b) = (cell_at(&model, [-8.0, 0.0]), cell_at(&model, [8.0, 0.0]));
-        let d = field(&model, &[(a, [0.0, 0.0, 3.0]), (b, [0.0, 0.0, 2.0])], [0.0; MOTION_PARAMETERS]);
+        let d = field(
+            &model,
+            &[(a, [0.0, 0.0, 3.0]), (b, [0.0, 0.0, 2.0])],
+            [0.0; MOTION_PARAMETERS],
+        );
         let valid = vec![true; model.observations / 2];
         let stage = model.stage1(&d, &valid);
         let stage2 = model.stage2(&d, &valid, &stage, 0.002, 0.1);
         assert_eq!(stage2.regions.len(), 2, "{:?}", stage2.regions);
-        assert!((stage2.regions[0].force_vector_n[2] - 3.0).abs() < 0.1 && (stage2.regions[1].force_vector_n[2] - 2.0).abs() < 0.1);
+        assert!(
+            (stage2.regions[0].force_vector_n[2] - 3.0).abs() < 0.1
+                && (stage2.regions[1].force_vector_n[2] - 2.0).abs() < 0.1
+        );
         // A line of cells along a diagonal.
         let cols = usize::from(model.pad.cols);
         let line: Vec<(usize, [f64; 3])> = (0..7).map(|k| ((2 + k) * cols + 4 + k, [0.0, 0.0, 1.0])).collect();
@@ -948,7 +1097,11 @@ mod tests {
         let moments = model.moments(&stage2.regions[0], 0.35);
         let angle = moments.angle_deg.expect("a line has a direction");
         let truth = (3.333f64).atan2(3.3125).to_degrees();
-        assert!((angle - truth).abs() < 1.5, "{angle} vs {truth}: {moments:?} {:?}", stage2.regions[0].cells);
+        assert!(
+            (angle - truth).abs() < 1.5,
+            "{angle} vs {truth}: {moments:?} {:?}",
+            stage2.regions[0].cells
+        );
     }
 
     #[test]
@@ -960,7 +1113,12 @@ mod tests {
         assert!(stage.tractions.iter().all(|v| v.is_finite()));
         let outcome = model.test(&stage, 0.0);
         assert!(!outcome.contact);
-        for v in [outcome.statistic, outcome.threshold, outcome.p_value, outcome.detection_floor_n] {
+        for v in [
+            outcome.statistic,
+            outcome.threshold,
+            outcome.p_value,
+            outcome.detection_floor_n,
+        ] {
             assert!(v.is_finite(), "{outcome:?}");
         }
         let stage2 = model.stage2(&d, &valid, &stage, 0.0, 0.1);

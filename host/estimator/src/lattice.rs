@@ -33,10 +33,18 @@ impl Lattice {
     pub fn empty(pad: PadGeometry) -> Self {
         Self {
             pad,
-            squares: pad.yellow_squares().map(|index| SquareObservation { index, raw_px: None }).collect(),
+            squares: pad
+                .yellow_squares()
+                .map(|index| SquareObservation { index, raw_px: None })
+                .collect(),
             corners: pad
                 .corners()
-                .map(|index| CornerObservation { index, raw_px: None, undistorted_px: None, mm: None })
+                .map(|index| CornerObservation {
+                    index,
+                    raw_px: None,
+                    undistorted_px: None,
+                    mm: None,
+                })
                 .collect(),
         }
     }
@@ -66,7 +74,9 @@ impl Lattice {
     }
 
     pub fn square(&self, index: SquareIndex) -> Option<Point2> {
-        self.square_slot(index).and_then(|slot| self.squares.get(slot)).and_then(|s| s.raw_px)
+        self.square_slot(index)
+            .and_then(|slot| self.squares.get(slot))
+            .and_then(|s| s.raw_px)
     }
 
     /// Where the pattern is: the raw-px box (min, max) around the squares found, grown on every side by
@@ -102,7 +112,12 @@ mod tests {
     #[test]
     fn square_slots_follow_row_major_order() {
         for top_left_yellow in [true, false] {
-            let pad = PadGeometry { rows: 5, cols: 6, top_left_yellow, ..PadGeometry::default() };
+            let pad = PadGeometry {
+                rows: 5,
+                cols: 6,
+                top_left_yellow,
+                ..PadGeometry::default()
+            };
             let lattice = Lattice::empty(pad);
             for (slot, s) in lattice.squares.iter().enumerate() {
                 assert_eq!(lattice.square_slot(s.index), Some(slot));

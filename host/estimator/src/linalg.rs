@@ -104,7 +104,9 @@ mod tests {
 
     #[test]
     fn products_match_nalgebra() {
-        let m = nalgebra::DMatrix::from_fn(7, 5, |r, c| (r as f64 + 1.0) * 0.3 - c as f64 * 0.7 + (r * c) as f64 * 0.01);
+        let m = nalgebra::DMatrix::from_fn(7, 5, |r, c| {
+            (r as f64 + 1.0) * 0.3 - c as f64 * 0.7 + (r * c) as f64 * 0.01
+        });
         let dense = Dense::from_nalgebra(&m);
         let x: Vec<f64> = (0..5).map(|i| i as f64 - 1.5).collect();
         let y: Vec<f64> = (0..7).map(|i| 0.5 * i as f64).collect();

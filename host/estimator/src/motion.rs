@@ -15,7 +15,12 @@ pub fn closest_similarity(motion: &Homography, points: &[Point2]) -> Option<(f64
     if points.len() < 2 {
         return None;
     }
-    let mean = |v: &[Point2]| [v.iter().map(|p| p[0]).sum::<f64>() / n, v.iter().map(|p| p[1]).sum::<f64>() / n];
+    let mean = |v: &[Point2]| {
+        [
+            v.iter().map(|p| p[0]).sum::<f64>() / n,
+            v.iter().map(|p| p[1]).sum::<f64>() / n,
+        ]
+    };
     let (c, c2) = (mean(points), mean(&moved));
     let (mut a, mut b, mut norm) = (0.0, 0.0, 0.0);
     for (p, q) in points.iter().zip(&moved) {
@@ -36,12 +41,18 @@ pub fn closest_similarity(motion: &Homography, points: &[Point2]) -> Option<(f64
 
 /// The motion as users see it: rotation and scale of the pattern, and the pad centre's shift in raw px.
 pub fn camera_motion(motion: &Homography, points: &[Point2], mapping: &PadMapping) -> CameraMotion {
-    let Some((rotation, scale, origin)) = closest_similarity(motion, points) else { return CameraMotion::NONE };
+    let Some((rotation, scale, origin)) = closest_similarity(motion, points) else {
+        return CameraMotion::NONE;
+    };
     let shift_px = match (mapping.mm_to_raw([0.0, 0.0]), mapping.mm_to_raw(origin)) {
         (Some(a), Some(b)) => [b[0] - a[0], b[1] - a[1]],
         _ => [0.0, 0.0],
     };
-    let motion = CameraMotion { rotation_deg: rotation.to_degrees(), shift_px, scale };
+    let motion = CameraMotion {
+        rotation_deg: rotation.to_degrees(),
+        shift_px,
+        scale,
+    };
     let finite = motion.rotation_deg.is_finite() && motion.scale.is_finite() && shift_px.iter().all(|v| v.is_finite());
     if finite {
         motion
@@ -66,9 +77,21 @@ mod tests {
     fn recovers_rotation_scale_and_shift() {
         let (angle, scale, shift) = (3f64.to_radians(), 1.01, [0.7, -0.4]);
         let (s, c) = angle.sin_cos();
-        let h = Homography::from_matrix([scale * c, -scale * s, shift[0], scale * s, scale * c, shift[1], 0.0, 0.0, 1.0])
-            .unwrap();
-        let points: Vec<Point2> = (0..5).flat_map(|i| (0..4).map(move |j| [i as f64 * 10.0 - 20.0, j as f64 * 8.0 - 12.0])).collect();
+        let h = Homography::from_matrix([
+            scale * c,
+            -scale * s,
+            shift[0],
+            scale * s,
+            scale * c,
+            shift[1],
+            0.0,
+            0.0,
+            1.0,
+        ])
+        .unwrap();
+        let points: Vec<Point2> = (0..5)
+            .flat_map(|i| (0..4).map(move |j| [i as f64 * 10.0 - 20.0, j as f64 * 8.0 - 12.0]))
+            .collect();
         let (rotation, found_scale, origin) = closest_similarity(&h, &points).unwrap();
         assert!((rotation - angle).abs() < 1e-12 && (found_scale - scale).abs() < 1e-12);
         assert!((origin[0] - shift[0]).abs() < 1e-12 && (origin[1] - shift[1]).abs() < 1e-12);

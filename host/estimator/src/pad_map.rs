@@ -61,11 +61,19 @@ pub struct LensCorrection {
 
 impl LensCorrection {
     fn none(centre_px: Point2, scale_px: f64) -> Self {
-        Self { centre_px, scale_px, x: [0.0; CORRECTION_TERMS], y: [0.0; CORRECTION_TERMS] }
+        Self {
+            centre_px,
+            scale_px,
+            x: [0.0; CORRECTION_TERMS],
+            y: [0.0; CORRECTION_TERMS],
+        }
     }
 
     fn normalise(&self, p: Point2) -> Point2 {
-        [(p[0] - self.centre_px[0]) / self.scale_px, (p[1] - self.centre_px[1]) / self.scale_px]
+        [
+            (p[0] - self.centre_px[0]) / self.scale_px,
+            (p[1] - self.centre_px[1]) / self.scale_px,
+        ]
     }
 
     /// Undistorted px to corrected px.
@@ -109,7 +117,11 @@ impl LensCorrection {
 
     /// The same warp for a frame `factor` times as wide (the lens scaled with the frame).
     fn scaled(&self, factor: f64) -> Self {
-        Self { centre_px: [self.centre_px[0] * factor, self.centre_px[1] * factor], scale_px: self.scale_px * factor, ..*self }
+        Self {
+            centre_px: [self.centre_px[0] * factor, self.centre_px[1] * factor],
+            scale_px: self.scale_px * factor,
+            ..*self
+        }
     }
 }
 
@@ -140,7 +152,12 @@ pub struct StoredPadMap {
 
 impl StoredPadMap {
     pub fn validate(&self) -> Result<(), String> {
-        let finite = self.homography.iter().chain(&self.correction.x).chain(&self.correction.y).all(|v| v.is_finite())
+        let finite = self
+            .homography
+            .iter()
+            .chain(&self.correction.x)
+            .chain(&self.correction.y)
+            .all(|v| v.is_finite())
             && self.correction.centre_px.iter().all(|v| v.is_finite())
             && self.correction.scale_px.is_finite()
             && self.correction.scale_px > 0.0;
@@ -187,9 +204,14 @@ impl PadMapping {
         }
         let needed = if stored.is_some() { 8 } else { MIN_MAP_POINTS };
         if from.len() < needed {
-            return Err(EstimateError::TooFewPoints { found: from.len(), needed });
+            return Err(EstimateError::TooFewPoints {
+                found: from.len(),
+                needed,
+            });
         }
-        let degenerate = || EstimateError::NoPattern { reason: "the reference corners are degenerate (collinear)".into() };
+        let degenerate = || EstimateError::NoPattern {
+            reason: "the reference corners are degenerate (collinear)".into(),
+        };
         let frame_scale = |stored: &StoredPadMap| f64::from(camera.width()) / f64::from(stored.width);
         let (correction, to_mm, used) = match stored {
             Some(s) => {
@@ -220,7 +242,12 @@ impl PadMapping {
             to_mm,
             to_corrected,
             paper_scale,
-            residual: MapResidual { rms_mm: 0.0, max_mm: 0.0, points: 0, outliers: 0 },
+            residual: MapResidual {
+                rms_mm: 0.0,
+                max_mm: 0.0,
+                points: 0,
+                outliers: 0,
+            },
         };
         let errors: Vec<f64> = from
             .iter()
@@ -258,7 +285,9 @@ impl PadMapping {
     }
 
     pub fn undistort(&self, raw: Point2) -> Option<Point2> {
-        self.camera.undistort_px(raw).filter(|p| p[0].is_finite() && p[1].is_finite())
+        self.camera
+            .undistort_px(raw)
+            .filter(|p| p[0].is_finite() && p[1].is_finite())
     }
 
     pub fn distort(&self, undistorted: Point2) -> Option<Point2> {
@@ -326,7 +355,12 @@ fn robust_subset(
             .zip(to)
             .map(|(&p, t)| map(p).map_or(f64::INFINITY, |m| (m[0] - t[0]).hypot(m[1] - t[1])))
             .collect();
-        let mut sorted: Vec<f64> = errors.iter().zip(&used).filter(|(e, &u)| u && e.is_finite()).map(|(e, _)| *e).collect();
+        let mut sorted: Vec<f64> = errors
+            .iter()
+            .zip(&used)
+            .filter(|(e, &u)| u && e.is_finite())
+            .map(|(e, _)| *e)
+            .collect();
         if sorted.is_empty() {
             return None;
         }
@@ -344,7 +378,12 @@ fn robust_subset(
 }
 
 fn select(from: &[Point2], to: &[Point2], used: &[bool]) -> (Vec<Point2>, Vec<Point2>) {
-    from.iter().zip(to).zip(used).filter(|(_, &u)| u).map(|((f, t), _)| (*f, *t)).unzip()
+    from.iter()
+        .zip(to)
+        .zip(used)
+        .filter(|(_, &u)| u)
+        .map(|((f, t), _)| (*f, *t))
+        .unzip()
 }
 
 /// Lens correction and homography together, by Gauss-Newton from the homography alone.
@@ -353,8 +392,16 @@ fn fit_joint(from: &[Point2], to: &[Point2]) -> Option<(LensCorrection, Homograp
         return None;
     }
     let n = from.len() as f64;
-    let centre = [from.iter().map(|p| p[0]).sum::<f64>() / n, from.iter().map(|p| p[1]).sum::<f64>() / n];
-    let scale = (from.iter().map(|p| (p[0] - centre[0]).powi(2) + (p[1] - centre[1]).powi(2)).sum::<f64>() / n).sqrt();
+    let centre = [
+        from.iter().map(|p| p[0]).sum::<f64>() / n,
+        from.iter().map(|p| p[1]).sum::<f64>() / n,
+    ];
+    let scale = (from
+        .iter()
+        .map(|p| (p[0] - centre[0]).powi(2) + (p[1] - centre[1]).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt();
     if !(scale > 0.0) {
         return None;
     }
@@ -443,11 +490,17 @@ mod tests {
         let truth: Vec<Point2> = grid(&pad)
             .iter()
             .map(|p| {
-                let (x, y) = (512.0 + 12.0 * p[0] + 0.01 * p[0] * p[1], 384.0 + 12.2 * p[1] - 0.02 * p[0]);
+                let (x, y) = (
+                    512.0 + 12.0 * p[0] + 0.01 * p[0] * p[1],
+                    384.0 + 12.2 * p[1] - 0.02 * p[0],
+                );
                 let w = 1.0 + 0.0008 * p[0] - 0.0005 * p[1];
                 let (x, y) = (x / w, y / w);
                 let r2 = ((x - 512.0).powi(2) + (y - 384.0).powi(2)) / 400.0f64.powi(2);
-                [512.0 + (x - 512.0) * (1.0 - 0.03 * r2), 384.0 + (y - 384.0) * (1.0 - 0.03 * r2)]
+                [
+                    512.0 + (x - 512.0) * (1.0 - 0.03 * r2),
+                    384.0 + (y - 384.0) * (1.0 - 0.03 * r2),
+                ]
             })
             .collect();
         let observed: Vec<Option<Point2>> = truth.iter().map(|&p| Some(p)).collect();
@@ -458,27 +511,40 @@ mod tests {
         // Round trip mm -> undistorted -> mm anywhere on the pad.
         for p in [[0.0, 0.0], [26.0, -19.0], [-25.0, 18.0], [3.3, 7.7]] {
             let back = map.undistorted_to_mm(map.mm_to_undistorted(p).unwrap()).unwrap();
-            assert!((back[0] - p[0]).abs() < 1e-6 && (back[1] - p[1]).abs() < 1e-6, "{p:?} -> {back:?}");
+            assert!(
+                (back[0] - p[0]).abs() < 1e-6 && (back[1] - p[1]).abs() < 1e-6,
+                "{p:?} -> {back:?}"
+            );
         }
         // The homography alone leaves the barrel term in place.
         let h = Homography::fit(&truth, &grid(&pad)).unwrap();
-        let worst = truth.iter().zip(grid(&pad)).map(|(&p, t)| {
-            let m = h.apply(p).unwrap();
-            (m[0] - t[0]).hypot(m[1] - t[1])
-        }).fold(0.0, f64::max);
+        let worst = truth
+            .iter()
+            .zip(grid(&pad))
+            .map(|(&p, t)| {
+                let m = h.apply(p).unwrap();
+                (m[0] - t[0]).hypot(m[1] - t[1])
+            })
+            .fold(0.0, f64::max);
         assert!(worst > 10.0 * residual.max_mm, "{worst}");
         // A stored map keeps the correction and re-fits the pose: the same frame gives the same residual.
         let stored = map.stored();
         let again = PadMapping::fit(camera, &pad, &observed, Some(&stored)).unwrap();
-        assert!((again.residual().rms_mm - residual.rms_mm).abs() < 1e-3, "{:?}", again.residual());
+        assert!(
+            (again.residual().rms_mm - residual.rms_mm).abs() < 1e-3,
+            "{:?}",
+            again.residual()
+        );
     }
 
     #[test]
     fn a_mis_found_corner_is_left_out_and_counted() {
         let pad = PadGeometry::default();
         let camera = FisheyeCamera::paper(1024, 768).unwrap();
-        let mut observed: Vec<Option<Point2>> =
-            grid(&pad).iter().map(|p| Some([512.0 + 12.0 * p[0], 384.0 + 12.0 * p[1]])).collect();
+        let mut observed: Vec<Option<Point2>> = grid(&pad)
+            .iter()
+            .map(|p| Some([512.0 + 12.0 * p[0], 384.0 + 12.0 * p[1]]))
+            .collect();
         observed[40] = observed[40].map(|p| [p[0] + 9.0, p[1] - 4.0]);
         let map = PadMapping::fit(camera, &pad, &observed, None).unwrap();
         assert_eq!(map.residual().outliers, 1);
@@ -489,8 +555,13 @@ mod tests {
     fn too_few_or_collinear_corners_are_typed_errors() {
         let pad = PadGeometry::default();
         let camera = FisheyeCamera::paper(1024, 768).unwrap();
-        let few: Vec<Option<Point2>> = (0..165).map(|i| (i < 10).then_some([i as f64 * 10.0, i as f64 * 3.0])).collect();
-        assert!(matches!(PadMapping::fit(camera, &pad, &few, None), Err(EstimateError::TooFewPoints { .. })));
+        let few: Vec<Option<Point2>> = (0..165)
+            .map(|i| (i < 10).then_some([i as f64 * 10.0, i as f64 * 3.0]))
+            .collect();
+        assert!(matches!(
+            PadMapping::fit(camera, &pad, &few, None),
+            Err(EstimateError::TooFewPoints { .. })
+        ));
         let line: Vec<Option<Point2>> = (0..165).map(|i| Some([i as f64 * 3.0, 100.0])).collect();
         assert!(PadMapping::fit(camera, &pad, &line, None).is_err());
     }

@@ -39,7 +39,11 @@ pub struct CameraMotion {
 }
 
 impl CameraMotion {
-    pub const NONE: Self = Self { rotation_deg: 0.0, shift_px: [0.0, 0.0], scale: 1.0 };
+    pub const NONE: Self = Self {
+        rotation_deg: 0.0,
+        shift_px: [0.0, 0.0],
+        scale: 1.0,
+    };
 }
 
 /// One contact region.
@@ -217,7 +221,10 @@ impl Reading {
     }
 
     pub fn contacts(&self) -> Vec<ContactRegion> {
-        self.touch.as_ref().map(|t| t.contacts().copied().collect()).unwrap_or_default()
+        self.touch
+            .as_ref()
+            .map(|t| t.contacts().copied().collect())
+            .unwrap_or_default()
     }
 
     pub fn edge_angle_deg(&self) -> Option<f64> {
@@ -379,7 +386,10 @@ impl TryFrom<ReadingJson> for Reading {
                 force_n: j.force_n,
                 force_vector_n: j.force_vector_n,
                 torque_nmm: j.torque_nmm,
-                edge: EdgeReading { angle_deg: j.edge_angle_deg, confidence: j.edge_confidence },
+                edge: EdgeReading {
+                    angle_deg: j.edge_angle_deg,
+                    confidence: j.edge_confidence,
+                },
             })
         } else {
             let stray = j.contact_px.is_some()
@@ -448,14 +458,38 @@ mod tests {
                 force_n: 5.0,
                 force_vector_n: Some([0.1, -0.2, 5.0]),
                 torque_nmm: Some(0.4),
-                edge: EdgeReading { angle_deg: None, confidence: 0.1 },
+                edge: EdgeReading {
+                    angle_deg: None,
+                    confidence: 0.1,
+                },
             }),
-            test: ContactTest { statistic: 900.0, threshold: 60.0, p_value: 0.0, noise_mm: 0.01, detection_floor_n: 0.1 },
-            camera_motion: CameraMotion { rotation_deg: 1.5, shift_px: [3.0, -2.0], scale: 1.001 },
-            gamma: GammaReading { gamma: 1.0, gamma_uncompensated: 1.2, samples_used: 10, samples_total: 10 },
+            test: ContactTest {
+                statistic: 900.0,
+                threshold: 60.0,
+                p_value: 0.0,
+                noise_mm: 0.01,
+                detection_floor_n: 0.1,
+            },
+            camera_motion: CameraMotion {
+                rotation_deg: 1.5,
+                shift_px: [3.0, -2.0],
+                scale: 1.001,
+            },
+            gamma: GammaReading {
+                gamma: 1.0,
+                gamma_uncompensated: 1.2,
+                samples_used: 10,
+                samples_total: 10,
+            },
             force_model_n: 1.95,
             contact_score_mm: 0.3,
-            pressure_map: Some(PressureMap { origin_mm: [-1.0, -1.0], step_mm: [2.0, 2.0], cols: 2, rows: 1, kpa: vec![0.0, 3.0] }),
+            pressure_map: Some(PressureMap {
+                origin_mm: [-1.0, -1.0],
+                step_mm: [2.0, 2.0],
+                cols: 2,
+                rows: 1,
+                kpa: vec![0.0, 3.0],
+            }),
             counts: LatticeCounts {
                 points_detected: 165,
                 points_expected: 165,
@@ -478,11 +512,33 @@ mod tests {
             let reading = sample(contact);
             let json = serde_json::to_value(&reading).unwrap();
             for key in [
-                "contact", "contact_px", "contact_undistorted_px", "contact_mm", "gamma", "force_n", "force_model_n",
-                "edge_angle_deg", "edge_confidence", "points_detected", "points_expected", "squares_detected",
-                "squares_expected", "points_valid", "points_implausible", "samples_used", "samples_total",
-                "contact_score_mm", "recovered", "shear_field", "elapsed_ms", "camera_motion", "force_vector_n",
-                "torque_nmm", "contacts", "pressure_map", "gamma_uncompensated",
+                "contact",
+                "contact_px",
+                "contact_undistorted_px",
+                "contact_mm",
+                "gamma",
+                "force_n",
+                "force_model_n",
+                "edge_angle_deg",
+                "edge_confidence",
+                "points_detected",
+                "points_expected",
+                "squares_detected",
+                "squares_expected",
+                "points_valid",
+                "points_implausible",
+                "samples_used",
+                "samples_total",
+                "contact_score_mm",
+                "recovered",
+                "shear_field",
+                "elapsed_ms",
+                "camera_motion",
+                "force_vector_n",
+                "torque_nmm",
+                "contacts",
+                "pressure_map",
+                "gamma_uncompensated",
             ] {
                 assert!(json.get(key).is_some(), "{key} missing from {json}");
             }
@@ -506,7 +562,10 @@ mod tests {
     fn the_schema_describes_the_flat_object() {
         let schema = serde_json::to_value(schemars::schema_for!(Reading)).unwrap();
         let properties = &schema["properties"];
-        assert!(properties.get("contact_px").is_some() && properties.get("camera_motion").is_some(), "{schema}");
+        assert!(
+            properties.get("contact_px").is_some() && properties.get("camera_motion").is_some(),
+            "{schema}"
+        );
         assert!(properties.get("touch").is_none(), "{schema}");
     }
 }

@@ -48,8 +48,7 @@ pub fn register(reference: &Lattice, current: &Lattice, max_displacement_cells: 
                 (Some(a), Some(b)) => Some([b[0] - a[0], b[1] - a[1]]),
                 _ => None,
             };
-            let plausible =
-                displacement_mm.is_some_and(|d| d[0].hypot(d[1]) <= max_displacement_cells * cell_mm);
+            let plausible = displacement_mm.is_some_and(|d| d[0].hypot(d[1]) <= max_displacement_cells * cell_mm);
             RegisteredCorner {
                 index: r.index,
                 reference_raw: r.raw_px,
@@ -69,7 +68,16 @@ pub fn register(reference: &Lattice, current: &Lattice, max_displacement_cells: 
         let (r, c) = (i32::from(corner.index.row), i32::from(corner.index.col));
         let mut dx = Vec::new();
         let mut dy = Vec::new();
-        for (nr, nc) in [(r - 1, c), (r + 1, c), (r, c - 1), (r, c + 1), (r - 1, c - 1), (r + 1, c + 1), (r - 1, c + 1), (r + 1, c - 1)] {
+        for (nr, nc) in [
+            (r - 1, c),
+            (r + 1, c),
+            (r, c - 1),
+            (r, c + 1),
+            (r - 1, c - 1),
+            (r + 1, c + 1),
+            (r - 1, c + 1),
+            (r + 1, c - 1),
+        ] {
             if nr < 0 || nc < 0 || nr >= rows || nc >= cols {
                 continue;
             }
@@ -91,6 +99,13 @@ pub fn register(reference: &Lattice, current: &Lattice, max_displacement_cells: 
             corner.valid = false;
         }
     }
-    let implausible = corners.iter().filter(|c| c.displacement_mm.is_some() && !c.valid).count();
-    Registration { corners, matched, implausible }
+    let implausible = corners
+        .iter()
+        .filter(|c| c.displacement_mm.is_some() && !c.valid)
+        .count();
+    Registration {
+        corners,
+        matched,
+        implausible,
+    }
 }

@@ -49,8 +49,9 @@ impl ShearSampler {
     ) -> Result<Self, SurfaceError> {
         let basis = SampleBasis::for_net(rows, cols, surface.degree_u, surface.degree_v, surface.uv_step)?;
         let net = ControlNet::new(rows, cols, reference.to_vec(), reference_valid.to_vec())?;
-        let reference_samples =
-            BSplineSurface::new(net, surface.degree_u, surface.degree_v)?.sample_on(&basis).points;
+        let reference_samples = BSplineSurface::new(net, surface.degree_u, surface.degree_v)?
+            .sample_on(&basis)
+            .points;
         Ok(Self {
             rows,
             cols,
@@ -78,7 +79,10 @@ impl ShearSampler {
             .collect();
         let net = ControlNet::new(self.rows, self.cols, displacement, valid.to_vec())?;
         let grid = BSplineSurface::new(net, self.degree_u, self.degree_v)?.sample_on(&self.basis);
-        Ok(ShearSamples { displacement: grid.points, valid: grid.rests_on_valid })
+        Ok(ShearSamples {
+            displacement: grid.points,
+            valid: grid.rests_on_valid,
+        })
     }
 }
 

@@ -17,9 +17,18 @@ pub enum SurfaceError {
     #[error("the control net is empty ({rows} x {cols})")]
     EmptyNet { rows: usize, cols: usize },
     #[error("the control net has {rows} x {cols} slots but {points} points and {mask} mask entries were given")]
-    SizeMismatch { rows: usize, cols: usize, points: usize, mask: usize },
+    SizeMismatch {
+        rows: usize,
+        cols: usize,
+        points: usize,
+        mask: usize,
+    },
     #[error("degree {degree} along {axis} needs at least {} control points, the net has {points}", degree + 1)]
-    DegreeTooHigh { axis: &'static str, degree: usize, points: usize },
+    DegreeTooHigh {
+        axis: &'static str,
+        degree: usize,
+        points: usize,
+    },
     #[error("degree must be at least 1 along {axis}")]
     DegreeZero { axis: &'static str },
     #[error("control point {index} is valid but not finite")]
@@ -48,15 +57,32 @@ impl ControlNet {
             return Err(SurfaceError::EmptyNet { rows, cols });
         }
         if points.len() != rows * cols || valid.len() != rows * cols {
-            return Err(SurfaceError::SizeMismatch { rows, cols, points: points.len(), mask: valid.len() });
+            return Err(SurfaceError::SizeMismatch {
+                rows,
+                cols,
+                points: points.len(),
+                mask: valid.len(),
+            });
         }
-        if let Some(index) = points.iter().zip(&valid).position(|(p, &ok)| ok && !(p[0].is_finite() && p[1].is_finite()))
+        if let Some(index) = points
+            .iter()
+            .zip(&valid)
+            .position(|(p, &ok)| ok && !(p[0].is_finite() && p[1].is_finite()))
         {
             return Err(SurfaceError::NotFinite { index });
         }
         // Invalid slots are zeroed so that no NaN can leak through a zero basis weight.
-        let points = points.iter().zip(&valid).map(|(&p, &ok)| if ok { p } else { [0.0, 0.0] }).collect();
-        Ok(Self { rows, cols, points, valid })
+        let points = points
+            .iter()
+            .zip(&valid)
+            .map(|(&p, &ok)| if ok { p } else { [0.0, 0.0] })
+            .collect();
+        Ok(Self {
+            rows,
+            cols,
+            points,
+            valid,
+        })
     }
 
     /// A net where missing points are `None`.
@@ -170,13 +196,20 @@ impl KnotVector {
             let mut saved = 0.0;
             for r in 0..j {
                 let denominator = right[r + 1] + left[j - r];
-                let temp = if denominator == 0.0 { 0.0 } else { weights[r] / denominator };
+                let temp = if denominator == 0.0 {
+                    0.0
+                } else {
+                    weights[r] / denominator
+                };
                 weights[r] = saved + right[r + 1] * temp;
                 saved = left[j - r] * temp;
             }
             weights[j] = saved;
         }
-        BasisSpan { first: span - p, weights }
+        BasisSpan {
+            first: span - p,
+            weights,
+        }
     }
 }
 
@@ -246,7 +279,8 @@ impl BSplineSurface {
     /// absent, see [`Self::evaluate_checked`] to know whether the point is meaningful.
     pub fn evaluate(&self, u: f64, v: f64) -> Point2 {
         let clamp = |t: f64| if t.is_finite() { t.clamp(0.0, 1.0) } else { 0.0 };
-        self.combine(&self.knots_u.basis(clamp(u)), &self.knots_v.basis(clamp(v))).0
+        self.combine(&self.knots_u.basis(clamp(u)), &self.knots_v.basis(clamp(v)))
+            .0
     }
 
     fn combine(&self, bu: &BasisSpan, bv: &BasisSpan) -> (Point2, bool) {
@@ -286,7 +320,12 @@ impl BSplineSurface {
                 rests_on_valid.push(ok);
             }
         }
-        SampleGrid { u_values: basis.u_values.clone(), v_values: basis.v_values.clone(), points, rests_on_valid }
+        SampleGrid {
+            u_values: basis.u_values.clone(),
+            v_values: basis.v_values.clone(),
+            points,
+            rests_on_valid,
+        }
     }
 }
 

@@ -17,7 +17,12 @@ fn a_frame_of_another_size_is_a_size_mismatch() {
     let mut estimator = Estimator::new(SensorConfig::default(), Mode::Fast, &reference).unwrap();
     let other = imageops::resize(&reference, 500, 384, imageops::FilterType::Nearest);
     match estimator.estimate(&other) {
-        Err(EstimateError::FrameSizeMismatch { expected_width: 512, expected_height: 384, found_width: 500, found_height: 384 }) => {}
+        Err(EstimateError::FrameSizeMismatch {
+            expected_width: 512,
+            expected_height: 384,
+            found_width: 500,
+            found_height: 384,
+        }) => {}
         other => panic!("{other:?}"),
     }
 }
@@ -90,7 +95,10 @@ fn config_errors_name_the_key() {
     }
     // Unknown keys and wrong types are parse errors that quote the key.
     let error = SensorConfig::from_toml_str("[calibration]\nslope = 3.0\n").unwrap_err();
-    assert!(matches!(error, ConfigError::Parse { .. }) && error.to_string().contains("slope"), "{error}");
+    assert!(
+        matches!(error, ConfigError::Parse { .. }) && error.to_string().contains("slope"),
+        "{error}"
+    );
     let error = SensorConfig::from_toml_str("[surface]\ndegree_u = \"two\"\n").unwrap_err();
     assert!(error.to_string().contains("degree_u"), "{error}");
 }
@@ -105,7 +113,10 @@ fn config_files_name_the_file() {
     assert_eq!((config.calibration.a, config.calibration.b), (2.0, -0.5));
     std::fs::write(&path, "[force]\na = 2.0\n").unwrap();
     let error = SensorConfig::load(&path).unwrap_err();
-    assert!(error.to_string().contains("sensor.toml") && error.to_string().contains("force"), "{error}");
+    assert!(
+        error.to_string().contains("sensor.toml") && error.to_string().contains("force"),
+        "{error}"
+    );
     let missing = SensorConfig::load(dir.join("missing.toml")).unwrap_err();
     assert!(matches!(missing, ConfigError::Io { .. }));
     std::fs::remove_dir_all(&dir).unwrap();

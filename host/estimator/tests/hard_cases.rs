@@ -69,12 +69,24 @@ fn distance(a: [f64; 2], b: [f64; 2]) -> f64 {
 
 /// No NaN or infinity anywhere in a reading, and the invariants every reading keeps.
 fn assert_sound(reading: &Reading, case: &str) {
-    assert!(reading.numbers().iter().all(|v| v.is_finite()), "{case}: a reading carries a non-finite value: {reading:?}");
+    assert!(
+        reading.numbers().iter().all(|v| v.is_finite()),
+        "{case}: a reading carries a non-finite value: {reading:?}"
+    );
     if let Some(angle) = reading.edge_angle_deg() {
-        assert!((0.0..180.0).contains(&angle), "{case}: edge angle {angle} outside [0, 180)");
+        assert!(
+            (0.0..180.0).contains(&angle),
+            "{case}: edge angle {angle} outside [0, 180)"
+        );
     }
-    assert!((0.0..=1.0).contains(&reading.edge_confidence()), "{case}: edge confidence");
-    assert!(reading.counts.points_detected <= reading.counts.points_expected, "{case}: more points than the lattice has");
+    assert!(
+        (0.0..=1.0).contains(&reading.edge_confidence()),
+        "{case}: edge confidence"
+    );
+    assert!(
+        reading.counts.points_detected <= reading.counts.points_expected,
+        "{case}: more points than the lattice has"
+    );
     assert!(reading.force_n() >= 0.0, "{case}: negative force");
 }
 
@@ -88,12 +100,21 @@ fn expect_press(
     location_mm: f64,
     case: &str,
 ) -> Reading {
-    let reading = estimator.estimate(frame).unwrap_or_else(|e| panic!("{case}: refused a measurable frame: {e}"));
+    let reading = estimator
+        .estimate(frame)
+        .unwrap_or_else(|e| panic!("{case}: refused a measurable frame: {e}"));
     assert_sound(&reading, case);
-    assert!(reading.is_contact(), "{case}: the press was not detected: {:?}", reading.test);
+    assert!(
+        reading.is_contact(),
+        "{case}: the press was not detected: {:?}",
+        reading.test
+    );
     let at = reading.contact_mm().expect("a contact has a location");
     let off = distance(at, truth_mm);
-    assert!(off <= location_mm, "{case}: contact at {at:.2?} mm, truth {truth_mm:?}: {off:.2} mm off");
+    assert!(
+        off <= location_mm,
+        "{case}: contact at {at:.2?} mm, truth {truth_mm:?}: {off:.2} mm off"
+    );
     let force = reading.force_n() * force_scale();
     assert!(
         (force - force_n).abs() <= FORCE_FRACTION * force_n,
@@ -104,9 +125,16 @@ fn expect_press(
 
 /// A frame without any press: measured, no contact, no force, no edge.
 fn expect_rest(estimator: &mut Estimator, frame: &RgbImage, case: &str) -> Reading {
-    let reading = estimator.estimate(frame).unwrap_or_else(|e| panic!("{case}: refused a measurable frame: {e}"));
+    let reading = estimator
+        .estimate(frame)
+        .unwrap_or_else(|e| panic!("{case}: refused a measurable frame: {e}"));
     assert_sound(&reading, case);
-    assert!(!reading.is_contact(), "{case}: contact reported without a press: {:?} at {:?}", reading.test, reading.contact_mm());
+    assert!(
+        !reading.is_contact(),
+        "{case}: contact reported without a press: {:?} at {:?}",
+        reading.test,
+        reading.contact_mm()
+    );
     assert_eq!(reading.force_n(), 0.0, "{case}: force without contact");
     assert_eq!(reading.edge_angle_deg(), None, "{case}: an edge without contact");
     reading
@@ -116,9 +144,15 @@ fn expect_rest(estimator: &mut Estimator, frame: &RgbImage, case: &str) -> Readi
 fn rest_frame_with_other_noise_is_no_contact_and_no_motion() {
     let (frame, _) = render(&Scene::rest(), 2);
     let reading = expect_rest(&mut estimator(), &frame, "rest");
-    assert_eq!(reading.counts.points_detected, reading.counts.points_expected, "all corners of a clean rest frame");
+    assert_eq!(
+        reading.counts.points_detected, reading.counts.points_expected,
+        "all corners of a clean rest frame"
+    );
     let motion = reading.camera_motion;
-    assert!(motion.rotation_deg.abs() < 0.02 && motion.shift_px.iter().all(|v| v.abs() < 0.1), "{motion:?}");
+    assert!(
+        motion.rotation_deg.abs() < 0.02 && motion.shift_px.iter().all(|v| v.abs() < 0.1),
+        "{motion:?}"
+    );
 }
 
 #[test]
@@ -133,16 +167,25 @@ fn press_one_cell_from_the_border() {
 #[test]
 fn two_presses_are_two_contacts_with_their_own_forces() {
     let (left, right) = ([-12.0, 0.0], [12.0, 0.0]);
-    let scene = Scene { contacts: vec![Contact::sphere(5.0, left, 4.0), Contact::sphere(5.0, right, 2.5)], ..Scene::default() };
+    let scene = Scene {
+        contacts: vec![Contact::sphere(5.0, left, 4.0), Contact::sphere(5.0, right, 2.5)],
+        ..Scene::default()
+    };
     let (frame, _) = render(&scene, 4);
     let reading = estimator().estimate(&frame).expect("two presses are measurable");
     assert_sound(&reading, "two presses");
     let contacts = reading.contacts();
     assert_eq!(contacts.len(), 2, "{contacts:?}");
     for (contact, (truth, force)) in contacts.iter().zip([(left, 4.0), (right, 2.5)]) {
-        assert!(distance(contact.centre_mm, truth) <= LOCATION_MM, "{contact:?} vs {truth:?}");
+        assert!(
+            distance(contact.centre_mm, truth) <= LOCATION_MM,
+            "{contact:?} vs {truth:?}"
+        );
         let calibrated = contact.force_n * force_scale();
-        assert!((calibrated - force).abs() <= FORCE_FRACTION * force, "{calibrated:.2} N for {force} N");
+        assert!(
+            (calibrated - force).abs() <= FORCE_FRACTION * force,
+            "{calibrated:.2} N for {force} N"
+        );
     }
     assert!((reading.force_n() - contacts.iter().map(|c| c.force_n).sum::<f64>()).abs() < 1e-9);
 }
@@ -150,31 +193,58 @@ fn two_presses_are_two_contacts_with_their_own_forces() {
 #[test]
 fn two_presses_ten_mm_apart_are_both_listed() {
     let (left, right) = ([-5.0, 3.0], [5.0, 3.0]);
-    let scene = Scene { contacts: vec![Contact::sphere(3.0, left, 3.0), Contact::sphere(3.0, right, 2.0)], ..Scene::default() };
+    let scene = Scene {
+        contacts: vec![Contact::sphere(3.0, left, 3.0), Contact::sphere(3.0, right, 2.0)],
+        ..Scene::default()
+    };
     let (frame, _) = render(&scene, 14);
     let reading = estimator().estimate(&frame).expect("two presses are measurable");
     let contacts = reading.contacts();
     assert_eq!(contacts.len(), 2, "{contacts:?}");
     for (contact, (truth, force)) in contacts.iter().zip([(left, 3.0), (right, 2.0)]) {
-        assert!(distance(contact.centre_mm, truth) <= LOCATION_MM, "{contact:?} vs {truth:?}");
+        assert!(
+            distance(contact.centre_mm, truth) <= LOCATION_MM,
+            "{contact:?} vs {truth:?}"
+        );
         let calibrated = contact.force_n * force_scale();
-        assert!((calibrated - force).abs() <= FORCE_FRACTION * force, "{calibrated:.2} N for {force} N");
+        assert!(
+            (calibrated - force).abs() <= FORCE_FRACTION * force,
+            "{calibrated:.2} N for {force} N"
+        );
     }
 }
 
 #[test]
 fn pad_torn_before_the_reference_still_measures_the_rest() {
     // The pad was already torn when the reference was taken: those corners are masked, the rest measure.
-    let tear = Damage::Missing { centre_mm: [10.0, 6.0], radius_mm: 4.0 };
-    let rest = Scene { damage: vec![tear.clone()], ..Scene::default() };
+    let tear = Damage::Missing {
+        centre_mm: [10.0, 6.0],
+        radius_mm: 4.0,
+    };
+    let rest = Scene {
+        damage: vec![tear.clone()],
+        ..Scene::default()
+    };
     let (torn_reference, _) = render(&rest, 1);
     let truth = [-10.0, -5.0];
-    let (frame, _) = render(&Scene { damage: vec![tear], ..press(truth, 6.0) }, 5);
+    let (frame, _) = render(
+        &Scene {
+            damage: vec![tear],
+            ..press(truth, 6.0)
+        },
+        5,
+    );
     let mut estimator =
         Estimator::new(SensorConfig::default(), Mode::Inverse, &torn_reference).expect("most of the pad is intact");
-    assert!(estimator.reference_lattice().corners_found() < 165, "the tear hides some corners");
+    assert!(
+        estimator.reference_lattice().corners_found() < 165,
+        "the tear hides some corners"
+    );
     let reading = expect_press(&mut estimator, &frame, truth, 6.0, LOCATION_MM, "torn pad");
-    assert!(reading.counts.points_valid < reading.counts.points_expected, "torn corners must be masked");
+    assert!(
+        reading.counts.points_valid < reading.counts.points_expected,
+        "torn corners must be masked"
+    );
 }
 
 #[test]
@@ -183,14 +253,24 @@ fn pad_torn_before_the_reference_still_measures_the_rest() {
 fn ink_lost_after_the_reference_is_not_a_press() {
     let scene = Scene {
         damage: vec![
-            Damage::Missing { centre_mm: [8.0, 4.0], radius_mm: 4.0 },
-            Damage::Smeared { centre_mm: [-12.0, -6.0], radius_mm: 5.0, smear_mm: 1.5 },
+            Damage::Missing {
+                centre_mm: [8.0, 4.0],
+                radius_mm: 4.0,
+            },
+            Damage::Smeared {
+                centre_mm: [-12.0, -6.0],
+                radius_mm: 5.0,
+                smear_mm: 1.5,
+            },
         ],
         ..Scene::default()
     };
     let (frame, _) = render(&scene, 6);
     let reading = expect_rest(&mut estimator(), &frame, "torn after the reference");
-    assert!(reading.counts.points_detected < reading.counts.points_expected, "the missing ink hides corners");
+    assert!(
+        reading.counts.points_detected < reading.counts.points_expected,
+        "the missing ink hides corners"
+    );
 }
 
 #[test]
@@ -206,7 +286,14 @@ fn leds_at_twenty_percent() {
 #[test]
 fn one_led_side_drifting_is_not_a_press() {
     let mut estimator = estimator();
-    for (k, leds) in [[100.0, 120.0, 100.0, 100.0], [100.0, 100.0, 70.0, 100.0], [60.0, 100.0, 100.0, 130.0]].iter().enumerate() {
+    for (k, leds) in [
+        [100.0, 120.0, 100.0, 100.0],
+        [100.0, 100.0, 70.0, 100.0],
+        [60.0, 100.0, 100.0, 130.0],
+    ]
+    .iter()
+    .enumerate()
+    {
         let (frame, _) = render_with(renderer(), &Scene::rest(), *leds, 20 + k as u64);
         expect_rest(&mut estimator, &frame, &format!("LED drift {leds:?}"));
     }
@@ -215,21 +302,36 @@ fn one_led_side_drifting_is_not_a_press() {
 #[test]
 fn saturated_exposure() {
     // Over-exposed so that the yellow squares clip at 255 in every channel; the red keeps some contrast.
-    let bright = Renderer::new(SensorModel { exposure: 1.8, ..model() }).unwrap();
+    let bright = Renderer::new(SensorModel {
+        exposure: 1.8,
+        ..model()
+    })
+    .unwrap();
     let truth = [-6.0, 5.0];
     let (frame, _) = render_with(&bright, &press(truth, 6.0), NOMINAL, 8);
     let saturated = frame.pixels().filter(|p| p.0.iter().any(|&c| c == 255)).count();
-    assert!(saturated * 5 > frame.pixels().len(), "the case needs a saturated frame ({saturated} px at 255)");
+    assert!(
+        saturated * 5 > frame.pixels().len(),
+        "the case needs a saturated frame ({saturated} px at 255)"
+    );
     expect_press(&mut estimator(), &frame, truth, 6.0, LOCATION_MM, "saturation");
 }
 
 #[test]
 fn heavy_noise() {
-    let noisy = Renderer::new(SensorModel { noise_sigma: 25.0, ..model() }).unwrap();
+    let noisy = Renderer::new(SensorModel {
+        noise_sigma: 25.0,
+        ..model()
+    })
+    .unwrap();
     let mut estimator = estimator();
     let (rest, _) = render_with(&noisy, &Scene::rest(), NOMINAL, 9);
     let reading = expect_rest(&mut estimator, &rest, "heavy noise, rest");
-    assert!(reading.test.noise_mm > SensorConfig::default().inverse.noise_floor_mm, "the noise is measured: {:?}", reading.test);
+    assert!(
+        reading.test.noise_mm > SensorConfig::default().inverse.noise_floor_mm,
+        "the noise is measured: {:?}",
+        reading.test
+    );
     let truth = [5.0, 3.0];
     let (frame, _) = render_with(&noisy, &press(truth, 6.0), NOMINAL, 9);
     expect_press(&mut estimator, &frame, truth, 6.0, 1.5, "heavy noise, press");
@@ -237,7 +339,11 @@ fn heavy_noise() {
 
 #[test]
 fn jpeg_frames() {
-    let jpeg = Renderer::new(SensorModel { jpeg_quality: Some(60), ..model() }).unwrap();
+    let jpeg = Renderer::new(SensorModel {
+        jpeg_quality: Some(60),
+        ..model()
+    })
+    .unwrap();
     let mut estimator = estimator();
     let (rest, _) = render_with(&jpeg, &Scene::rest(), NOMINAL, 15);
     expect_rest(&mut estimator, &rest, "JPEG q60, rest");
@@ -265,17 +371,36 @@ fn camera_rotated_and_shifted_is_measured_and_removed() {
         let reading = expect_rest(&mut estimator, &rest, &case);
         let motion = reading.camera_motion;
         assert!((motion.rotation_deg - degrees).abs() <= 0.2, "{case}: {motion:?}");
-        assert!(motion.shift_px[0].hypot(motion.shift_px[1]) > 2.0, "{case}: the shift is seen: {motion:?}");
+        assert!(
+            motion.shift_px[0].hypot(motion.shift_px[1]) > 2.0,
+            "{case}: the shift is seen: {motion:?}"
+        );
         // The press through the moved camera is where it is on the pad, with its force.
         let truth = [-4.0, 6.0];
         let (frame, _) = render_with(&moved, &press(truth, 6.0), NOMINAL, 10);
         let reading = expect_press(&mut estimator, &frame, truth, 6.0, LOCATION_MM, &case);
-        assert!((reading.camera_motion.rotation_deg - degrees).abs() <= 0.2, "{case}: {:?}", reading.camera_motion);
+        assert!(
+            (reading.camera_motion.rotation_deg - degrees).abs() <= 0.2,
+            "{case}: {:?}",
+            reading.camera_motion
+        );
         // Removed before the shear is measured: the compensated gamma is the unmoved one, the paper's is not.
         let (still, _) = render(&press(truth, 6.0), 10);
-        let unmoved = Estimator::new(SensorConfig::default(), Mode::Inverse, reference()).unwrap().estimate(&still).unwrap();
-        assert!((reading.gamma.gamma / unmoved.gamma.gamma - 1.0).abs() < 0.1, "{case}: {:?} vs {:?}", reading.gamma, unmoved.gamma);
-        assert!(reading.gamma.gamma_uncompensated > 2.0 * unmoved.gamma.gamma, "{case}: {:?}", reading.gamma);
+        let unmoved = Estimator::new(SensorConfig::default(), Mode::Inverse, reference())
+            .unwrap()
+            .estimate(&still)
+            .unwrap();
+        assert!(
+            (reading.gamma.gamma / unmoved.gamma.gamma - 1.0).abs() < 0.1,
+            "{case}: {:?} vs {:?}",
+            reading.gamma,
+            unmoved.gamma
+        );
+        assert!(
+            reading.gamma.gamma_uncompensated > 2.0 * unmoved.gamma.gamma,
+            "{case}: {:?}",
+            reading.gamma
+        );
     }
 }
 
@@ -297,19 +422,43 @@ fn a_camera_that_stays_moved_re_tares_by_itself() {
     // After the re-tare the moved camera is the rest position: no motion, and presses measure as before.
     let (rest, _) = render_with(&moved, &Scene::rest(), NOMINAL, 99);
     let reading = expect_rest(&mut estimator, &rest, "after the re-tare");
-    assert!(reading.camera_motion.rotation_deg.abs() < 0.05, "{:?}", reading.camera_motion);
+    assert!(
+        reading.camera_motion.rotation_deg.abs() < 0.05,
+        "{:?}",
+        reading.camera_motion
+    );
     let truth = [6.0, -6.0];
     let (frame, _) = render_with(&moved, &press(truth, 5.0), NOMINAL, 98);
-    expect_press(&mut estimator, &frame, truth, 5.0, LOCATION_MM, "press after the re-tare");
+    expect_press(
+        &mut estimator,
+        &frame,
+        truth,
+        5.0,
+        LOCATION_MM,
+        "press after the re-tare",
+    );
 }
 
 #[test]
 fn partial_occlusion() {
-    let occlusion = Occlusion { centre_mm: [-15.0, 8.0], radius_mm: 6.0, colour: [12, 10, 10] };
+    let occlusion = Occlusion {
+        centre_mm: [-15.0, 8.0],
+        radius_mm: 6.0,
+        colour: [12, 10, 10],
+    };
     let truth = [8.0, -2.0];
-    let (frame, _) = render(&Scene { occlusions: vec![occlusion], ..press(truth, 6.0) }, 11);
+    let (frame, _) = render(
+        &Scene {
+            occlusions: vec![occlusion],
+            ..press(truth, 6.0)
+        },
+        11,
+    );
     let reading = expect_press(&mut estimator(), &frame, truth, 6.0, LOCATION_MM, "partial occlusion");
-    assert!(reading.counts.points_detected < reading.counts.points_expected, "occluded corners cannot be found");
+    assert!(
+        reading.counts.points_detected < reading.counts.points_expected,
+        "occluded corners cannot be found"
+    );
 }
 
 #[test]
@@ -320,7 +469,11 @@ fn a_press_with_a_tangential_push_reports_its_direction() {
         contact.tangential_force_n = [1.5 * c, 1.5 * s];
         let (frame, _) = render(&Scene::with_contact(contact), 16);
         let reading = expect_press(&mut estimator(), &frame, [2.0, 1.0], 5.0, LOCATION_MM, "shear");
-        let v = reading.touch.as_ref().and_then(|t| t.force_vector_n).expect("the inverse gives a force vector");
+        let v = reading
+            .touch
+            .as_ref()
+            .and_then(|t| t.force_vector_n)
+            .expect("the inverse gives a force vector");
         let found = v[1].atan2(v[0]).to_degrees();
         let off = (found - angle + 180.0).rem_euclid(360.0) - 180.0;
         assert!(off.abs() <= 5.0, "push at {angle} deg read at {found:.1} deg ({v:?})");
@@ -336,8 +489,15 @@ fn force_so_large_that_corners_move_more_than_half_a_cell() {
     let (frame, ground) = render(&Scene::with_contact(contact), 12);
     let pad = SensorConfig::default().pad;
     let pitch_mm = pad.pitch_x_mm().min(pad.pitch_y_mm());
-    let largest = ground.corners.iter().map(|c| distance(c.displaced_mm, c.rest_mm)).fold(0.0, f64::max);
-    assert!(largest > 0.5 * pitch_mm, "the case needs corners moving > half a cell: largest {largest:.2} mm");
+    let largest = ground
+        .corners
+        .iter()
+        .map(|c| distance(c.displaced_mm, c.rest_mm))
+        .fold(0.0, f64::max);
+    assert!(
+        largest > 0.5 * pitch_mm,
+        "the case needs corners moving > half a cell: largest {largest:.2} mm"
+    );
     let reading = estimator().estimate(&frame).expect("a huge press is measurable");
     assert_sound(&reading, "huge force");
     assert!(reading.is_contact(), "huge force: not detected");
@@ -353,12 +513,22 @@ fn force_so_large_that_corners_move_more_than_half_a_cell() {
 fn round_contact_has_no_edge_direction_but_an_edge_has_one() {
     let (round, _) = render(&Scene::with_contact(Contact::flat_punch(4.0, [0.0, 0.0], 6.0)), 13);
     let reading = expect_press(&mut estimator(), &round, [0.0, 0.0], 6.0, LOCATION_MM, "round contact");
-    assert_eq!(reading.edge_angle_deg(), None, "a round contact has no direction (confidence {})", reading.edge_confidence());
+    assert_eq!(
+        reading.edge_angle_deg(),
+        None,
+        "a round contact has no direction (confidence {})",
+        reading.edge_confidence()
+    );
     for angle in [30.0, 105.0] {
-        let (edge, _) = render(&Scene::with_contact(Contact::edge(20.0, 1.0, angle, [0.0, 0.0], 8.0)), 13);
+        let (edge, _) = render(
+            &Scene::with_contact(Contact::edge(20.0, 1.0, angle, [0.0, 0.0], 8.0)),
+            13,
+        );
         let reading = estimator().estimate(&edge).expect("a central edge press is measurable");
         assert_sound(&reading, "edge contact");
-        let found = reading.edge_angle_deg().unwrap_or_else(|| panic!("no edge direction: {:?}", reading.edge_confidence()));
+        let found = reading
+            .edge_angle_deg()
+            .unwrap_or_else(|| panic!("no edge direction: {:?}", reading.edge_confidence()));
         let off = (found - angle).rem_euclid(180.0);
         assert!(off.min(180.0 - off) <= 2.0, "edge at {found:.1} deg, truth {angle} deg");
     }
@@ -377,28 +547,44 @@ fn light_touches_down_to_half_a_newton_are_contacts() {
         let (frame, _) = render_with(&half, &press(truth, force), NOMINAL, 40 + k as u64);
         let reading = estimator.estimate(&frame).expect("a light press is measurable");
         assert_sound(&reading, "light touch");
-        assert!(reading.test.detection_floor_n <= 0.5, "{force} N: floor {:?}", reading.test);
+        assert!(
+            reading.test.detection_floor_n <= 0.5,
+            "{force} N: floor {:?}",
+            reading.test
+        );
         assert!(reading.is_contact(), "{force} N not detected: {:?}", reading.test);
         let at = reading.contact_mm().unwrap();
         assert!(distance(at, truth) <= 1.5, "{force} N at {at:.2?}");
         let calibrated = reading.force_n() * force_scale();
-        assert!((calibrated - force).abs() <= 0.3 * force.max(1.0), "{force} N read as {calibrated:.2} N (calibrated)");
+        assert!(
+            (calibrated - force).abs() <= 0.3 * force.max(1.0),
+            "{force} N read as {calibrated:.2} N (calibrated)"
+        );
     }
     let (rest, _) = render_with(&half, &Scene::rest(), NOMINAL, 49);
     expect_rest(&mut estimator, &rest, "half resolution, rest");
 }
 
 fn samples(pairs: &[(f64, f64)]) -> Vec<CalibrationSample> {
-    pairs.iter().map(|&(gamma, force_n)| CalibrationSample { gamma, force_n }).collect()
+    pairs
+        .iter()
+        .map(|&(gamma, force_n)| CalibrationSample { gamma, force_n })
+        .collect()
 }
 
 #[test]
 fn calibration_with_duplicate_points() {
     let options = FitOptions::default();
     let same = samples(&[(1.0, 2.0); 6]);
-    assert!(matches!(fit_force_line(&same, &options), Err(CalibrationError::TooFewPoints { .. })));
+    assert!(matches!(
+        fit_force_line(&same, &options),
+        Err(CalibrationError::TooFewPoints { .. })
+    ));
     let two = samples(&[(1.0, 2.0), (1.0, 2.0), (2.0, 5.0), (2.0, 5.0), (1.0, 2.0)]);
-    assert!(matches!(fit_force_line(&two, &options), Err(CalibrationError::TooFewPoints { .. })));
+    assert!(matches!(
+        fit_force_line(&two, &options),
+        Err(CalibrationError::TooFewPoints { .. })
+    ));
     let vertical = samples(&[(1.5, 1.0), (1.5, 2.0), (1.5, 3.0), (1.5, 4.0)]);
     assert!(matches!(
         fit_force_line(&vertical, &options),
@@ -406,21 +592,38 @@ fn calibration_with_duplicate_points() {
     ));
     let mixed = samples(&[(1.0, 2.0), (1.0, 2.0), (2.0, 5.0), (3.0, 8.0), (3.0, 8.0), (4.0, 11.0)]);
     let fit = fit_force_line(&mixed, &options).expect("four distinct collinear points");
-    assert!((fit.a - 3.0).abs() < 1e-6 && (fit.b + 1.0).abs() < 1e-6, "a {} b {}", fit.a, fit.b);
+    assert!(
+        (fit.a - 3.0).abs() < 1e-6 && (fit.b + 1.0).abs() < 1e-6,
+        "a {} b {}",
+        fit.a,
+        fit.b
+    );
 }
 
 #[test]
 fn calibration_with_exactly_collinear_points() {
     let line = samples(&[(0.5, 0.405), (1.0, 1.95), (1.5, 3.495), (2.0, 5.04), (2.5, 6.585)]);
     let fit = fit_force_line(&line, &FitOptions::default()).expect("collinear points are a perfect line");
-    assert!((fit.a - 3.09).abs() < 1e-9 && (fit.b + 1.14).abs() < 1e-9, "a {} b {}", fit.a, fit.b);
-    for value in [fit.a_std_error, fit.b_std_error, fit.residual_scale_n].into_iter().chain(fit.a_interval).chain(fit.b_interval) {
+    assert!(
+        (fit.a - 3.09).abs() < 1e-9 && (fit.b + 1.14).abs() < 1e-9,
+        "a {} b {}",
+        fit.a,
+        fit.b
+    );
+    for value in [fit.a_std_error, fit.b_std_error, fit.residual_scale_n]
+        .into_iter()
+        .chain(fit.a_interval)
+        .chain(fit.b_interval)
+    {
         assert!(value.is_finite(), "collinear fit: non-finite value in {fit:?}");
     }
     assert!(fit.a_interval[0] <= fit.a && fit.a <= fit.a_interval[1], "{fit:?}");
     let mut bad = line.clone();
     bad[2].gamma = f64::NAN;
-    assert!(matches!(fit_force_line(&bad, &FitOptions::default()), Err(CalibrationError::NotFinite { index: 2, .. })));
+    assert!(matches!(
+        fit_force_line(&bad, &FitOptions::default()),
+        Err(CalibrationError::NotFinite { index: 2, .. })
+    ));
 }
 
 #[test]
@@ -430,25 +633,42 @@ fn smallest_control_net_two_by_two() {
     let surface = BSplineSurface::new(net.clone(), 1, 1).expect("degree 1 on 2 x 2 is the bilinear patch");
     for (u, v) in [(0.0, 0.0), (0.25, 0.5), (1.0, 1.0), (0.7, 0.1)] {
         let p = surface.evaluate(u, v);
-        assert!((p[0] - 10.0 * v).abs() < 1e-12 && (p[1] - 20.0 * u).abs() < 1e-12, "({u}, {v}) -> {p:?}");
+        assert!(
+            (p[0] - 10.0 * v).abs() < 1e-12 && (p[1] - 20.0 * u).abs() < 1e-12,
+            "({u}, {v}) -> {p:?}"
+        );
     }
     let grid = surface.sample_grid(0.5).unwrap();
     assert!(grid.points.iter().flatten().all(|v| v.is_finite()));
-    assert!(matches!(BSplineSurface::new(net.clone(), 3, 3), Err(SurfaceError::DegreeTooHigh { .. })));
-    let holey = ControlNet::from_options(2, 2, &[Some([0.0, 0.0]), None, Some([0.0, 20.0]), Some([10.0, 20.0])]).unwrap();
+    assert!(matches!(
+        BSplineSurface::new(net.clone(), 3, 3),
+        Err(SurfaceError::DegreeTooHigh { .. })
+    ));
+    let holey =
+        ControlNet::from_options(2, 2, &[Some([0.0, 0.0]), None, Some([0.0, 20.0]), Some([10.0, 20.0])]).unwrap();
     let surface = BSplineSurface::new(holey, 1, 1).unwrap();
     let (point, valid) = surface.evaluate_checked(0.5, 0.5).unwrap();
     assert!(!valid && point.iter().all(|v| v.is_finite()));
-    assert!(matches!(surface.evaluate_checked(1.5, 0.0), Err(SurfaceError::OutOfDomain { .. })));
+    assert!(matches!(
+        surface.evaluate_checked(1.5, 0.0),
+        Err(SurfaceError::OutOfDomain { .. })
+    ));
 }
 
 #[test]
 fn estimator_with_a_surface_degree_the_lattice_cannot_carry_is_a_typed_error() {
     let mut config = SensorConfig::default();
-    config.surface = SurfaceConfig { degree_u: 20, degree_v: 1, ..config.surface };
+    config.surface = SurfaceConfig {
+        degree_u: 20,
+        degree_v: 1,
+        ..config.surface
+    };
     match Estimator::new(config, Mode::Inverse, reference()) {
         Ok(_) => panic!("degree 20 on 12 corner rows was accepted"),
-        Err(error) => assert!(matches!(error, EstimateError::Surface(_) | EstimateError::Config(_)), "{error}"),
+        Err(error) => assert!(
+            matches!(error, EstimateError::Surface(_) | EstimateError::Config(_)),
+            "{error}"
+        ),
     }
 }
 
@@ -461,7 +681,15 @@ fn every_mode_reads_the_same_press_with_the_same_contact_decision() {
     let reading = fast.estimate(&frame).unwrap();
     assert_sound(&reading, "fast mode");
     assert!(reading.is_contact());
-    assert!(distance(reading.contact_mm().unwrap(), truth) <= 1.5, "{:?}", reading.contact_mm());
-    assert_eq!(reading.touch.as_ref().unwrap().force_vector_n, None, "the fast mode has no force vector");
+    assert!(
+        distance(reading.contact_mm().unwrap(), truth) <= 1.5,
+        "{:?}",
+        reading.contact_mm()
+    );
+    assert_eq!(
+        reading.touch.as_ref().unwrap().force_vector_n,
+        None,
+        "the fast mode has no force vector"
+    );
     assert!(reading.pressure_map.is_none());
 }

@@ -11,8 +11,12 @@ use nusense_estimator::{EstimateError, SensorConfig};
 use nusense_geometry::CornerIndex;
 
 fn load(name: &str) -> RgbImage {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real").join(name);
-    image::open(path).expect("the real frames ship in host/estimator/tests/data/real").to_rgb8()
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/real")
+        .join(name);
+    image::open(path)
+        .expect("the real frames ship in host/estimator/tests/data/real")
+        .to_rgb8()
 }
 
 fn frames() -> &'static (RgbImage, RgbImage) {
@@ -46,15 +50,35 @@ fn finds_about_the_published_counts() {
             d.corners_found,
             d.points.len()
         );
-        assert!((68..=80).contains(&d.squares_found), "{name}: {} squares", d.squares_found);
-        assert!((105..=128).contains(&d.corners_found), "{name}: {} corners", d.corners_found);
-        assert!(d.squares_found < 96 && d.corners_found < 165, "{name}: the published method is not complete");
+        assert!(
+            (68..=80).contains(&d.squares_found),
+            "{name}: {} squares",
+            d.squares_found
+        );
+        assert!(
+            (105..=128).contains(&d.corners_found),
+            "{name}: {} corners",
+            d.corners_found
+        );
+        assert!(
+            d.squares_found < 96 && d.corners_found < 165,
+            "{name}: the published method is not complete"
+        );
         // Every quad is a yellow square and gets an index; nearly every distinct midpoint becomes an indexed
         // point (a pair joining two quads that are not diagonal neighbours is dropped, not guessed).
         assert_eq!(d.squares_indexed(), d.squares_found, "{name}");
         assert!(d.points.len() <= d.corners_found, "{name}");
-        assert!(d.points.len() * 100 >= d.corners_found * 95, "{name}: {} of {}", d.points.len(), d.corners_found);
-        assert!(d.implausible_pairs <= d.corners_found / 20, "{name}: {} implausible pairs", d.implausible_pairs);
+        assert!(
+            d.points.len() * 100 >= d.corners_found * 95,
+            "{name}: {} of {}",
+            d.points.len(),
+            d.corners_found
+        );
+        assert!(
+            d.implausible_pairs <= d.corners_found / 20,
+            "{name}: {} implausible pairs",
+            d.implausible_pairs
+        );
     }
 }
 
@@ -64,13 +88,25 @@ fn indices_form_a_lattice_in_both_frames() {
     for d in [reference, touch] {
         let points = by_index(d);
         for (index, p) in &points {
-            if let Some(right) = points.get(&CornerIndex { row: index.row, col: index.col + 1 }) {
+            if let Some(right) = points.get(&CornerIndex {
+                row: index.row,
+                col: index.col + 1,
+            }) {
                 let dx = right[0] - p[0];
-                assert!((40.0..140.0).contains(&dx) && (right[1] - p[1]).abs() < 30.0, "{index:?}: {p:?} -> {right:?}");
+                assert!(
+                    (40.0..140.0).contains(&dx) && (right[1] - p[1]).abs() < 30.0,
+                    "{index:?}: {p:?} -> {right:?}"
+                );
             }
-            if let Some(below) = points.get(&CornerIndex { row: index.row + 1, col: index.col }) {
+            if let Some(below) = points.get(&CornerIndex {
+                row: index.row + 1,
+                col: index.col,
+            }) {
                 let dy = below[1] - p[1];
-                assert!((40.0..140.0).contains(&dy) && (below[0] - p[0]).abs() < 30.0, "{index:?}: {p:?} -> {below:?}");
+                assert!(
+                    (40.0..140.0).contains(&dy) && (below[0] - p[0]).abs() < 30.0,
+                    "{index:?}: {p:?} -> {below:?}"
+                );
             }
         }
     }
@@ -91,7 +127,10 @@ fn the_same_index_is_the_same_corner_in_both_frames() {
         largest = largest.max(d);
         assert!(d < 30.0, "{k:?} moved {d:.1} px: {p:?} -> {q:?}");
     }
-    assert!(largest > 2.0, "the touch frame shows no displacement at all ({largest:.2} px)");
+    assert!(
+        largest > 2.0,
+        "the touch frame shows no displacement at all ({largest:.2} px)"
+    );
 }
 
 #[test]
@@ -112,7 +151,10 @@ fn half_size_frames_scale_the_method() {
     let (reference, _) = frames();
     let small = image::imageops::resize(reference, 1024, 768, image::imageops::FilterType::Triangle);
     let d = nusense_estimator::paper::detect(&small, &SensorConfig::default()).unwrap();
-    println!("paper mode, reference at 1024 x 768: {} squares, {} corners", d.squares_found, d.corners_found);
+    println!(
+        "paper mode, reference at 1024 x 768: {} squares, {} corners",
+        d.squares_found, d.corners_found
+    );
     assert!(d.squares_found >= 50, "{} squares at half size", d.squares_found);
     // Same indices as at full size for the same corners, at half the coordinates. The published corner is the
     // midpoint of two polygon vertices, precise to a few px only; an index slip would move it by a pitch (~80 px).
@@ -120,7 +162,10 @@ fn half_size_frames_scale_the_method() {
     let mut offsets: Vec<f64> = d
         .points
         .iter()
-        .filter_map(|p| full.get(&p.index).map(|q| (2.0 * p.raw_px[0] - q[0]).hypot(2.0 * p.raw_px[1] - q[1])))
+        .filter_map(|p| {
+            full.get(&p.index)
+                .map(|q| (2.0 * p.raw_px[0] - q[0]).hypot(2.0 * p.raw_px[1] - q[1]))
+        })
         .collect();
     offsets.sort_by(f64::total_cmp);
     println!(
@@ -138,7 +183,10 @@ fn half_size_frames_scale_the_method() {
         Ok(d) => println!("paper mode, reference at 512 x 384: {} squares", d.squares_found),
         Err(e) => {
             println!("paper mode, reference at 512 x 384: {e}");
-            assert!(matches!(e, EstimateError::NoPattern { .. } | EstimateError::TooFewPoints { .. }), "{e}");
+            assert!(
+                matches!(e, EstimateError::NoPattern { .. } | EstimateError::TooFewPoints { .. }),
+                "{e}"
+            );
         }
     }
 }
@@ -158,15 +206,29 @@ fn bad_frames_give_typed_errors_not_panics() {
         state ^= state << 13;
         state ^= state >> 7;
         state ^= state << 17;
-        image::Rgb([(state & 0xff) as u8, (state >> 8 & 0xff) as u8, (state >> 16 & 0xff) as u8])
+        image::Rgb([
+            (state & 0xff) as u8,
+            (state >> 8 & 0xff) as u8,
+            (state >> 16 & 0xff) as u8,
+        ])
     });
     assert!(detector.detect(&noise).is_err());
     assert!(matches!(
         detector.detect(&RgbImage::new(w + 2, h)),
-        Err(EstimateError::FrameSizeMismatch { expected_width: 256, found_width: 258, .. })
+        Err(EstimateError::FrameSizeMismatch {
+            expected_width: 256,
+            found_width: 258,
+            ..
+        })
     ));
-    assert!(matches!(PaperDetector::new(&config, 8, 8), Err(EstimateError::FrameTooSmall { .. })));
-    assert!(matches!(PaperDetector::new(&config, 0, 0), Err(EstimateError::FrameTooSmall { .. })));
+    assert!(matches!(
+        PaperDetector::new(&config, 8, 8),
+        Err(EstimateError::FrameTooSmall { .. })
+    ));
+    assert!(matches!(
+        PaperDetector::new(&config, 0, 0),
+        Err(EstimateError::FrameTooSmall { .. })
+    ));
 }
 
 #[test]
@@ -195,9 +257,18 @@ fn paper_mode_estimator_reads_the_touch_with_masked_gaps() {
     );
     assert_eq!(reading.counts.points_expected, 165);
     assert!(reading.counts.points_detected < 165 && reading.counts.points_valid <= reading.counts.points_detected);
-    assert!(reading.gamma.samples_used < reading.gamma.samples_total, "samples resting on missing corners must be left out");
+    assert!(
+        reading.gamma.samples_used < reading.gamma.samples_total,
+        "samples resting on missing corners must be left out"
+    );
     assert!(!rest.is_contact() && rest.gamma.gamma.abs() < 1e-9);
     assert!(reading.is_contact() && reading.gamma.gamma > 0.0);
-    let c = reading.strongest().map(|c| c.centre_undistorted_px).expect("a contact has a location");
-    assert!((c[0] - 1000.0).abs() <= 40.0 && (c[1] - 750.0).abs() <= 40.0, "contact at {c:?}");
+    let c = reading
+        .strongest()
+        .map(|c| c.centre_undistorted_px)
+        .expect("a contact has a location");
+    assert!(
+        (c[0] - 1000.0).abs() <= 40.0 && (c[1] - 750.0).abs() <= 40.0,
+        "contact at {c:?}"
+    );
 }

@@ -11,7 +11,9 @@ fn real_dir() -> PathBuf {
 }
 
 fn load(name: &str) -> RgbImage {
-    image::open(real_dir().join(name)).expect("the real frames ship in host/estimator/tests/data/real").to_rgb8()
+    image::open(real_dir().join(name))
+        .expect("the real frames ship in host/estimator/tests/data/real")
+        .to_rgb8()
 }
 
 fn reference() -> &'static RgbImage {
@@ -34,7 +36,10 @@ fn fast_mode_finds_every_square_and_corner_on_both_frames() {
     assert_eq!(reading.counts.squares_detected, 96);
     assert_eq!(reading.counts.points_detected, 165);
     assert_eq!(reading.counts.points_expected, 165);
-    assert_eq!(reading.counts.points_valid, 165, "no corner of the real touch frame is implausible");
+    assert_eq!(
+        reading.counts.points_valid, 165,
+        "no corner of the real touch frame is implausible"
+    );
 }
 
 #[test]
@@ -43,8 +48,16 @@ fn fast_mode_finds_the_contact_near_the_published_centre() {
     let reading = estimator.estimate(touch()).unwrap();
     assert!(reading.is_contact(), "{reading:?}");
     let [x, y] = reading.strongest().unwrap().centre_undistorted_px;
-    assert!((x - 1000.0).abs() <= 40.0 && (y - 750.0).abs() <= 40.0, "contact at ({x}, {y}) undistorted px");
-    assert!(reading.gamma.gamma > 0.0 && reading.force_n() > 0.0, "{} {}", reading.gamma.gamma, reading.force_n());
+    assert!(
+        (x - 1000.0).abs() <= 40.0 && (y - 750.0).abs() <= 40.0,
+        "contact at ({x}, {y}) undistorted px"
+    );
+    assert!(
+        reading.gamma.gamma > 0.0 && reading.force_n() > 0.0,
+        "{} {}",
+        reading.gamma.gamma,
+        reading.force_n()
+    );
     // The contact in mm lies on the pad, near its centre (the press was "near the centre of the pad").
     let [mx, my] = reading.contact_mm().unwrap();
     assert!(mx.abs() < 10.0 && my.abs() < 10.0, "({mx}, {my}) mm");
@@ -71,10 +84,17 @@ fn paper_mode_finds_the_same_contact_with_the_published_pipeline() {
     let rest = estimator.reference_lattice().corners_found();
     let reading = estimator.estimate(touch()).unwrap();
     // The published method misses squares and corners on this pair; whatever it misses is masked and counted.
-    assert!(rest <= 165 && reading.counts.points_detected <= 165 && reading.counts.points_valid <= reading.counts.points_detected);
+    assert!(
+        rest <= 165
+            && reading.counts.points_detected <= 165
+            && reading.counts.points_valid <= reading.counts.points_detected
+    );
     assert!(reading.gamma.samples_used <= reading.gamma.samples_total);
     assert!(reading.is_contact());
     let [x, y] = reading.strongest().unwrap().centre_undistorted_px;
-    assert!((x - 1000.0).abs() <= 40.0 && (y - 750.0).abs() <= 40.0, "contact at ({x}, {y}) undistorted px");
+    assert!(
+        (x - 1000.0).abs() <= 40.0 && (y - 750.0).abs() <= 40.0,
+        "contact at ({x}, {y}) undistorted px"
+    );
     assert!(reading.gamma.gamma > 0.0);
 }

@@ -10,16 +10,28 @@ use nusense_estimator::{EstimateError, Estimator, Mode, SensorConfig};
 
 fn load(name: &str) -> RgbImage {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real");
-    image::open(dir.join(name)).expect("the real frames ship in host/estimator/tests/data/real").to_rgb8()
+    image::open(dir.join(name))
+        .expect("the real frames ship in host/estimator/tests/data/real")
+        .to_rgb8()
 }
 
 fn scaled(image: &RgbImage, divisor: u32) -> RgbImage {
-    imageops::resize(image, image.width() / divisor, image.height() / divisor, imageops::FilterType::Triangle)
+    imageops::resize(
+        image,
+        image.width() / divisor,
+        image.height() / divisor,
+        imageops::FilterType::Triangle,
+    )
 }
 
 fn half_pair() -> &'static (RgbImage, RgbImage) {
     static PAIR: OnceLock<(RgbImage, RgbImage)> = OnceLock::new();
-    PAIR.get_or_init(|| (scaled(&load("reference_fisheye.jpg"), 2), scaled(&load("touch_fisheye.jpg"), 2)))
+    PAIR.get_or_init(|| {
+        (
+            scaled(&load("reference_fisheye.jpg"), 2),
+            scaled(&load("touch_fisheye.jpg"), 2),
+        )
+    })
 }
 
 /// A small deterministic generator (xorshift), so noise is the same on every run.
@@ -78,7 +90,9 @@ fn moved(image: &RgbImage, dx: f64, dy: f64, degrees: f64) -> RgbImage {
 
 fn jpeg(image: &RgbImage, quality: u8) -> RgbImage {
     let mut bytes = Vec::new();
-    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, quality).encode_image(image).unwrap();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, quality)
+        .encode_image(image)
+        .unwrap();
     image::load_from_memory(&bytes).unwrap().to_rgb8()
 }
 
@@ -86,7 +100,10 @@ fn jpeg(image: &RgbImage, quality: u8) -> RgbImage {
 fn assert_contact_in_box(undistorted: [f64; 2], width: u32) {
     let s = f64::from(width) / 2048.0;
     let [x, y] = undistorted;
-    assert!((x / s - 1000.0).abs() <= 40.0 && (y / s - 750.0).abs() <= 40.0, "contact at ({x}, {y}) in a {width}-px frame");
+    assert!(
+        (x / s - 1000.0).abs() <= 40.0 && (y / s - 750.0).abs() <= 40.0,
+        "contact at ({x}, {y}) in a {width}-px frame"
+    );
 }
 
 #[test]
@@ -109,7 +126,12 @@ fn works_at_half_and_quarter_resolution_with_the_same_gamma_scale() {
         assert!(reading.is_contact(), "1/{divisor}");
         assert_contact_in_box(reading.strongest().unwrap().centre_undistorted_px, touch.width());
         // gamma is measured in paper px, so it does not scale with the resolution.
-        assert!((reading.gamma.gamma / full.gamma.gamma - 1.0).abs() < 0.15, "1/{divisor}: gamma {} vs {}", reading.gamma.gamma, full.gamma.gamma);
+        assert!(
+            (reading.gamma.gamma / full.gamma.gamma - 1.0).abs() < 0.15,
+            "1/{divisor}: gamma {} vs {}",
+            reading.gamma.gamma,
+            full.gamma.gamma
+        );
     }
 }
 
@@ -119,7 +141,11 @@ fn noise_on_the_rest_frame_is_not_a_contact() {
     let mut estimator = Estimator::new(SensorConfig::default(), Mode::Inverse, reference).unwrap();
     for seed in 1..=3 {
         let reading = estimator.estimate(&with_noise(reference, 8.0, seed)).unwrap();
-        assert!(!reading.is_contact(), "seed {seed}: score {} mm", reading.contact_score_mm);
+        assert!(
+            !reading.is_contact(),
+            "seed {seed}: score {} mm",
+            reading.contact_score_mm
+        );
         assert_eq!(reading.counts.points_detected, 165);
         assert!(reading.gamma.gamma < 0.1, "gamma {}", reading.gamma.gamma);
     }
@@ -135,19 +161,34 @@ fn a_camera_shift_or_rotation_is_measured_and_removed() {
         let case = format!("shift ({dx}, {dy}) px, rotation {degrees} deg");
         let reading = estimator.estimate(&moved(reference, dx, dy, degrees)).unwrap();
         assert!(!reading.is_contact(), "{case}: {:?}", reading.test);
-        assert!(reading.counts.points_detected >= 160, "{case}: {}", reading.counts.points_detected);
+        assert!(
+            reading.counts.points_detected >= 160,
+            "{case}: {}",
+            reading.counts.points_detected
+        );
         let motion = reading.camera_motion;
         assert!((motion.rotation_deg - degrees).abs() <= 0.2, "{case}: {motion:?}");
         // The image turns about its centre, so the pad centre's shift is the given one plus the turn's.
         if degrees == 0.0 {
-            assert!((motion.shift_px[0] - dx).abs() <= 0.5 && (motion.shift_px[1] - dy).abs() <= 0.5, "{case}: {motion:?}");
+            assert!(
+                (motion.shift_px[0] - dx).abs() <= 0.5 && (motion.shift_px[1] - dy).abs() <= 0.5,
+                "{case}: {motion:?}"
+            );
         }
         // The touch through the same moved camera: the same place on the pad, the same force.
         let reading = estimator.estimate(&moved(touch, dx, dy, degrees)).unwrap();
         assert!(reading.is_contact(), "{case}");
         let at = reading.contact_mm().unwrap();
-        assert!((at[0] - still_at[0]).hypot(at[1] - still_at[1]) <= 0.5, "{case}: {at:?} vs {still_at:?}");
-        assert!((reading.force_n() / still.force_n() - 1.0).abs() <= 0.1, "{case}: {} vs {} N", reading.force_n(), still.force_n());
+        assert!(
+            (at[0] - still_at[0]).hypot(at[1] - still_at[1]) <= 0.5,
+            "{case}: {at:?} vs {still_at:?}"
+        );
+        assert!(
+            (reading.force_n() / still.force_n() - 1.0).abs() <= 0.1,
+            "{case}: {} vs {} N",
+            reading.force_n(),
+            still.force_n()
+        );
     }
 }
 
@@ -175,7 +216,11 @@ fn a_smeared_part_of_the_pad_is_masked_and_counted() {
     // A grey smear over the pad's top-left (about 3 x 3 cells), away from the contact.
     let mut smeared = touch.clone();
     let lattice = estimator.reference_lattice();
-    let anchor = lattice.corner(nusense_geometry::CornerIndex { row: 1, col: 1 }).unwrap().raw_px.unwrap();
+    let anchor = lattice
+        .corner(nusense_geometry::CornerIndex { row: 1, col: 1 })
+        .unwrap()
+        .raw_px
+        .unwrap();
     for y in 0..smeared.height() {
         for x in 0..smeared.width() {
             if (f64::from(x) - anchor[0]).hypot(f64::from(y) - anchor[1]) < 60.0 {
@@ -184,9 +229,20 @@ fn a_smeared_part_of_the_pad_is_masked_and_counted() {
         }
     }
     let reading = estimator.estimate(&smeared).unwrap();
-    assert!(reading.counts.squares_detected < 96 && reading.counts.squares_detected > 80, "{}", reading.counts.squares_detected);
-    assert!(reading.counts.points_detected < 165, "{}", reading.counts.points_detected);
-    assert_eq!(reading.shear_field.iter().filter(|s| s.valid).count(), reading.counts.points_valid);
+    assert!(
+        reading.counts.squares_detected < 96 && reading.counts.squares_detected > 80,
+        "{}",
+        reading.counts.squares_detected
+    );
+    assert!(
+        reading.counts.points_detected < 165,
+        "{}",
+        reading.counts.points_detected
+    );
+    assert_eq!(
+        reading.shear_field.iter().filter(|s| s.valid).count(),
+        reading.counts.points_valid
+    );
     assert!(reading.gamma.samples_used < reading.gamma.samples_total);
     assert!(reading.is_contact());
     assert_contact_in_box(reading.strongest().unwrap().centre_undistorted_px, touch.width());
@@ -198,8 +254,14 @@ fn a_smeared_part_of_the_pad_is_masked_and_counted() {
 fn a_jump_of_more_than_half_a_cell_is_recovered_by_a_full_search() {
     let (reference, touch) = half_pair();
     let mut estimator = Estimator::new(SensorConfig::default(), Mode::Fast, reference).unwrap();
-    let cell = estimator.reference_lattice().square(nusense_geometry::SquareIndex { row: 6, col: 8 }).unwrap()[0]
-        - estimator.reference_lattice().square(nusense_geometry::SquareIndex { row: 6, col: 6 }).unwrap()[0];
+    let cell = estimator
+        .reference_lattice()
+        .square(nusense_geometry::SquareIndex { row: 6, col: 8 })
+        .unwrap()[0]
+        - estimator
+            .reference_lattice()
+            .square(nusense_geometry::SquareIndex { row: 6, col: 6 })
+            .unwrap()[0];
     // The camera jumps by 0.7 cell to the right: windows centred on the old squares would lock onto the wrong ones.
     let jumped = moved(touch, 0.35 * cell, 0.0, 0.0);
     let reading = estimator.estimate(&jumped).unwrap();
@@ -213,7 +275,10 @@ fn frames_without_the_pattern_are_typed_errors() {
     let (reference, _) = half_pair();
     let mut estimator = Estimator::new(SensorConfig::default(), Mode::Fast, reference).unwrap();
     let grey = RgbImage::from_pixel(reference.width(), reference.height(), Rgb([120, 120, 120]));
-    assert!(matches!(estimator.estimate(&grey), Err(EstimateError::NoPattern { .. } | EstimateError::TooFewPoints { .. })));
+    assert!(matches!(
+        estimator.estimate(&grey),
+        Err(EstimateError::NoPattern { .. } | EstimateError::TooFewPoints { .. })
+    ));
     assert!(matches!(
         Estimator::new(SensorConfig::default(), Mode::Fast, &grey),
         Err(EstimateError::NoPattern { .. } | EstimateError::TooFewPoints { .. })

@@ -4,7 +4,14 @@ use nusense_estimator::surface::{BSplineSurface, ControlNet, SurfaceError};
 
 fn net(rows: usize, cols: usize) -> Vec<[f64; 2]> {
     // Irregular values, so that no symmetry hides an indexing mistake.
-    (0..rows * cols).map(|i| [(i as f64 * 7.3).sin() * 50.0 + i as f64, (i as f64 * 3.1).cos() * 20.0 - i as f64]).collect()
+    (0..rows * cols)
+        .map(|i| {
+            [
+                (i as f64 * 7.3).sin() * 50.0 + i as f64,
+                (i as f64 * 3.1).cos() * 20.0 - i as f64,
+            ]
+        })
+        .collect()
 }
 
 #[test]
@@ -29,7 +36,10 @@ fn degree_one_reproduces_bilinear_interpolation() {
                 })
                 .collect();
             let got = surface.evaluate(u, v);
-            assert!((got[0] - expected[0]).abs() < 1e-9 && (got[1] - expected[1]).abs() < 1e-9, "({u}, {v}): {got:?} vs {expected:?}");
+            assert!(
+                (got[0] - expected[0]).abs() < 1e-9 && (got[1] - expected[1]).abs() < 1e-9,
+                "({u}, {v}): {got:?} vs {expected:?}"
+            );
         }
     }
     // At the nodes the surface passes through the control points.
@@ -47,9 +57,13 @@ fn higher_degrees_keep_a_constant_net() {
     // The basis is a partition of unity at every degree, so a constant net gives that constant everywhere.
     // (Values of higher degrees against another implementation are the golden-data tests.)
     for (p, q) in [(2, 2), (3, 3), (2, 5), (10, 14)] {
-        let surface = BSplineSurface::new(ControlNet::from_points(11, 15, vec![[3.5, -2.0]; 165]).unwrap(), p, q).unwrap();
+        let surface =
+            BSplineSurface::new(ControlNet::from_points(11, 15, vec![[3.5, -2.0]; 165]).unwrap(), p, q).unwrap();
         let grid = surface.sample_grid(0.05).unwrap();
-        assert!(grid.points.iter().all(|s| (s[0] - 3.5).abs() < 1e-9 && (s[1] + 2.0).abs() < 1e-9));
+        assert!(grid
+            .points
+            .iter()
+            .all(|s| (s[0] - 3.5).abs() < 1e-9 && (s[1] + 2.0).abs() < 1e-9));
         assert_eq!(grid.valid_count(), grid.points.len());
     }
 }
@@ -75,15 +89,33 @@ fn samples_rest_only_on_valid_points() {
 
 #[test]
 fn bad_nets_and_degrees_are_typed_errors() {
-    assert!(matches!(ControlNet::from_points(0, 3, vec![]), Err(SurfaceError::EmptyNet { .. })));
-    assert!(matches!(ControlNet::from_points(2, 3, vec![[0.0; 2]; 5]), Err(SurfaceError::SizeMismatch { .. })));
-    assert!(matches!(ControlNet::from_points(2, 2, vec![[f64::NAN, 0.0]; 4]), Err(SurfaceError::NotFinite { .. })));
+    assert!(matches!(
+        ControlNet::from_points(0, 3, vec![]),
+        Err(SurfaceError::EmptyNet { .. })
+    ));
+    assert!(matches!(
+        ControlNet::from_points(2, 3, vec![[0.0; 2]; 5]),
+        Err(SurfaceError::SizeMismatch { .. })
+    ));
+    assert!(matches!(
+        ControlNet::from_points(2, 2, vec![[f64::NAN, 0.0]; 4]),
+        Err(SurfaceError::NotFinite { .. })
+    ));
     let ok = || ControlNet::from_points(3, 4, vec![[0.0; 2]; 12]).unwrap();
-    assert!(matches!(BSplineSurface::new(ok(), 3, 1), Err(SurfaceError::DegreeTooHigh { .. })));
-    assert!(matches!(BSplineSurface::new(ok(), 0, 1), Err(SurfaceError::DegreeZero { .. })));
+    assert!(matches!(
+        BSplineSurface::new(ok(), 3, 1),
+        Err(SurfaceError::DegreeTooHigh { .. })
+    ));
+    assert!(matches!(
+        BSplineSurface::new(ok(), 0, 1),
+        Err(SurfaceError::DegreeZero { .. })
+    ));
     assert!(BSplineSurface::new(ok(), 2, 3).is_ok());
     let s = BSplineSurface::new(ok(), 1, 1).unwrap();
-    assert!(matches!(s.evaluate_checked(1.5, 0.0), Err(SurfaceError::OutOfDomain { .. })));
+    assert!(matches!(
+        s.evaluate_checked(1.5, 0.0),
+        Err(SurfaceError::OutOfDomain { .. })
+    ));
     assert!(matches!(s.sample_grid(0.0), Err(SurfaceError::BadStep(_))));
     assert!(s.evaluate(f64::NAN, 2.0).iter().all(|v| v.is_finite()));
 }

@@ -14,7 +14,11 @@ fn golden() -> Value {
 }
 
 fn numbers(v: &Value) -> Vec<f64> {
-    v.as_array().expect("array").iter().map(|x| x.as_f64().expect("number")).collect()
+    v.as_array()
+        .expect("array")
+        .iter()
+        .map(|x| x.as_f64().expect("number"))
+        .collect()
 }
 
 fn surface_of(case: &Value) -> BSplineSurface {
@@ -30,8 +34,12 @@ fn surface_of(case: &Value) -> BSplineSurface {
         })
         .collect();
     let net = ControlNet::from_points(rows, cols, points).unwrap();
-    BSplineSurface::new(net, case["degree_u"].as_u64().unwrap() as usize, case["degree_v"].as_u64().unwrap() as usize)
-        .unwrap()
+    BSplineSurface::new(
+        net,
+        case["degree_u"].as_u64().unwrap() as usize,
+        case["degree_v"].as_u64().unwrap() as usize,
+    )
+    .unwrap()
 }
 
 #[test]
@@ -100,7 +108,10 @@ fn degree_one_is_bilinear_interpolation() {
     let points: Vec<[f64; 2]> = (0..rows * cols)
         .map(|i| {
             let (r, c) = ((i / cols) as f64, (i % cols) as f64);
-            [80.0 * c + 7.0 * (1.3 * r + 0.7 * c).sin(), 80.0 * r + 5.0 * (0.9 * c - 0.4 * r).cos() + 0.3 * c * c]
+            [
+                80.0 * c + 7.0 * (1.3 * r + 0.7 * c).sin(),
+                80.0 * r + 5.0 * (0.9 * c - 0.4 * r).cos() + 0.3 * c * c,
+            ]
         })
         .collect();
     let surface = BSplineSurface::new(ControlNet::from_points(rows, cols, points.clone()).unwrap(), 1, 1).unwrap();
@@ -111,7 +122,10 @@ fn degree_one_is_bilinear_interpolation() {
             let p = surface.evaluate(u, v);
             let q = bilinear(&points, rows, cols, u, v);
             // Same interpolation, different arithmetic: agreement to rounding error of values ~1000.
-            assert!((p[0] - q[0]).abs() < 1e-10 && (p[1] - q[1]).abs() < 1e-10, "S({u}, {v}) = {p:?}, bilinear {q:?}");
+            assert!(
+                (p[0] - q[0]).abs() < 1e-10 && (p[1] - q[1]).abs() < 1e-10,
+                "S({u}, {v}) = {p:?}, bilinear {q:?}"
+            );
         }
     }
     // At the nodes the surface passes through the control points.
@@ -119,7 +133,10 @@ fn degree_one_is_bilinear_interpolation() {
         for c in 0..cols {
             let p = surface.evaluate(r as f64 / (rows - 1) as f64, c as f64 / (cols - 1) as f64);
             let q = points[r * cols + c];
-            assert!((p[0] - q[0]).abs() < 1e-10 && (p[1] - q[1]).abs() < 1e-10, "node ({r}, {c}): {p:?} vs {q:?}");
+            assert!(
+                (p[0] - q[0]).abs() < 1e-10 && (p[1] - q[1]).abs() < 1e-10,
+                "node ({r}, {c}): {p:?} vs {q:?}"
+            );
         }
     }
 }
@@ -127,12 +144,23 @@ fn degree_one_is_bilinear_interpolation() {
 #[test]
 fn a_missing_control_point_only_marks_the_samples_it_supports() {
     let data = golden();
-    let case = data["cases"].as_array().unwrap().iter().find(|c| c["degree_u"] == 2 && c["degree_v"] == 2).unwrap();
+    let case = data["cases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["degree_u"] == 2 && c["degree_v"] == 2)
+        .unwrap();
     let full = surface_of(case);
     let (rows, cols) = (full.net().rows(), full.net().cols());
     let missing = (2, 3);
     let points: Vec<Option<[f64; 2]>> = (0..rows * cols)
-        .map(|i| if (i / cols, i % cols) == missing { None } else { full.net().point(i / cols, i % cols) })
+        .map(|i| {
+            if (i / cols, i % cols) == missing {
+                None
+            } else {
+                full.net().point(i / cols, i % cols)
+            }
+        })
         .collect();
     let masked = BSplineSurface::new(ControlNet::from_options(rows, cols, &points).unwrap(), 2, 2).unwrap();
     let (ku, kv) = (full.knots_u().knots().to_vec(), full.knots_v().knots().to_vec());
@@ -147,7 +175,11 @@ fn a_missing_control_point_only_marks_the_samples_it_supports() {
             let supported = inside(u, &ku, missing.0) && inside(v, &kv, missing.1);
             assert_eq!(!valid, supported, "({u}, {v})");
             if valid {
-                assert_eq!(p, full.evaluate(u, v), "a valid sample must not depend on the missing point");
+                assert_eq!(
+                    p,
+                    full.evaluate(u, v),
+                    "a valid sample must not depend on the missing point"
+                );
                 clean += 1;
             } else {
                 flagged += 1;

@@ -41,14 +41,30 @@ impl FisheyeIntrinsics {
     pub fn paper(width: u32, height: u32) -> Self {
         let w = f64::from(width);
         let h = f64::from(height);
-        Self { width, height, fx: w, fy: w, cx: w / 2.0, cy: h / 2.0, distortion: [-0.28, 0.07, 0.0, 0.0] }
+        Self {
+            width,
+            height,
+            fx: w,
+            fy: w,
+            cx: w / 2.0,
+            cy: h / 2.0,
+            distortion: [-0.28, 0.07, 0.0, 0.0],
+        }
     }
 
     /// The same lens on a frame of another size (a webcam's lower modes scale the full sensor).
     pub fn scaled_to(&self, width: u32, height: u32) -> Self {
         let sx = f64::from(width) / f64::from(self.width);
         let sy = f64::from(height) / f64::from(self.height);
-        Self { width, height, fx: self.fx * sx, fy: self.fy * sy, cx: self.cx * sx, cy: self.cy * sy, ..*self }
+        Self {
+            width,
+            height,
+            fx: self.fx * sx,
+            fy: self.fy * sy,
+            cx: self.cx * sx,
+            cy: self.cy * sy,
+            ..*self
+        }
     }
 }
 
@@ -83,7 +99,14 @@ const NEWTON_TOLERANCE: f64 = 1e-12;
 
 impl FisheyeCamera {
     pub fn new(intrinsics: FisheyeIntrinsics) -> Result<Self, CameraError> {
-        let FisheyeIntrinsics { width, height, fx, fy, distortion, .. } = intrinsics;
+        let FisheyeIntrinsics {
+            width,
+            height,
+            fx,
+            fy,
+            distortion,
+            ..
+        } = intrinsics;
         if width == 0 || height == 0 {
             return Err(CameraError::EmptyFrame { width, height });
         }
@@ -95,7 +118,15 @@ impl FisheyeCamera {
         if distortion.iter().any(|k| !k.is_finite()) {
             return Err(CameraError::BadDistortion(distortion));
         }
-        let mut camera = Self { intrinsics, rectified: PinholeCamera { fx, fy, cx: intrinsics.cx, cy: intrinsics.cy } };
+        let mut camera = Self {
+            intrinsics,
+            rectified: PinholeCamera {
+                fx,
+                fy,
+                cx: intrinsics.cx,
+                cy: intrinsics.cy,
+            },
+        };
         // Undistortion inverts theta_d(theta) by Newton's method, which is only meaningful where theta_d rises.
         let corner = camera.pixel_to_distorted_normalized([0.0, 0.0]);
         let theta_d_max = (corner[0].hypot(corner[1])).max({
@@ -240,7 +271,9 @@ impl FisheyeCamera {
         let undistorted: Vec<Point2> = edge_midpoints
             .iter()
             .map(|&p| {
-                let n = self.raw_to_normalized(p).unwrap_or(self.pixel_to_distorted_normalized(p));
+                let n = self
+                    .raw_to_normalized(p)
+                    .unwrap_or(self.pixel_to_distorted_normalized(p));
                 [n[0], n[1] * aspect]
             })
             .collect();
@@ -296,10 +329,19 @@ mod tests {
         let edges = [[1024.0, 0.0], [2048.0, 768.0], [1024.0, 1536.0], [0.0, 768.0]];
         let mapped: Vec<Point2> = edges.iter().map(|&p| cam.undistort_px(p).unwrap()).collect();
         for p in &mapped {
-            assert!(p[0] >= -1e-6 && p[0] <= 2048.0 + 1e-6 && p[1] >= -1e-6 && p[1] <= 1536.0 + 1e-6, "{p:?}");
+            assert!(
+                p[0] >= -1e-6 && p[0] <= 2048.0 + 1e-6 && p[1] >= -1e-6 && p[1] <= 1536.0 + 1e-6,
+                "{p:?}"
+            );
         }
-        let on_edge = mapped.iter().filter(|p| p[0].abs() < 1e-6 || (p[0] - 2048.0).abs() < 1e-6).count()
-            + mapped.iter().filter(|p| p[1].abs() < 1e-6 || (p[1] - 1536.0).abs() < 1e-6).count();
+        let on_edge = mapped
+            .iter()
+            .filter(|p| p[0].abs() < 1e-6 || (p[0] - 2048.0).abs() < 1e-6)
+            .count()
+            + mapped
+                .iter()
+                .filter(|p| p[1].abs() < 1e-6 || (p[1] - 1536.0).abs() < 1e-6)
+                .count();
         assert!(on_edge >= 2, "{mapped:?}");
         // Barrel distortion: undistortion pushes points outward, so the rectified focal length is below fx.
         assert!(cam.rectified().fx < 2048.0);
@@ -319,10 +361,17 @@ mod tests {
     fn rejects_folding_distortion() {
         let mut k = FisheyeIntrinsics::paper(640, 480);
         k.distortion = [-2.0, 0.0, 0.0, 0.0];
-        assert!(matches!(FisheyeCamera::new(k), Err(CameraError::NonMonotonicDistortion(_))));
+        assert!(matches!(
+            FisheyeCamera::new(k),
+            Err(CameraError::NonMonotonicDistortion(_))
+        ));
         k.distortion = [f64::NAN, 0.0, 0.0, 0.0];
         assert!(matches!(FisheyeCamera::new(k), Err(CameraError::BadDistortion(_))));
-        assert!(FisheyeCamera::new(FisheyeIntrinsics { width: 0, ..FisheyeIntrinsics::paper(640, 480) }).is_err());
+        assert!(FisheyeCamera::new(FisheyeIntrinsics {
+            width: 0,
+            ..FisheyeIntrinsics::paper(640, 480)
+        })
+        .is_err());
     }
 
     #[test]

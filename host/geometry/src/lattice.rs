@@ -39,7 +39,13 @@ pub struct PadGeometry {
 
 impl Default for PadGeometry {
     fn default() -> Self {
-        Self { rows: 12, cols: 16, width_mm: 53.0, height_mm: 40.0, top_left_yellow: true }
+        Self {
+            rows: 12,
+            cols: 16,
+            width_mm: 53.0,
+            height_mm: 40.0,
+            top_left_yellow: true,
+        }
     }
 }
 

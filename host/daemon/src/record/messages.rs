@@ -57,8 +57,16 @@ pub(crate) fn channel_table() -> Vec<ChannelSpec> {
         typed::<CompressedImage>(FRAME_TOPIC),
         typed::<CameraCalibration>(CALIBRATION_TOPIC),
         typed::<ImageAnnotations>(ANNOTATIONS_TOPIC),
-        json(READING_TOPIC, "nusense.Reading", crate::reading::reading_schema_json().into_bytes()),
-        json(TELEMETRY_TOPIC, "nusense.BoardTelemetry", TELEMETRY_SCHEMA.as_bytes().to_vec()),
+        json(
+            READING_TOPIC,
+            "nusense.Reading",
+            crate::reading::reading_schema_json().into_bytes(),
+        ),
+        json(
+            TELEMETRY_TOPIC,
+            "nusense.BoardTelemetry",
+            TELEMETRY_SCHEMA.as_bytes().to_vec(),
+        ),
     ]
 }
 

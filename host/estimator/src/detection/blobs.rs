@@ -36,7 +36,13 @@ pub fn find_square_blobs(map: &YellownessMap, expected_squares: usize) -> Option
             continue;
         }
         let id = raws.len() as u32;
-        let mut r = Raw { count: 0, sx: 0.0, sy: 0.0, min: [usize::MAX; 2], max: [0; 2] };
+        let mut r = Raw {
+            count: 0,
+            sx: 0.0,
+            sy: 0.0,
+            min: [usize::MAX; 2],
+            max: [0; 2],
+        };
         label[start] = id;
         stack.push(start);
         while let Some(i) = stack.pop() {

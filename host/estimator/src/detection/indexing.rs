@@ -96,7 +96,12 @@ pub fn index_lattice(points: &[Point2]) -> Option<Indexed> {
     while let Some(i) = queue.pop_front() {
         let Some(here) = indices[i] else { continue };
         let (l_dr, l_ur) = local[i];
-        let moves = [(l_dr, 1, 1, true), ([-l_dr[0], -l_dr[1]], -1, -1, true), (l_ur, -1, 1, false), ([-l_ur[0], -l_ur[1]], 1, -1, false)];
+        let moves = [
+            (l_dr, 1, 1, true),
+            ([-l_dr[0], -l_dr[1]], -1, -1, true),
+            (l_ur, -1, 1, false),
+            ([-l_ur[0], -l_ur[1]], 1, -1, false),
+        ];
         for (v, d_row, d_col, along_dr) in moves {
             let predicted = [points[i][0] + v[0], points[i][1] + v[1]];
             let tolerance2 = 0.3f64.powi(2) * (v[0] * v[0] + v[1] * v[1]);
@@ -109,21 +114,32 @@ pub fn index_lattice(points: &[Point2]) -> Option<Indexed> {
             if dist2(points[j], predicted) > tolerance2 {
                 continue;
             }
-            let index = RelativeIndex { row: here.row + d_row, col: here.col + d_col };
+            let index = RelativeIndex {
+                row: here.row + d_row,
+                col: here.col + d_col,
+            };
             match indices[j] {
                 Some(existing) if existing != index => conflicts += 1,
                 Some(_) => {}
                 None => {
                     indices[j] = Some(index);
                     let sign = if d_col > 0 { 1.0 } else { -1.0 };
-                    let measured = [sign * (points[j][0] - points[i][0]), sign * (points[j][1] - points[i][1])];
+                    let measured = [
+                        sign * (points[j][0] - points[i][0]),
+                        sign * (points[j][1] - points[i][1]),
+                    ];
                     local[j] = if along_dr { (measured, l_ur) } else { (l_dr, measured) };
                     queue.push_back(j);
                 }
             }
         }
     }
-    Some(Indexed { indices, down_right, up_right, conflicts })
+    Some(Indexed {
+        indices,
+        down_right,
+        up_right,
+        conflicts,
+    })
 }
 
 #[cfg(test)]
@@ -156,7 +172,10 @@ mod tests {
         let first = indexed.indices[0].unwrap();
         for (index, &(row, col)) in indexed.indices.iter().zip(&truth) {
             let index = index.unwrap();
-            assert_eq!((index.row - first.row, index.col - first.col), (row - truth[0].0, col - truth[0].1));
+            assert_eq!(
+                (index.row - first.row, index.col - first.col),
+                (row - truth[0].0, col - truth[0].1)
+            );
         }
     }
 }

@@ -108,7 +108,11 @@ impl FastTracker {
     ) -> Result<(Self, Detection), EstimateError> {
         let (width, height) = frame.dimensions();
         if width < MIN_FRAME_SIDE || height < MIN_FRAME_SIDE {
-            return Err(EstimateError::FrameTooSmall { width, height, min: MIN_FRAME_SIDE });
+            return Err(EstimateError::FrameTooSmall {
+                width,
+                height,
+                min: MIN_FRAME_SIDE,
+            });
         }
         let coarse = full_search(frame, &pad)?;
         let found = coarse.iter().filter(|p| p.is_some()).count();
@@ -119,9 +123,14 @@ impl FastTracker {
         let cells = local_cells(&pad, &coarse)?;
         let mut steps: Vec<f64> = cells.iter().flatten().map(CellFrame::min_step).collect();
         let stride = ((median(&mut steps) / SAMPLES_PER_CELL).round() as usize).max(1);
-        let any_cell = cells.iter().flatten().next().copied().ok_or_else(|| EstimateError::NoPattern {
-            reason: "no square has lattice neighbours".into(),
-        })?;
+        let any_cell = cells
+            .iter()
+            .flatten()
+            .next()
+            .copied()
+            .ok_or_else(|| EstimateError::NoPattern {
+                reason: "no square has lattice neighbours".into(),
+            })?;
         let squares: Vec<SquareModel> = pad
             .yellow_squares()
             .zip(&cells)
@@ -132,8 +141,16 @@ impl FastTracker {
                 cell: cell.unwrap_or(any_cell),
             })
             .collect();
-        let mut tracker =
-            Self { pad, width, height, stride, squares, previous: coarse.clone(), previous_area: Vec::new(), thresholds };
+        let mut tracker = Self {
+            pad,
+            width,
+            height,
+            stride,
+            squares,
+            previous: coarse.clone(),
+            previous_area: Vec::new(),
+            thresholds,
+        };
         let measured = tracker.measure(frame, &coarse, None)?;
         let mut squares_px = Vec::with_capacity(measured.len());
         for (model, m) in tracker.squares.iter_mut().zip(&measured) {
@@ -151,7 +168,14 @@ impl FastTracker {
         tracker.previous = squares_px.clone();
         tracker.previous_area = measured.iter().map(|m| m.map(|(_, a)| a)).collect();
         let corners = corners_from_squares(&pad, &squares_px);
-        Ok((tracker, Detection { squares: squares_px, corners, recovered: false }))
+        Ok((
+            tracker,
+            Detection {
+                squares: squares_px,
+                corners,
+                recovered: false,
+            },
+        ))
     }
 
     /// Makes the last tracked frame the reference: squares found there keep their new position and area (and the
@@ -193,7 +217,11 @@ impl FastTracker {
         self.previous = squares.clone();
         self.previous_area = measured.iter().map(|m| m.map(|(_, a)| a)).collect();
         let corners = corners_from_squares(&self.pad, &squares);
-        Ok(Detection { squares, corners, recovered })
+        Ok(Detection {
+            squares,
+            corners,
+            recovered,
+        })
     }
 
     /// Where each square is expected: where it was last seen, else its reference position moved by the median
@@ -207,7 +235,11 @@ impl FastTracker {
                 dy.push(p[1] - r[1]);
             }
         }
-        let shift = if dx.is_empty() { [0.0, 0.0] } else { [median(&mut dx), median(&mut dy)] };
+        let shift = if dx.is_empty() {
+            [0.0, 0.0]
+        } else {
+            [median(&mut dx), median(&mut dy)]
+        };
         self.squares
             .iter()
             .zip(&self.previous)
@@ -241,7 +273,10 @@ impl FastTracker {
             if r < 0 || c < 0 || r >= rows || c >= cols {
                 return None;
             }
-            let index = SquareIndex { row: r as u16, col: c as u16 };
+            let index = SquareIndex {
+                row: r as u16,
+                col: c as u16,
+            };
             self.squares.binary_search_by_key(&index, |m| m.index).ok()
         };
         let mut best: Option<(f64, usize, i32, i32)> = None;
@@ -252,9 +287,10 @@ impl FastTracker {
                 }
                 let mut distances = Vec::new();
                 for (model, found) in self.squares.iter().zip(coarse) {
-                    let (Some(p), Some(slot)) =
-                        (found, slot_of(i32::from(model.index.row) + dr, i32::from(model.index.col) + dc))
-                    else {
+                    let (Some(p), Some(slot)) = (
+                        found,
+                        slot_of(i32::from(model.index.row) + dr, i32::from(model.index.col) + dc),
+                    ) else {
                         continue;
                     };
                     if let Some(r) = self.squares[slot].reference {
@@ -299,7 +335,11 @@ impl FastTracker {
                 found_height: height,
             });
         }
-        let px = Pixels { raw: frame.as_raw(), width: width as usize, height: height as usize };
+        let px = Pixels {
+            raw: frame.as_raw(),
+            width: width as usize,
+            height: height as usize,
+        };
         let mut histogram = Histogram::default();
         let (mut visited, mut clipped) = (0usize, 0usize);
         for (model, p) in self.squares.iter().zip(predicted) {
@@ -342,7 +382,10 @@ impl FastTracker {
                 _ => None,
             })
             .collect();
-        let retry: Vec<bool> = outcomes.iter().map(|o| matches!(o, Some(SquareOutcome::Lost))).collect();
+        let retry: Vec<bool> = outcomes
+            .iter()
+            .map(|o| matches!(o, Some(SquareOutcome::Lost)))
+            .collect();
         for _ in 0..NEIGHBOUR_ROUNDS {
             let mut progress = false;
             let snapshot = result.clone();
@@ -350,7 +393,9 @@ impl FastTracker {
                 if !retry[slot] || result[slot].is_some() {
                     continue;
                 }
-                let Some(start) = self.neighbour_prediction(slot, predicted, &snapshot) else { continue };
+                let Some(start) = self.neighbour_prediction(slot, predicted, &snapshot) else {
+                    continue;
+                };
                 if let SquareOutcome::Found(at, area) = self.measure_square(&px, model, start, &membership, check_area)
                 {
                     result[slot] = Some((at, area));
@@ -390,7 +435,9 @@ impl FastTracker {
             }
             centre = next;
         }
-        let Some((found, last_step)) = last else { return SquareOutcome::Lost };
+        let Some((found, last_step)) = last else {
+            return SquareOutcome::Lost;
+        };
         // A window still travelling after the last pass was caught between two squares and is slowly leaving one
         // of them: its centroid is a blend of both.
         if last_step > 1.0 {
@@ -466,20 +513,35 @@ fn full_search(frame: &RgbImage, pad: &PadGeometry) -> Result<Vec<Option<Point2>
     let factor = (frame.width() as usize / SEARCH_MAP_WIDTH).max(1);
     let map = YellownessMap::new(frame, factor);
     let Some((blobs, _)) = find_square_blobs(&map, pad.yellow_count()) else {
-        return Err(EstimateError::NoPattern { reason: "no yellow squares in the frame".into() });
+        return Err(EstimateError::NoPattern {
+            reason: "no yellow squares in the frame".into(),
+        });
     };
     let points: Vec<Point2> = blobs.iter().map(|b| b.centre).collect();
     let Some(indexed) = index_lattice(&points) else {
-        return Err(EstimateError::NoPattern { reason: "the yellow blobs do not form a checkerboard lattice".into() });
+        return Err(EstimateError::NoPattern {
+            reason: "the yellow blobs do not form a checkerboard lattice".into(),
+        });
     };
-    let reached: Vec<(usize, indexing::RelativeIndex)> =
-        indexed.indices.iter().enumerate().filter_map(|(i, x)| x.map(|x| (i, x))).collect();
+    let reached: Vec<(usize, indexing::RelativeIndex)> = indexed
+        .indices
+        .iter()
+        .enumerate()
+        .filter_map(|(i, x)| x.map(|x| (i, x)))
+        .collect();
     let needed = pad.yellow_count().div_ceil(2);
     if reached.len() < needed {
-        return Err(EstimateError::TooFewPoints { found: reached.len(), needed });
+        return Err(EstimateError::TooFewPoints {
+            found: reached.len(),
+            needed,
+        });
     }
-    let (min_r, max_r) = reached.iter().fold((i32::MAX, i32::MIN), |(a, b), (_, x)| (a.min(x.row), b.max(x.row)));
-    let (min_c, max_c) = reached.iter().fold((i32::MAX, i32::MIN), |(a, b), (_, x)| (a.min(x.col), b.max(x.col)));
+    let (min_r, max_r) = reached
+        .iter()
+        .fold((i32::MAX, i32::MIN), |(a, b), (_, x)| (a.min(x.row), b.max(x.row)));
+    let (min_c, max_c) = reached
+        .iter()
+        .fold((i32::MAX, i32::MIN), |(a, b), (_, x)| (a.min(x.col), b.max(x.col)));
     let (rows, cols) = (i32::from(pad.rows), i32::from(pad.cols));
     if max_r - min_r >= rows || max_c - min_c >= cols {
         return Err(EstimateError::NoPattern {
@@ -495,7 +557,10 @@ fn full_search(frame: &RgbImage, pad: &PadGeometry) -> Result<Vec<Option<Point2>
     let mut row_offset = -min_r + (rows - 1 - (max_r - min_r)) / 2;
     let mut col_offset = -min_c + (cols - 1 - (max_c - min_c)) / 2;
     // The seed square is yellow, so its absolute index must have the parity of a yellow cell.
-    let seed_yellow = pad.is_yellow(SquareIndex { row: row_offset.rem_euclid(2) as u16, col: col_offset.rem_euclid(2) as u16 });
+    let seed_yellow = pad.is_yellow(SquareIndex {
+        row: row_offset.rem_euclid(2) as u16,
+        col: col_offset.rem_euclid(2) as u16,
+    });
     if !seed_yellow {
         if max_c - min_c < cols - 1 {
             col_offset += if col_offset + max_c < cols - 1 { 1 } else { -1 };
@@ -514,7 +579,10 @@ fn full_search(frame: &RgbImage, pad: &PadGeometry) -> Result<Vec<Option<Point2>
         if r < 0 || c < 0 || r >= rows || c >= cols {
             continue;
         }
-        if let Ok(slot) = slots.binary_search(&SquareIndex { row: r as u16, col: c as u16 }) {
+        if let Ok(slot) = slots.binary_search(&SquareIndex {
+            row: r as u16,
+            col: c as u16,
+        }) {
             squares[slot] = Some(points[i]);
         }
     }
@@ -529,13 +597,21 @@ fn local_cells(pad: &PadGeometry, squares: &[Option<Point2>]) -> Result<Vec<Opti
         if r < 0 || c < 0 {
             return None;
         }
-        let slot = slots.binary_search(&SquareIndex { row: r as u16, col: c as u16 }).ok()?;
+        let slot = slots
+            .binary_search(&SquareIndex {
+                row: r as u16,
+                col: c as u16,
+            })
+            .ok()?;
         squares[slot]
     };
     let mean = |vs: &[Point2]| -> Option<Point2> {
         (!vs.is_empty()).then(|| {
             let n = vs.len() as f64;
-            [vs.iter().map(|v| v[0]).sum::<f64>() / n, vs.iter().map(|v| v[1]).sum::<f64>() / n]
+            [
+                vs.iter().map(|v| v[0]).sum::<f64>() / n,
+                vs.iter().map(|v| v[1]).sum::<f64>() / n,
+            ]
         })
     };
     // Diagonal neighbours: one column step plus (down-right) or minus (up-right) one row step.
@@ -569,7 +645,9 @@ fn local_cells(pad: &PadGeometry, squares: &[Option<Point2>]) -> Result<Vec<Opti
         .collect();
     let valid: Vec<&CellFrame> = local.iter().flatten().collect();
     if valid.is_empty() {
-        return Err(EstimateError::NoPattern { reason: "no square has lattice neighbours".into() });
+        return Err(EstimateError::NoPattern {
+            reason: "no square has lattice neighbours".into(),
+        });
     }
     let mut cx: Vec<f64> = valid.iter().map(|c| c.col_step[0]).collect();
     let mut cy: Vec<f64> = valid.iter().map(|c| c.col_step[1]).collect();

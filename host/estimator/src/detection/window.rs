@@ -21,18 +21,30 @@ impl CellFrame {
         if !det.is_finite() || det.abs() < 1e-6 {
             return None;
         }
-        let inverse = [[row_step[1] / det, -row_step[0] / det], [-col_step[1] / det, col_step[0] / det]];
-        Some(Self { col_step, row_step, inverse })
+        let inverse = [
+            [row_step[1] / det, -row_step[0] / det],
+            [-col_step[1] / det, col_step[0] / det],
+        ];
+        Some(Self {
+            col_step,
+            row_step,
+            inverse,
+        })
     }
 
     /// Cell coordinates (column steps, row steps) of an offset in raw px.
     pub fn to_cell(&self, d: Point2) -> Point2 {
-        [self.inverse[0][0] * d[0] + self.inverse[0][1] * d[1], self.inverse[1][0] * d[0] + self.inverse[1][1] * d[1]]
+        [
+            self.inverse[0][0] * d[0] + self.inverse[0][1] * d[1],
+            self.inverse[1][0] * d[0] + self.inverse[1][1] * d[1],
+        ]
     }
 
     /// Length of the shorter step, px.
     pub fn min_step(&self) -> f64 {
-        self.col_step[0].hypot(self.col_step[1]).min(self.row_step[0].hypot(self.row_step[1]))
+        self.col_step[0]
+            .hypot(self.col_step[1])
+            .min(self.row_step[0].hypot(self.row_step[1]))
     }
 
     /// The x-range (in pixel-centre offsets from the centre) of row offset `dy` inside |s|, |t| <= half.
@@ -217,9 +229,15 @@ mod tests {
                 raw[i + 2] = 60;
             }
         }
-        let px = Pixels { raw: &raw, width: w, height: h };
+        let px = Pixels {
+            raw: &raw,
+            width: w,
+            height: h,
+        };
         let cell = CellFrame::new([30.0, 0.0], [0.0, 30.0]).unwrap();
-        let membership: Vec<f32> = (-255..=255).map(|v| ((f32::from(v as i16) + 20.0) / 140.0).clamp(0.0, 1.0)).collect();
+        let membership: Vec<f32> = (-255..=255)
+            .map(|v| ((f32::from(v as i16) + 20.0) / 140.0).clamp(0.0, 1.0))
+            .collect();
         let found = centroid(&px, [48.0, 43.0], &cell, 0.55, 1, &membership).unwrap();
         let (c, area) = (found.at, found.area);
         assert!((c[0] - 50.5).abs() < 0.05 && (c[1] - 40.5).abs() < 0.05, "{c:?}");

@@ -50,7 +50,10 @@ impl OtsuSplit {
     /// makes centroids sub-pixel.
     pub fn ramp(&self) -> Ramp {
         let half_width = (0.25 * self.contrast()).max(1.0);
-        Ramp { start: self.threshold - half_width, inv_width: 1.0 / (2.0 * half_width) }
+        Ramp {
+            start: self.threshold - half_width,
+            inv_width: 1.0 / (2.0 * half_width),
+        }
     }
 }
 
@@ -63,7 +66,9 @@ pub struct Ramp {
 impl Ramp {
     /// Lookup table of the membership for every yellowness value (bin = value + 255).
     pub fn table(&self) -> Vec<f32> {
-        (-255..=255).map(|v| ((f64::from(v) - self.start) * self.inv_width).clamp(0.0, 1.0) as f32).collect()
+        (-255..=255)
+            .map(|v| ((f64::from(v) - self.start) * self.inv_width).clamp(0.0, 1.0) as f32)
+            .collect()
     }
 }
 
@@ -139,7 +144,12 @@ impl YellownessMap {
                 *v = (s / area) as i16;
             }
         }
-        Self { width, height, factor, values }
+        Self {
+            width,
+            height,
+            factor,
+            values,
+        }
     }
 
     pub fn histogram(&self) -> Histogram {

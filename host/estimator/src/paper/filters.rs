@@ -145,7 +145,12 @@ mod tests {
             let base = if x < 20 { 20u8 } else { 220u8 };
             image::Luma([if (x + y) % 2 == 0 { base + 4 } else { base - 4 }])
         });
-        let filtered = Bilateral { diameter: 6, sigma_color: 20.0, sigma_space: 5.0 }.apply(&img);
+        let filtered = Bilateral {
+            diameter: 6,
+            sigma_color: 20.0,
+            sigma_space: 5.0,
+        }
+        .apply(&img);
         assert!((i32::from(filtered.get_pixel(5, 10).0[0]) - 20).abs() <= 1);
         assert!((i32::from(filtered.get_pixel(35, 10).0[0]) - 220).abs() <= 1);
         assert!(filtered.get_pixel(19, 10).0[0] < 40 && filtered.get_pixel(20, 10).0[0] > 200);
@@ -154,7 +159,12 @@ mod tests {
     #[test]
     fn bilateral_of_constant_image_is_identity() {
         let img = GrayImage::from_pixel(13, 7, image::Luma([77]));
-        let filtered = Bilateral { diameter: 20, sigma_color: 65.0, sigma_space: 75.0 }.apply(&img);
+        let filtered = Bilateral {
+            diameter: 20,
+            sigma_color: 65.0,
+            sigma_space: 75.0,
+        }
+        .apply(&img);
         assert_eq!(filtered, img);
     }
 
@@ -184,7 +194,11 @@ mod tests {
         img.put_pixel(4, 2, image::Luma([0]));
         let closed = close_3x3(&img);
         assert_eq!(closed.get_pixel(4, 2).0[0], 255);
-        assert_eq!(closed.get_pixel(0, 2).0[0], 255, "erosion must not eat the line where it meets the border");
+        assert_eq!(
+            closed.get_pixel(0, 2).0[0],
+            255,
+            "erosion must not eat the line where it meets the border"
+        );
         assert_eq!(closed.get_pixel(4, 0).0[0], 0);
     }
 }

@@ -125,7 +125,9 @@ impl AffineLattice {
         }
         let sx = solve3(ata, atx)?;
         let sy = solve3(ata, aty)?;
-        let lattice = Self { m: [sx[0], sx[1], sx[2], sy[0], sy[1], sy[2]] };
+        let lattice = Self {
+            m: [sx[0], sx[1], sx[2], sy[0], sy[1], sy[2]],
+        };
         (lattice.determinant().abs() > 1e-6).then_some(lattice)
     }
 
@@ -226,12 +228,17 @@ pub fn assign_lattice(
     pieces.sort_by_key(|p| std::cmp::Reverse(p.len()));
 
     let main = &pieces[0];
-    let samples: Vec<((i32, i32), [f64; 2])> =
-        main.iter().map(|&q| (relative[q].expect("walked"), centres[q])).collect();
+    let samples: Vec<((i32, i32), [f64; 2])> = main
+        .iter()
+        .map(|&q| (relative[q].expect("walked"), centres[q]))
+        .collect();
     let lattice = (main.len() >= MIN_CONNECTED_QUADS)
         .then(|| AffineLattice::fit(&samples))
         .flatten()
-        .ok_or(IndexingFailure::TooFewConnected { found: main.len(), needed: MIN_CONNECTED_QUADS })?;
+        .ok_or(IndexingFailure::TooFewConnected {
+            found: main.len(),
+            needed: MIN_CONNECTED_QUADS,
+        })?;
 
     // Place the other pieces (often single quads whose corners found no partner) through the fitted lattice.
     let mut placed: Vec<Option<(i32, i32)>> = vec![None; quads.len()];
@@ -262,7 +269,12 @@ pub fn assign_lattice(
     let offset = absolute_offset(&placed, &lattice, pad, roi_centre, parity)?;
     let squares: Vec<Option<SquareIndex>> = placed
         .iter()
-        .map(|cell| cell.map(|(r, c)| SquareIndex { row: (r + offset.0) as u16, col: (c + offset.1) as u16 }))
+        .map(|cell| {
+            cell.map(|(r, c)| SquareIndex {
+                row: (r + offset.0) as u16,
+                col: (c + offset.1) as u16,
+            })
+        })
         .collect();
 
     let mut corners: BTreeMap<CornerIndex, ([f64; 2], f64)> = BTreeMap::new();
@@ -276,7 +288,10 @@ pub fn assign_lattice(
             implausible_pairs += 1;
             continue;
         }
-        let corner = CornerIndex { row: a.row.min(b.row), col: a.col.min(b.col) };
+        let corner = CornerIndex {
+            row: a.row.min(b.row),
+            col: a.col.min(b.col),
+        };
         let midpoint = [f64::from(pair.midpoint[0]), f64::from(pair.midpoint[1])];
         let keep = corners.get(&corner).is_none_or(|&(_, d)| pair.distance < d);
         if keep {
@@ -295,12 +310,31 @@ fn diagonal_links(centres: &[[f64; 2]], pairs: &[VertexPair]) -> Result<Vec<Link
     let vectors: Vec<(usize, usize, [f64; 2])> = pairs
         .iter()
         .filter(|p| p.from < p.to)
-        .map(|p| (p.from, p.to, [centres[p.to][0] - centres[p.from][0], centres[p.to][1] - centres[p.from][1]]))
+        .map(|p| {
+            (
+                p.from,
+                p.to,
+                [
+                    centres[p.to][0] - centres[p.from][0],
+                    centres[p.to][1] - centres[p.from][1],
+                ],
+            )
+        })
         .chain(
             // A pair seen only from the higher-numbered quad still joins the two.
-            pairs.iter().filter(|p| p.from > p.to && !pairs.iter().any(|q| q.from == p.to && q.to == p.from)).map(
-                |p| (p.to, p.from, [centres[p.from][0] - centres[p.to][0], centres[p.from][1] - centres[p.to][1]]),
-            ),
+            pairs
+                .iter()
+                .filter(|p| p.from > p.to && !pairs.iter().any(|q| q.from == p.to && q.to == p.from))
+                .map(|p| {
+                    (
+                        p.to,
+                        p.from,
+                        [
+                            centres[p.from][0] - centres[p.to][0],
+                            centres[p.from][1] - centres[p.to][1],
+                        ],
+                    )
+                }),
         )
         .collect();
     if vectors.is_empty() {
@@ -316,15 +350,21 @@ fn diagonal_links(centres: &[[f64; 2]], pairs: &[VertexPair]) -> Result<Vec<Link
     }
     let rotation = s.atan2(c) / 4.0;
     let (sin, cos) = rotation.sin_cos();
-    let in_axes: Vec<(usize, usize, [f64; 2])> =
-        vectors.iter().map(|&(a, b, v)| (a, b, [cos * v[0] + sin * v[1], -sin * v[0] + cos * v[1]])).collect();
+    let in_axes: Vec<(usize, usize, [f64; 2])> = vectors
+        .iter()
+        .map(|&(a, b, v)| (a, b, [cos * v[0] + sin * v[1], -sin * v[0] + cos * v[1]]))
+        .collect();
     let pitch_x = median(in_axes.iter().map(|(_, _, u)| u[0].abs()).collect());
     let pitch_y = median(in_axes.iter().map(|(_, _, u)| u[1].abs()).collect());
     let plausible = |d: f64, pitch: f64| d > 0.5 * pitch && d < 1.5 * pitch;
     Ok(in_axes
         .into_iter()
         .filter(|(_, _, u)| plausible(u[0].abs(), pitch_x) && plausible(u[1].abs(), pitch_y))
-        .map(|(a, b, u)| Link { a, b, step: (u[1].signum() as i32, u[0].signum() as i32) })
+        .map(|(a, b, u)| Link {
+            a,
+            b,
+            step: (u[1].signum() as i32, u[0].signum() as i32),
+        })
         .collect())
 }
 
@@ -344,9 +384,18 @@ fn piece_offset(
         })
         .collect();
     let n = residuals.len() as f64;
-    let mean = (residuals.iter().map(|r| r.0).sum::<f64>() / n, residuals.iter().map(|r| r.1).sum::<f64>() / n);
+    let mean = (
+        residuals.iter().map(|r| r.0).sum::<f64>() / n,
+        residuals.iter().map(|r| r.1).sum::<f64>() / n,
+    );
     let base = (mean.0.round() as i32, mean.1.round() as i32);
-    let candidates = [base, (base.0 + 1, base.1), (base.0 - 1, base.1), (base.0, base.1 + 1), (base.0, base.1 - 1)];
+    let candidates = [
+        base,
+        (base.0 + 1, base.1),
+        (base.0 - 1, base.1),
+        (base.0, base.1 + 1),
+        (base.0, base.1 - 1),
+    ];
     candidates
         .into_iter()
         // Quads are all of one colour: a shift must keep row + col parity.
@@ -399,8 +448,14 @@ fn absolute_offset(
     parity: i32,
 ) -> Result<(i32, i32), IndexingFailure> {
     let cells: Vec<(i32, i32)> = placed.iter().flatten().copied().collect();
-    let (min_r, max_r) = (cells.iter().map(|c| c.0).min().unwrap_or(0), cells.iter().map(|c| c.0).max().unwrap_or(0));
-    let (min_c, max_c) = (cells.iter().map(|c| c.1).min().unwrap_or(0), cells.iter().map(|c| c.1).max().unwrap_or(0));
+    let (min_r, max_r) = (
+        cells.iter().map(|c| c.0).min().unwrap_or(0),
+        cells.iter().map(|c| c.0).max().unwrap_or(0),
+    );
+    let (min_c, max_c) = (
+        cells.iter().map(|c| c.1).min().unwrap_or(0),
+        cells.iter().map(|c| c.1).max().unwrap_or(0),
+    );
     let (rows, cols) = (i32::from(pad.rows), i32::from(pad.cols));
     let centre_cell = (f64::from(rows - 1) / 2.0, f64::from(cols - 1) / 2.0);
     let mut best: Option<((i32, i32), f64)> = None;
@@ -528,8 +583,14 @@ mod tests {
         let (quads, _) = synthetic_quads(&pad, 80.0, [0.0, 0.0], &[]);
         let lonely = vec![quads[0].clone()];
         let pairs = pair_vertices(&lonely, 50.0);
-        let colour = Checkerboard { pitch: 80.0, origin: [0.0, 0.0] };
-        assert_eq!(assign_lattice(&lonely, &pairs, &pad, [0.0, 0.0], &colour), Err(IndexingFailure::NoPairs));
+        let colour = Checkerboard {
+            pitch: 80.0,
+            origin: [0.0, 0.0],
+        };
+        assert_eq!(
+            assign_lattice(&lonely, &pairs, &pad, [0.0, 0.0], &colour),
+            Err(IndexingFailure::NoPairs)
+        );
         let two = vec![quads[0].clone(), quads[8].clone()];
         let pairs = pair_vertices(&two, 50.0);
         assert!(matches!(

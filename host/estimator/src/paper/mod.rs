@@ -97,7 +97,11 @@ impl PaperDetector {
     /// Resolves the config for `width x height` frames and builds the remap table (the costly part of setup).
     pub fn new(config: &SensorConfig, width: u32, height: u32) -> Result<Self, EstimateError> {
         if width < MIN_FRAME_SIDE || height < MIN_FRAME_SIDE {
-            return Err(EstimateError::FrameTooSmall { width, height, min: MIN_FRAME_SIDE });
+            return Err(EstimateError::FrameTooSmall {
+                width,
+                height,
+                min: MIN_FRAME_SIDE,
+            });
         }
         let intrinsics = config.camera.scaled_to(width, height);
         let camera = FisheyeCamera::new(intrinsics)?;
@@ -147,8 +151,12 @@ impl PaperDetector {
     /// Stage 2: bilateral filter, Sobel, threshold, closing: the binary edge map of the ROI.
     pub fn edge_map(&self, gray: &GrayImage) -> GrayImage {
         let smoothed = self.bilateral.apply(gray);
-        let binary =
-            filters::sobel_threshold(&smoothed, self.sobel_weights.0, self.sobel_weights.1, self.binary_threshold);
+        let binary = filters::sobel_threshold(
+            &smoothed,
+            self.sobel_weights.0,
+            self.sobel_weights.1,
+            self.binary_threshold,
+        );
         filters::close_3x3(&binary)
     }
 
@@ -172,10 +180,16 @@ impl PaperDetector {
         let pairs = lattice::pair_vertices(quads, self.pair_distance_px);
         let corners_found = lattice::distinct_midpoints(&pairs);
         if quads.is_empty() {
-            return Err(EstimateError::NoPattern { reason: "the published method found no quadrilateral".into() });
+            return Err(EstimateError::NoPattern {
+                reason: "the published method found no quadrilateral".into(),
+            });
         }
         let roi_centre = [f64::from(roi.width) / 2.0, f64::from(roi.height) / 2.0];
-        let colour = FrameColour { frame, camera: &self.camera, roi };
+        let colour = FrameColour {
+            frame,
+            camera: &self.camera,
+            roi,
+        };
         let assignment =
             lattice::assign_lattice(quads, &pairs, &self.pad, roi_centre, &colour).map_err(|e| match e {
                 IndexingFailure::NoPairs => EstimateError::NoPattern {
@@ -190,13 +204,20 @@ impl PaperDetector {
         let locate = |p: [f64; 2]| -> Option<(Point2, Point2)> {
             let raw = undistort::index_to_raw_px(&self.camera, [p[0] + f64::from(roi.x), p[1] + f64::from(roi.y)]);
             let undistorted = self.camera.undistort_px(raw)?;
-            raw.iter().chain(&undistorted).all(|v| v.is_finite()).then_some((raw, undistorted))
+            raw.iter()
+                .chain(&undistorted)
+                .all(|v| v.is_finite())
+                .then_some((raw, undistorted))
         };
         let points = assignment
             .corners
             .iter()
             .filter_map(|(&index, &p)| {
-                locate(p).map(|(raw_px, undistorted_px)| PaperPoint { index, raw_px, undistorted_px })
+                locate(p).map(|(raw_px, undistorted_px)| PaperPoint {
+                    index,
+                    raw_px,
+                    undistorted_px,
+                })
             })
             .collect();
         let squares = quads
@@ -244,7 +265,12 @@ fn scaled_roi(config: &SensorConfig, sx: f64, sy: f64, width: u32, height: u32) 
     let y = (f64::from(r.y) * sy).round() as u32;
     let w = ((f64::from(r.width) * sx).round() as u32).min(width.saturating_sub(x));
     let h = ((f64::from(r.height) * sy).round() as u32).min(height.saturating_sub(y));
-    (w > 0 && h > 0).then_some(RoiPx { x, y, width: w, height: h })
+    (w > 0 && h > 0).then_some(RoiPx {
+        x,
+        y,
+        width: w,
+        height: h,
+    })
 }
 
 /// Yellowness of the undistorted frame, sampled through the camera model at ROI pixel positions.

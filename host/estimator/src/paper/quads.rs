@@ -248,7 +248,11 @@ pub fn find_quads(contours: &[Vec<PixelPoint>], filter: &QuadFilter) -> Vec<Quad
             let hull_area = convex_hull_area(contour);
             let solidity = if hull_area > 0.0 { area / hull_area } else { 0.0 };
             let accepted = filter.min_area < area && area < filter.max_area && solidity > filter.min_solidity;
-            accepted.then(|| Quad { vertices: [approx[0], approx[1], approx[2], approx[3]], area, solidity })
+            accepted.then(|| Quad {
+                vertices: [approx[0], approx[1], approx[2], approx[3]],
+                area,
+                solidity,
+            })
         })
         .collect()
 }
@@ -259,7 +263,11 @@ mod tests {
 
     fn filled_square(size: u32, x0: u32, y0: u32, side: u32) -> GrayImage {
         GrayImage::from_fn(size, size, |x, y| {
-            image::Luma([if x >= x0 && x < x0 + side && y >= y0 && y < y0 + side { 255 } else { 0 }])
+            image::Luma([if x >= x0 && x < x0 + side && y >= y0 && y < y0 + side {
+                255
+            } else {
+                0
+            }])
         })
     }
 
@@ -303,7 +311,12 @@ mod tests {
 
     #[test]
     fn a_circle_is_not_a_quad_but_a_square_is() {
-        let filter = QuadFilter { epsilon_fraction: 0.08, min_area: 100.0, max_area: 1e5, min_solidity: 0.2 };
+        let filter = QuadFilter {
+            epsilon_fraction: 0.08,
+            min_area: 100.0,
+            max_area: 1e5,
+            min_solidity: 0.2,
+        };
         let square = external_contours(&filled_square(60, 10, 10, 30));
         let quads = find_quads(&square, &filter);
         assert_eq!(quads.len(), 1);
@@ -313,8 +326,9 @@ mod tests {
         let small = external_contours(&filled_square(60, 10, 10, 5));
         assert!(find_quads(&small, &filter).is_empty());
         // A triangle approximates to three vertices.
-        let triangle =
-            GrayImage::from_fn(60, 60, |x, y| image::Luma([if x >= 5 && y >= 5 && x + y < 55 { 255 } else { 0 }]));
+        let triangle = GrayImage::from_fn(60, 60, |x, y| {
+            image::Luma([if x >= 5 && y >= 5 && x + y < 55 { 255 } else { 0 }])
+        });
         assert!(find_quads(&external_contours(&triangle), &filter).is_empty());
     }
 
@@ -324,7 +338,12 @@ mod tests {
         assert_eq!(approx_poly_dp_closed(&[[3, 3]], 1.0), vec![[3, 3]]);
         let line = vec![[0, 0], [5, 0]];
         assert!(approx_poly_dp_closed(&line, 0.5).len() <= 2);
-        let filter = QuadFilter { epsilon_fraction: 0.08, min_area: 0.0, max_area: 1e5, min_solidity: 0.0 };
+        let filter = QuadFilter {
+            epsilon_fraction: 0.08,
+            min_area: 0.0,
+            max_area: 1e5,
+            min_solidity: 0.0,
+        };
         assert!(find_quads(&[vec![], vec![[1, 1]], line], &filter).is_empty());
     }
 }

@@ -43,7 +43,12 @@ impl RemapTable {
                 taps.push(tap_for(source));
             }
         }
-        Self { roi, raw_width: camera.width(), raw_height: camera.height(), taps }
+        Self {
+            roi,
+            raw_width: camera.width(),
+            raw_height: camera.height(),
+            taps,
+        }
     }
 
     pub fn roi(&self) -> RoiPx {
@@ -63,11 +68,21 @@ fn tap_for(source: Point2) -> RemapTap {
     let [sx, sy] = source;
     if !(sx.is_finite() && sy.is_finite()) || sx.abs() > 1e6 || sy.abs() > 1e6 {
         // Outside the model: reads the constant (black) border like OpenCV's BORDER_CONSTANT.
-        return RemapTap { x0: i32::MIN / 2, y0: i32::MIN / 2, fx: 0.0, fy: 0.0 };
+        return RemapTap {
+            x0: i32::MIN / 2,
+            y0: i32::MIN / 2,
+            fx: 0.0,
+            fy: 0.0,
+        };
     }
     let x0 = sx.floor();
     let y0 = sy.floor();
-    RemapTap { x0: x0 as i32, y0: y0 as i32, fx: (sx - x0) as f32, fy: (sy - y0) as f32 }
+    RemapTap {
+        x0: x0 as i32,
+        y0: y0 as i32,
+        fx: (sx - x0) as f32,
+        fy: (sy - y0) as f32,
+    }
 }
 
 /// Bilinear interpolation with a black constant border, rounded to 8 bits per channel like `cv::remap`.
@@ -100,7 +115,12 @@ fn bilinear_rgb(frame: &RgbImage, tap: &RemapTap) -> [u8; 3] {
             [f32::from(p[0]), f32::from(p[1]), f32::from(p[2])]
         }
     };
-    let (a, b, c, d) = (fetch(x0, y0), fetch(x0 + 1, y0), fetch(x0, y0 + 1), fetch(x0 + 1, y0 + 1));
+    let (a, b, c, d) = (
+        fetch(x0, y0),
+        fetch(x0 + 1, y0),
+        fetch(x0, y0 + 1),
+        fetch(x0 + 1, y0 + 1),
+    );
     let (fx, fy) = (tap.fx, tap.fy);
     let mut out = [0u8; 3];
     for ch in 0..3 {
@@ -150,7 +170,12 @@ mod tests {
     fn remap_of_a_flat_frame_is_flat_where_it_sees_the_frame_and_black_beyond() {
         let camera = FisheyeCamera::paper(64, 48).unwrap();
         let frame = RgbImage::from_pixel(64, 48, image::Rgb([90, 90, 90]));
-        let roi = RoiPx { x: 0, y: 0, width: 64, height: 48 };
+        let roi = RoiPx {
+            x: 0,
+            y: 0,
+            width: 64,
+            height: 48,
+        };
         let gray = RemapTable::new(&camera, roi).undistorted_gray(&frame);
         // Balance 1 keeps the farthest edge midpoints on the frame's edge; the others land inside, so parts of the
         // undistorted frame look past the raw frame: OpenCV fills them from its black constant border.
