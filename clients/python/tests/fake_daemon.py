@@ -31,6 +31,9 @@ class FakeSensor:
     tares: int = 0
     #: When set, the led queryable answers with this error message (as the daemon does for an invalid request).
     led_error: str | None = None
+    #: When set, tare queries are held and never answered (a daemon too busy to answer in time).
+    tare_silent: bool = False
+    held_queries: list[Any] = field(default_factory=list)
     handles: list[Any] = field(default_factory=list)
 
 
@@ -56,7 +59,10 @@ class FakeDaemon:
         return sensor
 
     def remove_sensor(self, serial: str) -> None:
-        for handle in self.sensors.pop(serial).handles:
+        sensor = self.sensors.pop(serial)
+        for query in sensor.held_queries:
+            query.drop()
+        for handle in sensor.handles:
             handle.undeclare()
 
     def publish_reading(self, serial: str, payload: bytes) -> None:
@@ -74,6 +80,9 @@ class FakeDaemon:
     def _tare(self, sensor: FakeSensor, query: zenoh.Query) -> None:
         with self._lock:
             sensor.tares += 1
+        if sensor.tare_silent:
+            sensor.held_queries.append(query)
+            return
         reply = {"schema_version": 1, "tare": "the next frame becomes the rest frame"}
         query.reply(query.key_expr, json.dumps(reply))
 

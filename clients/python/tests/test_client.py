@@ -51,22 +51,36 @@ def test_watch_with_a_callback(fake: FakeDaemon, client: nusense.Client) -> None
     assert events[1] == nusense.SensorEvent("NUS-C", alive=False)
 
 
+MARKER = 10**9
+
+
 def wait_until_subscribed(fake: FakeDaemon, stream: nusense.Stream[nusense.Reading], serial: str) -> None:
-    """Publishes a marker reading (frame id 10**9) until the stream sees it: the subscription has reached the fake."""
+    """Publishes marker readings (frame id MARKER) until the stream sees one: the subscription has reached the
+    fake. Markers still on their way are skipped by ``next_reading``."""
 
     def seen() -> bool:
-        fake.publish_reading(serial, reading_payload(10**9))
+        fake.publish_reading(serial, reading_payload(MARKER))
         try:
-            return stream.get(timeout=0.05).frame_id == 10**9
+            return stream.get(timeout=0.05).frame_id == MARKER
         except TimeoutError:
             return False
 
     assert eventually(seen)
-    while True:  # the markers still on their way
-        try:
-            stream.get(timeout=0.2)
-        except TimeoutError:
-            return
+
+
+def next_reading(stream: nusense.Stream[nusense.Reading], timeout: float = 5.0) -> nusense.Reading:
+    while True:
+        reading = stream.get(timeout=timeout)
+        if reading.frame_id != MARKER:
+            return reading
+
+
+def no_more_readings(stream: nusense.Stream[nusense.Reading]) -> bool:
+    try:
+        next_reading(stream, timeout=0.2)
+    except TimeoutError:
+        return True
+    return False
 
 
 def test_streams_one_sensor_and_not_the_others(fake: FakeDaemon, client: nusense.Client) -> None:
@@ -75,10 +89,9 @@ def test_streams_one_sensor_and_not_the_others(fake: FakeDaemon, client: nusense
         for frame_id in range(5):
             fake.publish_reading("NUS-B", reading_payload(100 + frame_id))
             fake.publish_reading("NUS-A", reading_payload(frame_id))
-        got = [stream.get(timeout=5) for _ in range(5)]
+        got = [next_reading(stream) for _ in range(5)]
         assert [(r.serial, r.frame_id) for r in got] == [("NUS-A", i) for i in range(5)]
-        with pytest.raises(TimeoutError):
-            stream.get(timeout=0.2)
+        assert no_more_readings(stream)
     # The decoded reading is the published one, arrays included.
     expected = nusense.decode_reading(fixture_bytes("reading_fast.json"))
     assert got[0].estimate is not None and expected.estimate is not None
@@ -94,7 +107,8 @@ def test_streams_several_sensors_at_once(fake: FakeDaemon, client: nusense.Clien
             fake.publish_reading("NUS-A", reading_payload(frame_id))
             fake.publish_reading("NUS-B", reading_payload(frame_id, "reading_inverse_two_contacts.json"))
             fake.publish_reading("NUS-C", reading_payload(frame_id))
-        got = [stream.get(timeout=5) for _ in range(6)]
+        got = [next_reading(stream) for _ in range(6)]
+        assert no_more_readings(stream)
     by_sensor = {s: [r for r in got if r.serial == s] for s in ("NUS-A", "NUS-B")}
     assert [r.frame_id for r in by_sensor["NUS-A"]] == [0, 1, 2]
     assert [r.frame_id for r in by_sensor["NUS-B"]] == [0, 1, 2]
@@ -105,6 +119,8 @@ def test_streams_several_sensors_at_once(fake: FakeDaemon, client: nusense.Clien
 def test_every_sensor_and_iteration_until_closed(fake: FakeDaemon, client: nusense.Client) -> None:
     stream = client.readings()
     wait_until_subscribed(fake, stream, "NUS-Z")
+    while not no_more_readings(stream):  # markers still on their way
+        pass
     fake.publish_reading("NUS-X", reading_payload(1))
     fake.publish_reading("NUS-Y", reading_payload(2))
     assert eventually(lambda: stream._inbox._queue.qsize() == 2)
@@ -115,9 +131,12 @@ def test_every_sensor_and_iteration_until_closed(fake: FakeDaemon, client: nusen
 def test_a_slow_reader_keeps_the_newest_readings(fake: FakeDaemon, client: nusense.Client) -> None:
     with client.readings("NUS-A", capacity=2) as stream:
         wait_until_subscribed(fake, stream, "NUS-A")
+        while not no_more_readings(stream):  # markers still on their way
+            pass
+        dropped_markers = stream.dropped
         for frame_id in range(5):
             fake.publish_reading("NUS-A", reading_payload(frame_id))
-        assert eventually(lambda: stream.dropped == 3), stream.dropped
+        assert eventually(lambda: stream.dropped - dropped_markers == 3), stream.dropped
         assert [stream.get(timeout=1).frame_id for _ in range(2)] == [3, 4]
 
 
@@ -127,8 +146,8 @@ def test_a_garbled_reading_raises_and_the_stream_goes_on(fake: FakeDaemon, clien
         fake.publish_reading("NUS-A", b'{"schema_version": 1, "frame_id": "seven"}')
         fake.publish_reading("NUS-A", reading_payload(8))
         with pytest.raises(nusense.ProtocolError, match="frame_id: expected an integer"):
-            stream.get(timeout=5)
-        assert stream.get(timeout=5).frame_id == 8
+            next_reading(stream)
+        assert next_reading(stream).frame_id == 8
 
 
 def test_contacts_stream(fake: FakeDaemon, client: nusense.Client) -> None:
@@ -204,6 +223,15 @@ def test_a_sensor_nobody_serves_raises_no_reply(fake: FakeDaemon, client: nusens
     served(client, "NUS-A")
     with pytest.raises(nusense.NoReplyError, match="no reply from sensor 'NUS-B' on nusense/NUS-B/tare"):
         client.tare("NUS-B", timeout=0.3)
+
+
+def test_a_sensor_that_does_not_answer_in_time_raises_no_reply(fake: FakeDaemon, client: nusense.Client) -> None:
+    sensor = fake.add_sensor("NUS-A", STATUS)
+    sensor.tare_silent = True
+    served(client, "NUS-A")
+    with pytest.raises(nusense.NoReplyError, match="no reply from sensor 'NUS-A' on nusense/NUS-A/tare within 0.3 s"):
+        client.tare("NUS-A", timeout=0.3)
+    assert sensor.tares == 1
 
 
 def test_serials_that_are_not_one_key_chunk_are_refused(client: nusense.Client) -> None:
