@@ -151,6 +151,10 @@ def test_unknown_keys_are_ignored() -> None:
         (lambda m: m["estimate"]["contacts"][0].update(centre_mm=[1.0]), "reading.estimate.contacts[0].centre_mm"),
         (lambda m: m["estimate"].update(mode="slow"), "unknown mode 'slow'"),
         (lambda m: m["led"].update(enabled=[1, 1, 1, 1]), "reading.led.enabled"),
+        (lambda m: m["estimate"]["shear_field"][3].update(current_px=["1", 2]), "reading.estimate.shear_field"),
+        (lambda m: m["estimate"]["shear_field"][3].update(current_px=[1.0]), "reading.estimate.shear_field"),
+        (lambda m: m["estimate"]["shear_field"][3].pop("valid"), "reading.estimate.shear_field"),
+        (lambda m: m["estimate"]["shear_field"][3].update(valid=None), "reading.estimate.shear_field"),
     ],
 )
 def test_malformed_messages_raise_protocol_errors_naming_the_field(change: Any, says: str) -> None:

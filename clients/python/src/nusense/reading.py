@@ -325,7 +325,7 @@ def _estimate(e: _Object) -> Estimate:
         recovered=e.boolean("recovered"),
         retared=e.boolean("retared"),
         retare_count=e.integer("retare_count"),
-        shear_field=_shear_field(e.children("shear_field")),
+        shear_field=_shear_field(e),
         elapsed_ms=e.number("elapsed_ms"),
     )
 
@@ -342,26 +342,44 @@ def _contact(c: _Object) -> Contact:
     )
 
 
-def _shear_field(vectors: list[_Object]) -> ShearField:
+def _shear_field(e: _Object) -> ShearField:
+    # One reading carries 165 corners of 4 fields each: read column by column with numpy, which checks the
+    # types of a whole column at once (a string or a missing value leaves a column that is not numeric).
+    path = f"{e.path}.shear_field"
+    vectors = e.items("shear_field")
+    missing = (np.nan, np.nan)
+    try:
+        index = _numeric([(v["index"]["row"], v["index"]["col"]) for v in vectors], "i")
+        points = {
+            name: _numeric([missing if v[name] is None else v[name] for v in vectors], "fi").astype(np.float64)
+            for name in ("reference_px", "current_px", "displacement_mm")
+        }
+        valid = np.array([v["valid"] for v in vectors])
+    except (KeyError, TypeError, ValueError) as error:
+        raise ProtocolError(f"{path}: not a list of corners with index, points and valid ({error!r})") from None
     n = len(vectors)
-    index = np.empty((n, 2), dtype=np.int64)
-    points = {name: np.full((n, 2), np.nan) for name in ("reference_px", "current_px", "displacement_mm")}
-    valid = np.empty(n, dtype=np.bool_)
-    for i, vector in enumerate(vectors):
-        corner = vector.child("index")
-        index[i] = (corner.integer("row"), corner.integer("col"))
-        for name, array in points.items():
-            point = vector.optional_array(name, 2)
-            if point is not None:
-                array[i] = point
-        valid[i] = vector.boolean("valid")
+    if (
+        index.shape != (n, 2)
+        or any(p.shape != (n, 2) for p in points.values())
+        or valid.shape != (n,)
+        or (n and valid.dtype != np.bool_)
+    ):
+        raise ProtocolError(f"{path}: every corner needs a [row, col] index, [x, y] points and a boolean valid")
     return ShearField(
-        index=_frozen(index),
-        reference_px=_frozen(points["reference_px"]),
-        current_px=_frozen(points["current_px"]),
-        displacement_mm=_frozen(points["displacement_mm"]),
-        valid=_frozen(valid),
+        index=_frozen(index.reshape(n, 2).astype(np.int64)),
+        reference_px=_frozen(points["reference_px"].reshape(n, 2)),
+        current_px=_frozen(points["current_px"].reshape(n, 2)),
+        displacement_mm=_frozen(points["displacement_mm"].reshape(n, 2)),
+        valid=_frozen(valid.reshape(n).astype(np.bool_)),
     )
+
+
+def _numeric(rows: list[Any], kinds: str) -> npt.NDArray[Any]:
+    """``rows`` as one array whose dtype is of one of ``kinds`` (numpy's: ``i`` integer, ``f`` float)."""
+    array = np.array(rows)
+    if array.size and array.dtype.kind not in kinds:
+        raise ValueError(f"values of type {array.dtype} where numbers belong")
+    return array
 
 
 def _pressure_map(m: _Object) -> PressureMap:
