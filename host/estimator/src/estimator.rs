@@ -23,7 +23,7 @@ use crate::force::force;
 use crate::homography::Homography;
 use crate::inverse::{InverseModel, Stage1, Stage2, TestOutcome, MOTION_PARAMETERS};
 use crate::lattice::{CornerObservation, Lattice, SquareObservation};
-use crate::motion::{camera_motion, largest_displacement_mm};
+use crate::motion::{camera_motion, fit_raw_similarity};
 use crate::pad_map::{camera_for, PadMapping};
 use crate::paper::PaperDetector;
 use crate::reading::{
@@ -254,13 +254,7 @@ impl Estimator {
     /// Also returns the largest displacement the camera motion gave a corner, mm.
     fn measure(&self, lattice: &Lattice, registration: &Registration) -> Result<(Reading, f64), EstimateError> {
         let valid: Vec<bool> = registration.corners.iter().map(|c| c.valid).collect();
-        let current_mm: Vec<Option<Point2>> = lattice
-            .corners
-            .iter()
-            .zip(&valid)
-            .map(|(c, &ok)| if ok { c.mm } else { None })
-            .collect();
-        let motion = self.remove_motion(&current_mm, &valid)?;
+        let motion = self.remove_motion(lattice, &valid)?;
         let floor_mm = self.rest.noise_floor_mm;
         let noise_mm = self.model.frame_noise_mm(&motion.stage, floor_mm).max(floor_mm);
         let outcome = self.model.test(&motion.stage, noise_mm);
@@ -374,41 +368,71 @@ impl Estimator {
         Ok((reading, motion.largest_mm))
     }
 
-    /// Camera motion fitted jointly with the tractions, then removed: a first pass on the raw displacements gives
-    /// the motion, the frame's corners are mapped back through it, and a second pass refines it (the deformation is
-    /// then measured in the rest frame's pad axes, not turned with the camera).
-    fn remove_motion(&self, current_mm: &[Option<Point2>], valid: &[bool]) -> Result<Compensated, EstimateError> {
+    /// Camera motion removed in two steps (see [`crate::motion`]): a robust similarity of the raw image brings the
+    /// frame's corners back near their rest positions, they are mapped to pad mm there, and a homography of the pad
+    /// plane fitted jointly with the tractions takes the rest (the deformation is then measured in the rest frame's
+    /// pad axes, not turned with the camera).
+    fn remove_motion(&self, lattice: &Lattice, valid: &[bool]) -> Result<Compensated, EstimateError> {
         let rest = &self.rest.corners_mm;
-        let raw: Vec<f64> = current_mm
-            .iter()
-            .zip(rest)
-            .flat_map(|(c, r)| c.map_or([0.0, 0.0], |c| [c[0] - r[0], c[1] - r[1]]))
-            .collect();
-        let first = self.model.stage1(&raw, valid);
+        let mapping = &self.rest.mapping;
         let degenerate = || EstimateError::NoPattern {
             reason: "the pad's motion is degenerate".into(),
         };
-        let coarse = Homography::from_matrix(self.model.motion_homography(&first.motion)).ok_or_else(degenerate)?;
-        let back = coarse.inverse().ok_or_else(degenerate)?;
-        let compensated: Vec<f64> = current_mm
+        let rest_raw: Vec<Option<Point2>> = rest.iter().map(|&r| mapping.mm_to_raw(r)).collect();
+        let pairs: Vec<(Point2, Point2)> = lattice
+            .corners
+            .iter()
+            .zip(&rest_raw)
+            .zip(valid)
+            .filter_map(|((c, r), &ok)| if ok { r.zip(c.raw_px) } else { None })
+            .collect();
+        let coarse = fit_raw_similarity(&pairs).ok_or_else(degenerate)?;
+        let back = coarse.homography().and_then(|h| h.inverse()).ok_or_else(degenerate)?;
+        let compensated: Vec<f64> = lattice
+            .corners
             .iter()
             .zip(rest)
-            .flat_map(|(c, r)| {
-                c.and_then(|c| back.apply(c))
-                    .map_or([0.0, 0.0], |c| [c[0] - r[0], c[1] - r[1]])
+            .zip(valid)
+            .flat_map(|((c, r), &ok)| {
+                let at = if ok {
+                    c.raw_px.and_then(|p| back.apply(p)).and_then(|p| mapping.raw_to_mm(p))
+                } else {
+                    None
+                };
+                at.map_or([0.0, 0.0], |c| [c[0] - r[0], c[1] - r[1]])
             })
             .collect();
         let stage = self.model.stage1(&compensated, valid);
         let fine = Homography::from_matrix(self.model.motion_homography(&stage.motion)).ok_or_else(degenerate)?;
-        let total = coarse.after(&fine);
         let mut displacement = compensated.clone();
         for (i, r) in rest.iter().enumerate() {
             let m = self.model.motion_field(&stage.motion, *r);
             displacement[2 * i] -= m[0];
             displacement[2 * i + 1] -= m[1];
         }
-        let reported = camera_motion(&total, rest, &self.rest.mapping);
-        let largest_mm = largest_displacement_mm(&total, rest);
+        // Where the whole motion (pad-plane homography, then the raw similarity) puts each rest corner.
+        let forward = coarse.homography().ok_or_else(degenerate)?;
+        let moved_raw = |mm: Point2| {
+            fine.apply(mm)
+                .and_then(|q| mapping.mm_to_raw(q))
+                .and_then(|q| forward.apply(q))
+        };
+        let mut reported_pairs = Vec::with_capacity(rest.len());
+        let mut largest_mm: f64 = 0.0;
+        for (&r, from) in rest.iter().zip(&rest_raw) {
+            let Some((from, to)) = from.zip(moved_raw(r)) else {
+                continue;
+            };
+            reported_pairs.push((from, to));
+            if let Some(q) = mapping.raw_to_mm(to) {
+                largest_mm = largest_mm.max((q[0] - r[0]).hypot(q[1] - r[1]));
+            }
+        }
+        let centre = mapping.mm_to_raw([0.0, 0.0]);
+        let reported = match centre.zip(moved_raw([0.0, 0.0])) {
+            Some((from, to)) => camera_motion(&reported_pairs, from, to),
+            None => CameraMotion::NONE,
+        };
         Ok(Compensated {
             data: compensated,
             displacement,

@@ -1,57 +1,147 @@
-//! Camera and pad motion between the rest frame and a frame: what it is (a homography of the pad plane, fitted
-//! jointly with the tractions by [`crate::inverse`]), how it is removed, and how it is reported.
+//! Camera and pad motion between the rest frame and a frame: what it is, how it is removed, and how it is reported.
+//!
+//! It is removed in two steps. First a similarity of the raw image: a camera's roll about its optical axis rotates
+//! the raw image exactly (whatever the lens, the plate's refraction or the pattern's depth), and removing it there
+//! brings every corner back near its rest position, where the pad map was fitted. Mapping the moved corners through
+//! the pad map instead and fitting the motion in pad mm would lean on the map far from where it was fitted, and
+//! would turn the map's own error into a smooth non-rigid field that the contact test takes for tractions. Then a
+//! homography of the pad plane, fitted jointly with the tractions by [`crate::inverse`], takes what is left (the
+//! camera's tilt and shift, the pad's own motion).
 
 use nusense_geometry::Point2;
 
 use crate::homography::Homography;
-use crate::pad_map::PadMapping;
 use crate::reading::CameraMotion;
 
-/// The similarity closest (least squares) to `motion` over `points` (pad mm): rotation (rad), scale and the
-/// image of the origin.
-pub fn closest_similarity(motion: &Homography, points: &[Point2]) -> Option<(f64, f64, Point2)> {
-    let moved: Vec<Point2> = points.iter().map(|&p| motion.apply(p)).collect::<Option<_>>()?;
-    let n = points.len() as f64;
-    if points.len() < 2 {
-        return None;
-    }
-    let mean = |v: &[Point2]| {
-        [
-            v.iter().map(|p| p[0]).sum::<f64>() / n,
-            v.iter().map(|p| p[1]).sum::<f64>() / n,
-        ]
-    };
-    let (c, c2) = (mean(points), mean(&moved));
-    let (mut a, mut b, mut norm) = (0.0, 0.0, 0.0);
-    for (p, q) in points.iter().zip(&moved) {
-        let (x, y) = (p[0] - c[0], p[1] - c[1]);
-        let (u, v) = (q[0] - c2[0], q[1] - c2[1]);
-        a += x * u + y * v;
-        b += x * v - y * u;
-        norm += x * x + y * y;
-    }
-    if !(norm > 0.0) {
-        return None;
-    }
-    let (a, b) = (a / norm, b / norm);
-    let (scale, rotation) = (a.hypot(b), b.atan2(a));
-    let origin = motion.apply([0.0, 0.0])?;
-    Some((rotation, scale, origin))
+/// Rounds of the robust similarity fit (each leaves out the pairs the previous fit explains worst).
+const ROBUST_ROUNDS: usize = 4;
+/// A pair is left out when it misses the fit by more than this many robust sigmas (a press moves its corners)...
+const OUTLIER_SIGMAS: f64 = 3.0;
+/// ...but never fewer than this fraction of the pairs is kept (a press never covers most of the pattern).
+const MIN_KEPT_FRACTION: f64 = 0.5;
+
+/// A similarity of the plane: `to = centre_to + z (from - centre_from)` with z = scale e^(i rotation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Similarity {
+    /// From +x towards +y, radians.
+    pub rotation: f64,
+    pub scale: f64,
+    matrix: [f64; 9],
 }
 
-/// The motion as users see it: rotation and scale of the pattern, and the pad centre's shift in raw px.
-pub fn camera_motion(motion: &Homography, points: &[Point2], mapping: &PadMapping) -> CameraMotion {
-    let Some((rotation, scale, origin)) = closest_similarity(motion, points) else {
+impl Similarity {
+    pub const IDENTITY: Self = Self {
+        rotation: 0.0,
+        scale: 1.0,
+        matrix: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+    };
+
+    /// Least squares over the pairs with `keep` set.
+    fn fit(pairs: &[(Point2, Point2)], keep: &[bool]) -> Option<Self> {
+        let kept = || pairs.iter().zip(keep).filter(|(_, &k)| k).map(|(p, _)| p);
+        let n = kept().count();
+        if n < 2 {
+            return None;
+        }
+        let n = n as f64;
+        let from = [
+            kept().map(|p| p.0[0]).sum::<f64>() / n,
+            kept().map(|p| p.0[1]).sum::<f64>() / n,
+        ];
+        let to = [
+            kept().map(|p| p.1[0]).sum::<f64>() / n,
+            kept().map(|p| p.1[1]).sum::<f64>() / n,
+        ];
+        // z = sum conj(a) b / sum |a|^2 over the centred pairs, in complex numbers.
+        let (mut re, mut im, mut norm) = (0.0, 0.0, 0.0);
+        for (a, b) in kept() {
+            let (x, y) = (a[0] - from[0], a[1] - from[1]);
+            let (u, v) = (b[0] - to[0], b[1] - to[1]);
+            re += x * u + y * v;
+            im += x * v - y * u;
+            norm += x * x + y * y;
+        }
+        if !(norm > 0.0) {
+            return None;
+        }
+        let (re, im) = (re / norm, im / norm);
+        let matrix = [
+            re,
+            -im,
+            to[0] - (re * from[0] - im * from[1]),
+            im,
+            re,
+            to[1] - (im * from[0] + re * from[1]),
+            0.0,
+            0.0,
+            1.0,
+        ];
+        let fitted = Self {
+            rotation: im.atan2(re),
+            scale: re.hypot(im),
+            matrix,
+        };
+        (fitted.scale > 0.0 && fitted.matrix.iter().all(|v| v.is_finite())).then_some(fitted)
+    }
+
+    pub fn homography(&self) -> Option<Homography> {
+        Homography::from_matrix(self.matrix)
+    }
+
+    pub fn apply(&self, p: Point2) -> Point2 {
+        let m = &self.matrix;
+        [m[0] * p[0] + m[1] * p[1] + m[2], m[3] * p[0] + m[4] * p[1] + m[5]]
+    }
+}
+
+/// The similarity of raw px that moves the rest frame's corners (`pairs.0`) onto this frame's (`pairs.1`), fitted on
+/// the pairs that move rigidly: each round leaves out those the previous fit misses by more than
+/// [`OUTLIER_SIGMAS`] robust sigmas (the corners a press moves).
+pub fn fit_raw_similarity(pairs: &[(Point2, Point2)]) -> Option<Similarity> {
+    let mut keep = vec![true; pairs.len()];
+    let mut fit = Similarity::fit(pairs, &keep)?;
+    for _ in 1..ROBUST_ROUNDS {
+        let misses: Vec<f64> = pairs
+            .iter()
+            .map(|(a, b)| {
+                let q = fit.apply(*a);
+                (q[0] - b[0]).hypot(q[1] - b[1])
+            })
+            .collect();
+        let mut sorted = misses.clone();
+        sorted.sort_unstable_by(f64::total_cmp);
+        // The median miss of a 2-D Gaussian is 1.1774 sigma.
+        let sigma = sorted[sorted.len() / 2] / 1.1774;
+        let mut order: Vec<usize> = (0..pairs.len()).collect();
+        order.sort_unstable_by(|&i, &j| misses[i].total_cmp(&misses[j]));
+        let least_kept = ((pairs.len() as f64) * MIN_KEPT_FRACTION).ceil() as usize;
+        let next: Vec<bool> = {
+            let mut next = vec![false; pairs.len()];
+            for (rank, &i) in order.iter().enumerate() {
+                next[i] = rank < least_kept || misses[i] <= OUTLIER_SIGMAS * sigma;
+            }
+            next
+        };
+        if next == keep {
+            break;
+        }
+        keep = next;
+        fit = Similarity::fit(pairs, &keep)?;
+    }
+    Some(fit)
+}
+
+/// The motion as users see it, from the rest frame's corners in raw px and where the whole fitted motion puts them:
+/// rotation and scale of the least-squares similarity between the two, and the pad centre's shift.
+pub fn camera_motion(pairs: &[(Point2, Point2)], centre_rest: Point2, centre_now: Point2) -> CameraMotion {
+    let Some(similarity) = Similarity::fit(pairs, &vec![true; pairs.len()]) else {
         return CameraMotion::NONE;
     };
-    let shift_px = match (mapping.mm_to_raw([0.0, 0.0]), mapping.mm_to_raw(origin)) {
-        (Some(a), Some(b)) => [b[0] - a[0], b[1] - a[1]],
-        _ => [0.0, 0.0],
-    };
+    let shift_px = [centre_now[0] - centre_rest[0], centre_now[1] - centre_rest[1]];
     let motion = CameraMotion {
-        rotation_deg: rotation.to_degrees(),
+        rotation_deg: similarity.rotation.to_degrees(),
         shift_px,
-        scale,
+        scale: similarity.scale,
     };
     let finite = motion.rotation_deg.is_finite() && motion.scale.is_finite() && shift_px.iter().all(|v| v.is_finite());
     if finite {
@@ -61,40 +151,75 @@ pub fn camera_motion(motion: &Homography, points: &[Point2], mapping: &PadMappin
     }
 }
 
-/// The largest displacement `motion` gives any of `points`, mm.
-pub fn largest_displacement_mm(motion: &Homography, points: &[Point2]) -> f64 {
-    points
-        .iter()
-        .filter_map(|&p| motion.apply(p).map(|q| (q[0] - p[0]).hypot(q[1] - p[1])))
-        .fold(0.0, f64::max)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    fn moved(angle_deg: f64, scale: f64, shift: Point2, about: Point2, p: Point2) -> Point2 {
+        let (s, c) = angle_deg.to_radians().sin_cos();
+        let (x, y) = (p[0] - about[0], p[1] - about[1]);
+        [
+            about[0] + scale * (c * x - s * y) + shift[0],
+            about[1] + scale * (s * x + c * y) + shift[1],
+        ]
+    }
+
+    fn grid() -> Vec<Point2> {
+        (0..15)
+            .flat_map(|i| (0..11).map(move |j| [200.0 + 40.0 * i as f64, 150.0 + 40.0 * j as f64]))
+            .collect()
+    }
+
     #[test]
-    fn recovers_rotation_scale_and_shift() {
-        let (angle, scale, shift) = (3f64.to_radians(), 1.01, [0.7, -0.4]);
-        let (s, c) = angle.sin_cos();
-        let h = Homography::from_matrix([
-            scale * c,
-            -scale * s,
-            shift[0],
-            scale * s,
-            scale * c,
-            shift[1],
-            0.0,
-            0.0,
-            1.0,
-        ])
-        .unwrap();
-        let points: Vec<Point2> = (0..5)
-            .flat_map(|i| (0..4).map(move |j| [i as f64 * 10.0 - 20.0, j as f64 * 8.0 - 12.0]))
+    fn a_roll_about_any_centre_is_recovered_exactly() {
+        let about = [512.0, 384.0];
+        let pairs: Vec<(Point2, Point2)> = grid()
+            .into_iter()
+            .map(|p| (p, moved(4.5, 1.003, [3.0, -2.0], about, p)))
             .collect();
-        let (rotation, found_scale, origin) = closest_similarity(&h, &points).unwrap();
-        assert!((rotation - angle).abs() < 1e-12 && (found_scale - scale).abs() < 1e-12);
-        assert!((origin[0] - shift[0]).abs() < 1e-12 && (origin[1] - shift[1]).abs() < 1e-12);
-        assert!(largest_displacement_mm(&h, &points) > 1.0);
+        let fit = fit_raw_similarity(&pairs).unwrap();
+        assert!(
+            (fit.rotation.to_degrees() - 4.5).abs() < 1e-9,
+            "{}",
+            fit.rotation.to_degrees()
+        );
+        assert!((fit.scale - 1.003).abs() < 1e-12);
+        for (a, b) in &pairs {
+            let q = fit.apply(*a);
+            assert!((q[0] - b[0]).abs() < 1e-9 && (q[1] - b[1]).abs() < 1e-9);
+        }
+        let reported = camera_motion(&pairs, about, moved(4.5, 1.003, [3.0, -2.0], about, about));
+        assert!((reported.rotation_deg - 4.5).abs() < 1e-9);
+        assert!((reported.shift_px[0] - 3.0).abs() < 1e-9 && (reported.shift_px[1] + 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_press_does_not_pull_the_camera_motion() {
+        // A press pushes the corners within 60 px of (420, 300) outwards by up to 4 px; the camera rolled 2 deg.
+        let about = [512.0, 384.0];
+        let press = [420.0, 300.0];
+        let pairs: Vec<(Point2, Point2)> = grid()
+            .into_iter()
+            .map(|p| {
+                let (dx, dy) = (p[0] - press[0], p[1] - press[1]);
+                let r = dx.hypot(dy);
+                let push = if r > 0.0 && r < 60.0 {
+                    4.0 * (1.0 - r / 60.0) / r
+                } else {
+                    0.0
+                };
+                let pressed = [p[0] + push * dx, p[1] + push * dy];
+                (p, moved(2.0, 1.0, [0.0, 0.0], about, pressed))
+            })
+            .collect();
+        let plain = Similarity::fit(&pairs, &vec![true; pairs.len()]).unwrap();
+        let robust = fit_raw_similarity(&pairs).unwrap();
+        let error = |s: &Similarity| (s.rotation.to_degrees() - 2.0).abs();
+        assert!(error(&robust) < 1e-9, "robust fit off by {} deg", error(&robust));
+        assert!(
+            error(&plain) > 1e-4,
+            "the press should pull a plain fit ({} deg)",
+            error(&plain)
+        );
     }
 }

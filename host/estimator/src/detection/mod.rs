@@ -20,6 +20,7 @@ use nusense_geometry::{CornerIndex, PadGeometry, Point2, SquareIndex};
 
 use crate::config::Thresholds;
 use crate::error::EstimateError;
+use crate::motion::Similarity;
 use blobs::find_square_blobs;
 use indexing::index_lattice;
 use window::{add_to_histogram, centroid, mean_membership, CellFrame, Pixels};
@@ -34,6 +35,12 @@ const SEARCH_MAP_WIDTH: usize = 512;
 const AREA_RATIO_RANGE: (f64, f64) = (0.45, 2.2);
 /// Most centroid passes per square (one in a steady scene, a few after a fast move).
 const MAX_PASSES: usize = 5;
+/// A tracked square further than this many cells from where the lattice's rigid motion puts it is measured again
+/// from there: its window may have locked onto a neighbour after the camera jumped (a press moves a square much
+/// less than this).
+const RELOCK_CELLS: f64 = 0.35;
+/// The camera jumped when its rigid motion moved some square this many cells since the last frame.
+const JUMP_CELLS: f64 = 0.1;
 /// Samples across a cell the centroid needs; more pixels than this add time, not precision.
 const SAMPLES_PER_CELL: f64 = 36.0;
 /// A found centroid must sit on yellow: the mean membership within CENTRE_HALF cells of it at least this. The
@@ -85,6 +92,8 @@ pub struct FastTracker {
     previous: Vec<Option<Point2>>,
     /// Yellow area of each square in the last frame (for a re-tare).
     previous_area: Vec<Option<f64>>,
+    /// The lattice's rigid motion (raw px, from the reference) in the last frame.
+    last_motion: Similarity,
     thresholds: Thresholds,
 }
 
@@ -149,6 +158,7 @@ impl FastTracker {
             squares,
             previous: coarse.clone(),
             previous_area: Vec::new(),
+            last_motion: Similarity::IDENTITY,
             thresholds,
         };
         let measured = tracker.measure(frame, &coarse, None)?;
@@ -181,6 +191,7 @@ impl FastTracker {
     /// Makes the last tracked frame the reference: squares found there keep their new position and area (and the
     /// cells follow them); squares it missed keep the old reference.
     pub fn adopt_last_frame_as_reference(&mut self) -> Result<(), EstimateError> {
+        self.last_motion = Similarity::IDENTITY;
         for ((model, p), a) in self.squares.iter_mut().zip(&self.previous).zip(&self.previous_area) {
             if let (Some(p), Some(a)) = (p, a) {
                 model.reference = Some(*p);
@@ -204,6 +215,9 @@ impl FastTracker {
     pub fn track(&mut self, frame: &RgbImage) -> Result<Detection, EstimateError> {
         let predicted = self.predictions();
         let mut measured = self.measure(frame, &predicted, Some(&predicted))?;
+        if let Some(relocked) = self.relock(frame, &measured)? {
+            measured = relocked;
+        }
         let mut recovered = false;
         if self.tracking_failed(&measured, &predicted) {
             if let Ok(coarse) = full_search(frame, &self.pad) {
@@ -245,6 +259,70 @@ impl FastTracker {
             .zip(&self.previous)
             .map(|(model, prev)| prev.or(model.reference.map(|r| [r[0] + shift[0], r[1] + shift[1]])))
             .collect()
+    }
+
+    /// Measures the lattice again when the camera jumped since the last frame or a square slipped: the lattice's
+    /// rigid motion is a robust similarity of the raw image fitted on every square against its reference (a camera's
+    /// roll is exactly that), so the squares still locked on correctly outvote those that slipped onto a neighbour,
+    /// and every square is measured again from where that motion puts it. Windows started far from their square
+    /// (a jump) may stop before they settle, or settle on a neighbour; started there, they settle where a frame of a
+    /// still camera would. `None` when neither happened (the usual case: one measurement per frame).
+    fn relock(
+        &mut self,
+        frame: &RgbImage,
+        measured: &[Option<(Point2, f64)>],
+    ) -> Result<Option<Vec<Option<(Point2, f64)>>>, EstimateError> {
+        let pairs: Vec<(Point2, Point2)> = self
+            .squares
+            .iter()
+            .zip(measured)
+            .filter_map(|(model, m)| Some((model.reference?, m.as_ref()?.0)))
+            .collect();
+        let Some(motion) = crate::motion::fit_raw_similarity(&pairs) else {
+            return Ok(None);
+        };
+        let last = std::mem::replace(&mut self.last_motion, motion);
+        let expected: Vec<Option<Point2>> = self
+            .squares
+            .iter()
+            .map(|m| m.reference.map(|r| motion.apply(r)))
+            .collect();
+        let cells =
+            |a: Point2, b: Point2, model: &SquareModel| sub(a, b)[0].hypot(sub(a, b)[1]) / model.cell.min_step();
+        let jumped = self
+            .squares
+            .iter()
+            .zip(&expected)
+            .any(|(model, e)| match (e, model.reference) {
+                (Some(e), Some(r)) => cells(*e, last.apply(r), model) > JUMP_CELLS,
+                _ => false,
+            });
+        let slipped = self
+            .squares
+            .iter()
+            .zip(measured)
+            .zip(&expected)
+            .any(|((model, m), e)| match (m, e) {
+                (Some((m, _)), Some(e)) => cells(*m, *e, model) > RELOCK_CELLS,
+                (None, Some(_)) => true,
+                _ => false,
+            });
+        if !(jumped || slipped) {
+            return Ok(None);
+        }
+        let again = self.measure(frame, &expected, Some(&expected))?;
+        let merged = measured
+            .iter()
+            .zip(again)
+            .zip(self.squares.iter().zip(&expected))
+            .map(|((first, second), (model, e))| match (first, second, e) {
+                (_, Some(second), _) => Some(second),
+                // Found only from afar, nowhere near the rigid motion: a neighbour, not this square.
+                (Some((p, _)), None, Some(e)) if cells(*p, *e, model) > RELOCK_CELLS => None,
+                (first, None, _) => *first,
+            })
+            .collect();
+        Ok(Some(merged))
     }
 
     fn tracking_failed(&self, measured: &[Option<(Point2, f64)>], predicted: &[Option<Point2>]) -> bool {
