@@ -5,11 +5,13 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::time::Duration;
 
 use anyhow::{bail, Context};
 use nusense_daemon::api::{self, AccessPolicy, AppState, RecordingsDir};
 use nusense_daemon::foxglove_live::FoxgloveLive;
-use nusense_daemon::pipeline::{open_sources, Pipeline};
+use nusense_daemon::pipeline::{open_sources, Pipeline, PipelineHandle};
+use nusense_ros2::{sensor_token, DiscoveryRange, Ros2Out, Ros2Settings};
 use tokio::signal::unix::{signal, SignalKind};
 
 use super::common::{
@@ -41,6 +43,11 @@ pub struct Args {
     /// given alone. Loopback only: the protocol has no authentication (reach it from elsewhere through SSH).
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
     pub foxglove: Option<SocketAddr>,
+    /// Also publish the sensor as ROS 2 topics (/nusense/<serial>/wrench, image/compressed, contacts) over DDS,
+    /// in ROS_DOMAIN_ID (0 when unset), to this machine only unless ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET
+    /// (docs/integrations/ros2.md).
+    #[arg(long)]
+    pub ros2: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
@@ -77,6 +84,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         pipeline_options(&args.source, config.clone()),
     )?;
     let handle = pipeline.handle();
+    // Before the async runtime takes over this thread: it may wait for the board to say who it is.
+    let ros2 = if args.ros2 { Some(start_ros2(&handle)?) } else { None };
     runtime.block_on(async move {
         let listener = tokio::net::TcpListener::bind(args.listen)
             .await
@@ -108,10 +117,34 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         .await
         .context("serving HTTP")
     })?;
-    // Stops capture and estimation and finishes the recording (its summary and footer).
+    // The node leaves the DDS domain, then capture and estimation stop and the recording is finished (its summary
+    // and footer).
+    drop(ros2);
     drop(pipeline);
     eprintln!("nusense serve: stopped");
     Ok(ExitCode::SUCCESS)
+}
+
+/// The sensor's ROS 2 node, named after its board's serial number.
+fn start_ros2(handle: &PipelineHandle) -> anyhow::Result<Ros2Out> {
+    let settings = Ros2Settings::from_env()?;
+    // The board answers within a few hundred ms of the pipeline's start; a sensor without one is "unknown".
+    let serial = nusense_ros2::board_serial(handle, Duration::from_secs(5)).unwrap_or_default();
+    let ros2 = Ros2Out::start(handle.clone(), &sensor_token(&serial), settings)?;
+    let range = match ros2.settings().range {
+        DiscoveryRange::Localhost => "this machine only",
+        DiscoveryRange::Subnet => "the local network",
+    };
+    let topics = ros2.topics();
+    eprintln!(
+        "nusense serve: ROS 2 in domain {} ({range}): {} {} {} (frame {})",
+        ros2.settings().domain_id,
+        topics.wrench,
+        topics.image,
+        topics.contacts,
+        topics.frame_id
+    );
+    Ok(ros2)
 }
 
 /// The signals that ask a daemon to stop: Ctrl-C, `systemctl stop` / `kill`, and a closed terminal.

@@ -33,6 +33,8 @@ pub struct Options {
     /// recordings folder: a disk that fills up, without touching the machine's disks.
     pub small_disk_kib: Option<u64>,
     pub token: Option<String>,
+    /// Environment variables set for the daemon only.
+    pub env: Vec<(String, String)>,
 }
 
 impl Options {
@@ -41,6 +43,7 @@ impl Options {
             args: args.iter().map(|a| a.to_string()).collect(),
             small_disk_kib: None,
             token: None,
+            env: Vec::new(),
         }
     }
 
@@ -59,6 +62,11 @@ impl Options {
 
     pub fn arg(mut self, arg: impl Into<String>) -> Self {
         self.args.push(arg.into());
+        self
+    }
+
+    pub fn env(mut self, name: &str, value: &str) -> Self {
+        self.env.push((name.into(), value.into()));
         self
     }
 
@@ -101,6 +109,7 @@ impl Daemon {
             .env("XDG_DATA_HOME", data_home.path())
             .env("RUST_LOG", "info")
             .env_remove("NUSENSE_TOKEN")
+            .envs(options.env.iter().map(|(k, v)| (k, v)))
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(Stdio::piped());

@@ -8,4 +8,5 @@ mod daemon;
 mod lifecycle;
 mod load;
 mod replay;
+mod ros2;
 mod security;
