@@ -36,7 +36,10 @@ fn run(args: &[&str]) -> Output {
 fn the_python_client_type_checks() {
     let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join("mypy-cache");
     let output = run(&["-m", "mypy", "--cache-dir", cache.to_str().unwrap()]);
-    assert!(output.status.success(), "mypy --strict found errors in clients/python (above)");
+    assert!(
+        output.status.success(),
+        "mypy --strict found errors in clients/python (above)"
+    );
 }
 
 #[test]
@@ -44,7 +47,12 @@ fn the_python_client_suite_passes_with_nothing_skipped() {
     let output = run(&["-m", "pytest", "-q", "-p", "no:cacheprovider", "-rs", "tests"]);
     assert!(output.status.success(), "the Python client's tests failed (above)");
     let summary = String::from_utf8_lossy(&output.stdout);
-    let last = summary.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or_default().to_owned();
+    let last = summary
+        .lines()
+        .rev()
+        .find(|l| !l.trim().is_empty())
+        .unwrap_or_default()
+        .to_owned();
     assert!(
         last.contains(" passed") && !last.contains("skipped"),
         "every test of the Python client must run here: {last}"
