@@ -23,7 +23,7 @@ use crate::force::force;
 use crate::homography::Homography;
 use crate::inverse::{InverseModel, Stage1, Stage2, TestOutcome, MOTION_PARAMETERS};
 use crate::lattice::{CornerObservation, Lattice, SquareObservation};
-use crate::motion::{camera_motion, fit_raw_similarity};
+use crate::motion::{camera_motion, fit_raw_similarity, homography_of};
 use crate::pad_map::{camera_for, PadMapping};
 use crate::paper::PaperDetector;
 use crate::reading::{
@@ -387,7 +387,8 @@ impl Estimator {
             .filter_map(|((c, r), &ok)| if ok { r.zip(c.raw_px) } else { None })
             .collect();
         let coarse = fit_raw_similarity(&pairs).ok_or_else(degenerate)?;
-        let back = coarse.homography().and_then(|h| h.inverse()).ok_or_else(degenerate)?;
+        let forward = homography_of(&coarse).ok_or_else(degenerate)?;
+        let back = forward.inverse().ok_or_else(degenerate)?;
         let compensated: Vec<f64> = lattice
             .corners
             .iter()
@@ -411,7 +412,6 @@ impl Estimator {
             displacement[2 * i + 1] -= m[1];
         }
         // Where the whole motion (pad-plane homography, then the raw similarity) puts each rest corner.
-        let forward = coarse.homography().ok_or_else(degenerate)?;
         let moved_raw = |mm: Point2| {
             fine.apply(mm)
                 .and_then(|q| mapping.mm_to_raw(q))

@@ -8,7 +8,7 @@
 //! homography of the pad plane, fitted jointly with the tractions by [`crate::inverse`], takes what is left (the
 //! camera's tilt and shift, the pad's own motion).
 
-use nusense_geometry::Point2;
+use nusense_geometry::{Point2, Similarity};
 
 use crate::homography::Homography;
 use crate::reading::CameraMotion;
@@ -20,78 +20,19 @@ const OUTLIER_SIGMAS: f64 = 3.0;
 /// ...but never fewer than this fraction of the pairs is kept (a press never covers most of the pattern).
 const MIN_KEPT_FRACTION: f64 = 0.5;
 
-/// A similarity of the plane: `to = centre_to + z (from - centre_from)` with z = scale e^(i rotation).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Similarity {
-    /// From +x towards +y, radians.
-    pub rotation: f64,
-    pub scale: f64,
-    matrix: [f64; 9],
+/// The least-squares similarity over the pairs with `keep` set; a usable one only (points that spread, a finite map).
+fn fit_kept(pairs: &[(Point2, Point2)], keep: &[bool]) -> Option<Similarity> {
+    let kept: Vec<(Point2, Point2)> = pairs.iter().zip(keep).filter(|(_, &k)| k).map(|(p, _)| *p).collect();
+    if kept.len() < 2 {
+        return None;
+    }
+    let fitted = Similarity::fit(kept.iter())?;
+    (fitted.scale > 0.0 && fitted.matrix().iter().all(|v| v.is_finite())).then_some(fitted)
 }
 
-impl Similarity {
-    pub const IDENTITY: Self = Self {
-        rotation: 0.0,
-        scale: 1.0,
-        matrix: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-    };
-
-    /// Least squares over the pairs with `keep` set.
-    fn fit(pairs: &[(Point2, Point2)], keep: &[bool]) -> Option<Self> {
-        let kept = || pairs.iter().zip(keep).filter(|(_, &k)| k).map(|(p, _)| p);
-        let n = kept().count();
-        if n < 2 {
-            return None;
-        }
-        let n = n as f64;
-        let from = [
-            kept().map(|p| p.0[0]).sum::<f64>() / n,
-            kept().map(|p| p.0[1]).sum::<f64>() / n,
-        ];
-        let to = [
-            kept().map(|p| p.1[0]).sum::<f64>() / n,
-            kept().map(|p| p.1[1]).sum::<f64>() / n,
-        ];
-        // z = sum conj(a) b / sum |a|^2 over the centred pairs, in complex numbers.
-        let (mut re, mut im, mut norm) = (0.0, 0.0, 0.0);
-        for (a, b) in kept() {
-            let (x, y) = (a[0] - from[0], a[1] - from[1]);
-            let (u, v) = (b[0] - to[0], b[1] - to[1]);
-            re += x * u + y * v;
-            im += x * v - y * u;
-            norm += x * x + y * y;
-        }
-        if !(norm > 0.0) {
-            return None;
-        }
-        let (re, im) = (re / norm, im / norm);
-        let matrix = [
-            re,
-            -im,
-            to[0] - (re * from[0] - im * from[1]),
-            im,
-            re,
-            to[1] - (im * from[0] + re * from[1]),
-            0.0,
-            0.0,
-            1.0,
-        ];
-        let fitted = Self {
-            rotation: im.atan2(re),
-            scale: re.hypot(im),
-            matrix,
-        };
-        (fitted.scale > 0.0 && fitted.matrix.iter().all(|v| v.is_finite())).then_some(fitted)
-    }
-
-    pub fn homography(&self) -> Option<Homography> {
-        Homography::from_matrix(self.matrix)
-    }
-
-    pub fn apply(&self, p: Point2) -> Point2 {
-        let m = &self.matrix;
-        [m[0] * p[0] + m[1] * p[1] + m[2], m[3] * p[0] + m[4] * p[1] + m[5]]
-    }
+/// The similarity as a homography (for composing with the pad-plane motion).
+pub fn homography_of(similarity: &Similarity) -> Option<Homography> {
+    Homography::from_matrix(similarity.matrix())
 }
 
 /// The similarity of raw px that moves the rest frame's corners (`pairs.0`) onto this frame's (`pairs.1`), fitted on
@@ -99,7 +40,7 @@ impl Similarity {
 /// [`OUTLIER_SIGMAS`] robust sigmas (the corners a press moves).
 pub fn fit_raw_similarity(pairs: &[(Point2, Point2)]) -> Option<Similarity> {
     let mut keep = vec![true; pairs.len()];
-    let mut fit = Similarity::fit(pairs, &keep)?;
+    let mut fit = fit_kept(pairs, &keep)?;
     for _ in 1..ROBUST_ROUNDS {
         let misses: Vec<f64> = pairs
             .iter()
@@ -126,7 +67,7 @@ pub fn fit_raw_similarity(pairs: &[(Point2, Point2)]) -> Option<Similarity> {
             break;
         }
         keep = next;
-        fit = Similarity::fit(pairs, &keep)?;
+        fit = fit_kept(pairs, &keep)?;
     }
     Some(fit)
 }
@@ -134,7 +75,7 @@ pub fn fit_raw_similarity(pairs: &[(Point2, Point2)]) -> Option<Similarity> {
 /// The motion as users see it, from the rest frame's corners in raw px and where the whole fitted motion puts them:
 /// rotation and scale of the least-squares similarity between the two, and the pad centre's shift.
 pub fn camera_motion(pairs: &[(Point2, Point2)], centre_rest: Point2, centre_now: Point2) -> CameraMotion {
-    let Some(similarity) = Similarity::fit(pairs, &vec![true; pairs.len()]) else {
+    let Some(similarity) = fit_kept(pairs, &vec![true; pairs.len()]) else {
         return CameraMotion::NONE;
     };
     let shift_px = [centre_now[0] - centre_rest[0], centre_now[1] - centre_rest[1]];
@@ -212,7 +153,7 @@ mod tests {
                 (p, moved(2.0, 1.0, [0.0, 0.0], about, pressed))
             })
             .collect();
-        let plain = Similarity::fit(&pairs, &vec![true; pairs.len()]).unwrap();
+        let plain = fit_kept(&pairs, &vec![true; pairs.len()]).unwrap();
         let robust = fit_raw_similarity(&pairs).unwrap();
         let error = |s: &Similarity| (s.rotation.to_degrees() - 2.0).abs();
         assert!(error(&robust) < 1e-9, "robust fit off by {} deg", error(&robust));

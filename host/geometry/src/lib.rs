@@ -10,9 +10,11 @@
 
 pub mod camera;
 pub mod lattice;
+pub mod similarity;
 
 pub use camera::{CameraError, FisheyeCamera, PinholeCamera};
 pub use lattice::{CornerIndex, PadGeometry, SquareIndex};
+pub use similarity::Similarity;
 
 /// A 2-D point or vector in whichever frame the context names.
 pub type Point2 = [f64; 2];

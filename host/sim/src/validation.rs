@@ -9,7 +9,7 @@
 //! apart, so that a force calibration fitted on them is scored on the others.
 
 use image::RgbImage;
-use nusense_geometry::Point2;
+use nusense_geometry::{Point2, Similarity};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -440,28 +440,17 @@ impl ValidationRenderer {
 
 /// Least-squares similarity a -> b: rotation and scale about the centroid of a, and the centroid's motion.
 pub fn similarity(pairs: &[(Point2, Point2)]) -> ImageMotion {
-    let n = pairs.len().max(1) as f64;
-    let ca = [
-        pairs.iter().map(|p| p.0[0]).sum::<f64>() / n,
-        pairs.iter().map(|p| p.0[1]).sum::<f64>() / n,
-    ];
-    let cb = [
-        pairs.iter().map(|p| p.1[0]).sum::<f64>() / n,
-        pairs.iter().map(|p| p.1[1]).sum::<f64>() / n,
-    ];
-    // z = sum conj(a) b / sum |a|^2 in complex numbers: scale e^{i angle}.
-    let (mut re, mut im, mut norm) = (0.0f64, 0.0f64, 0.0f64);
-    for (a, b) in pairs {
-        let (ax, ay) = (a[0] - ca[0], a[1] - ca[1]);
-        let (bx, by) = (b[0] - cb[0], b[1] - cb[1]);
-        re += ax * bx + ay * by;
-        im += ax * by - ay * bx;
-        norm += ax * ax + ay * ay;
-    }
-    ImageMotion {
-        rotation_deg: im.atan2(re).to_degrees(),
-        shift_px: [cb[0] - ca[0], cb[1] - ca[1]],
-        scale: re.hypot(im) / norm.max(f64::MIN_POSITIVE),
+    match Similarity::fit(pairs.iter()) {
+        Some(fit) => ImageMotion {
+            rotation_deg: fit.rotation.to_degrees(),
+            shift_px: fit.shift(),
+            scale: fit.scale,
+        },
+        None => ImageMotion {
+            rotation_deg: 0.0,
+            shift_px: [0.0, 0.0],
+            scale: 0.0,
+        },
     }
 }
 

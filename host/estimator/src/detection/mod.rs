@@ -16,11 +16,10 @@ pub mod window;
 pub mod yellowness;
 
 use image::RgbImage;
-use nusense_geometry::{CornerIndex, PadGeometry, Point2, SquareIndex};
+use nusense_geometry::{CornerIndex, PadGeometry, Point2, Similarity, SquareIndex};
 
 use crate::config::Thresholds;
 use crate::error::EstimateError;
-use crate::motion::Similarity;
 use blobs::find_square_blobs;
 use indexing::index_lattice;
 use window::{add_to_histogram, centroid, mean_membership, CellFrame, Pixels};
