@@ -266,10 +266,14 @@ impl Sensors {
         // Sense and supply pins sit behind 2 kOhm: 56 cycles (2.3 us) settle them to 12 bits. The internal
         // channels need >= 10 us (DS10314 TS_temp, TS_vrefint): 480 cycles = 20 us.
         for ch in SENSE_CHANNELS.into_iter().chain([SUPPLY_CHANNEL]) {
-            pac::ADC1.smpr2().modify(|w| w.set_smp(usize::from(ch), SampleTime::CYCLES56));
+            pac::ADC1
+                .smpr2()
+                .modify(|w| w.set_smp(usize::from(ch), SampleTime::CYCLES56));
         }
         for ch in [VREFINT_CHANNEL, TEMPERATURE_CHANNEL] {
-            pac::ADC1.smpr1().modify(|w| w.set_smp(usize::from(ch - 10), SampleTime::CYCLES480));
+            pac::ADC1
+                .smpr1()
+                .modify(|w| w.set_smp(usize::from(ch - 10), SampleTime::CYCLES480));
         }
         pac::ADC1.cr2().modify(|w| w.set_adon(true));
         // tSTAB (3 us) for the converter, 10 us start-up for the sensor and reference: wait generously.

@@ -28,12 +28,8 @@ pub fn jump_if_requested() {
     // SAFETY: as above.
     unsafe { core::ptr::addr_of_mut!(REQUEST).write(MaybeUninit::new(0)) };
     // Map system memory at 0x0000_0000, as a BOOT0 boot would, so the bootloader finds its vectors.
-    embassy_stm32::pac::RCC
-        .apb2enr()
-        .modify(|w| w.set_syscfgen(true));
-    embassy_stm32::pac::SYSCFG
-        .memrm()
-        .modify(|w| w.set_mem_mode(1));
+    embassy_stm32::pac::RCC.apb2enr().modify(|w| w.set_syscfgen(true));
+    embassy_stm32::pac::SYSCFG.memrm().modify(|w| w.set_mem_mode(1));
     // SAFETY: the system memory holds a valid vector table; nothing has been set up that it would trip over.
     unsafe { cortex_m::asm::bootload(SYSTEM_MEMORY as *const u32) }
 }

@@ -39,7 +39,11 @@ mod tests {
         let mut sensors = Sensors::new(p.ADC1);
         let (calibrated, typical) = sensors.temperature_cross_check();
         let calibrated = calibrated.expect("the part has plausible TS_CAL1/TS_CAL2 words");
-        defmt::info!("temperature: calibrated {} degC, typical sensor {} degC", calibrated, typical);
+        defmt::info!(
+            "temperature: calibrated {} degC, typical sensor {} degC",
+            calibrated,
+            typical
+        );
         assert!((5.0..=60.0).contains(&calibrated));
         assert!((calibrated - typical).abs() <= 15.0);
     }
@@ -79,7 +83,10 @@ mod tests {
             store.save(&config, n, || erases += 1).unwrap();
         }
         let newest = store.load().unwrap().unwrap();
-        assert_eq!((newest.request_id, newest.config.ramp_ms), (slots + 1, (slots + 1) as u16));
+        assert_eq!(
+            (newest.request_id, newest.config.ramp_ms),
+            (slots + 1, (slots + 1) as u16)
+        );
         assert!((1..=2).contains(&erases));
     }
 

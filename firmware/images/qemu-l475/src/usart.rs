@@ -23,9 +23,7 @@ pub fn init(kernel_clock_hz: u32, baud: u32) {
         GPIOB.moder().modify(|w| w.set_moder(pin, Moder::ALTERNATE));
         GPIOB.afr(0).modify(|w| w.set_afr(pin, 7));
     }
-    USART1
-        .brr()
-        .write(|w| w.set_brr((kernel_clock_hz / baud) as u16));
+    USART1.brr().write(|w| w.set_brr((kernel_clock_hz / baud) as u16));
     USART1.cr1().write(|w| {
         w.set_te(true);
         w.set_re(true);
