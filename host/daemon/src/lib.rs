@@ -6,6 +6,7 @@
 //! speak.
 
 pub mod api;
+pub mod commands;
 mod dashboard;
 pub mod foxglove_live;
 pub mod pipeline;

@@ -12,18 +12,17 @@ mod stream;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, PoisonError};
 
-use axum::body::Body;
+use axum::body::{Body, Bytes};
 use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{Path as UrlPath, Query, State};
-use axum::http::{header, StatusCode, Uri};
+use axum::http::{header, HeaderMap, StatusCode, Uri};
 use axum::response::{IntoResponse, Redirect, Response};
 use axum::routing::{any, get, post, put};
 use axum::{Json, Router};
 use serde::{Deserialize, Serialize};
 
-use crate::pipeline::{
-    error_chain, BoardError, BoardStatus, LedCommand, PipelineError, PipelineHandle, PipelineStatus, ProcessedFrame,
-};
+use crate::commands::{apply_led_request, LedReply, TareReply};
+use crate::pipeline::{error_chain, BoardStatus, PipelineError, PipelineHandle, PipelineStatus, ProcessedFrame};
 use crate::record::{encode_jpeg, RecordSummary, RecorderOptions};
 use crate::SCHEMA_VERSION;
 use nusense_capture::{SceneControl, SourceInfo};
@@ -81,6 +80,21 @@ impl AppState {
             closing: tokio::sync::watch::Sender::new(false),
         }
     }
+
+    /// The same access and recordings folder for another sensor of the daemon (its own stream counters): what
+    /// answers that sensor's status and commands over Zenoh.
+    pub fn for_sensor(&self, pipeline: PipelineHandle, scene: Option<SceneControl>) -> Self {
+        Self {
+            pipeline,
+            scene,
+            access: self.access.clone(),
+            recordings: self.recordings.clone(),
+            stream: Arc::new(StreamStats::default()),
+            stream_options: self.stream_options,
+            encoded: Arc::default(),
+            closing: tokio::sync::watch::Sender::new(false),
+        }
+    }
 }
 
 pub fn router(state: AppState) -> Router {
@@ -114,11 +128,16 @@ pub struct Versioned<T> {
     body: T,
 }
 
-fn reply<T: Serialize>(body: T) -> Json<Versioned<T>> {
-    Json(Versioned {
+/// `body` beside `schema_version`, as every message of the API and of Zenoh carries it.
+pub fn versioned<T: Serialize>(body: T) -> Versioned<T> {
+    Versioned {
         schema_version: SCHEMA_VERSION,
         body,
-    })
+    }
+}
+
+fn reply<T: Serialize>(body: T) -> Json<Versioned<T>> {
+    Json(versioned(body))
 }
 
 #[derive(Debug)]
@@ -192,10 +211,15 @@ pub struct StatusMessage {
 }
 
 async fn status(State(state): State<AppState>) -> Json<Versioned<StatusMessage>> {
+    Json(status_message(&state))
+}
+
+/// What `GET /api/v1/status` answers (and the Zenoh queryable `nusense/<serial>/status`).
+pub fn status_message(state: &AppState) -> Versioned<StatusMessage> {
     let pipeline = state.pipeline.status();
     let board = state.pipeline.board().status();
     let latest_error = state.pipeline.latest_reading().and_then(|r| r.message.error.clone());
-    reply(StatusMessage {
+    versioned(StatusMessage {
         version: env!("CARGO_PKG_VERSION"),
         protocol_version: nusense_protocol::PROTOCOL_VERSION,
         simulator: state.scene.is_some(),
@@ -278,72 +302,41 @@ async fn schema() -> Response {
         .into_response()
 }
 
-async fn tare(State(state): State<AppState>) -> (StatusCode, Json<Versioned<serde_json::Value>>) {
-    state.pipeline.request_tare();
-    (
-        StatusCode::ACCEPTED,
-        reply(serde_json::json!({ "tare": "the next frame becomes the rest frame" })),
-    )
+async fn tare(State(state): State<AppState>) -> (StatusCode, Json<Versioned<TareReply>>) {
+    (StatusCode::ACCEPTED, reply(crate::commands::tare(&state.pipeline)))
 }
 
-/// `PUT /api/v1/led`: currents in mA per side, or `all`; `enabled` switches the addressed channels.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct LedBody {
-    top: Option<u16>,
-    right: Option<u16>,
-    bottom: Option<u16>,
-    left: Option<u16>,
-    all: Option<u16>,
-    enabled: Option<bool>,
-}
-
-#[derive(Serialize)]
-struct BoardReply {
-    board: BoardStatus,
-}
-
+/// `PUT /api/v1/led`: currents in mA per side, or `all`; `enabled` switches the addressed channels (checked in
+/// [`crate::commands`], the same as over Zenoh). JSON only: a web page cannot send that without the browser
+/// asking first.
 async fn set_led(
     State(state): State<AppState>,
-    body: Result<Json<LedBody>, JsonRejection>,
-) -> Result<Json<Versioned<BoardReply>>, ApiError> {
-    let Json(body) = body?;
-    let per_side = [body.top, body.right, body.bottom, body.left];
-    let current_ma = match body.all {
-        Some(_) if per_side.iter().any(Option::is_some) => {
-            return Err(ApiError::new(
-                StatusCode::UNPROCESSABLE_ENTITY,
-                "give either `all` or per-side currents, not both",
-            ))
-        }
-        Some(all) => [Some(all); nusense_protocol::CHANNEL_COUNT],
-        None => per_side,
-    };
-    if current_ma.iter().all(Option::is_none) && body.enabled.is_none() {
+    headers: HeaderMap,
+    body: Bytes,
+) -> Result<Json<Versioned<LedReply>>, ApiError> {
+    if !is_json(&headers) {
         return Err(ApiError::new(
-            StatusCode::UNPROCESSABLE_ENTITY,
-            "nothing to set: give currents in mA as `top`, `right`, `bottom`, `left` or `all`, and/or `enabled`",
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            "Expected request with `Content-Type: application/json`",
         ));
     }
-    let command = LedCommand {
-        current_ma,
-        enabled: body.enabled,
-    };
-    command
-        .validate()
-        .map_err(|e| ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, e.to_string()))?;
     let board = state.pipeline.board().clone();
-    let result = tokio::task::spawn_blocking(move || board.set_leds(&command))
+    let result = tokio::task::spawn_blocking(move || apply_led_request(&board, &body))
         .await
         .map_err(ApiError::internal)?;
-    match result {
-        Ok(()) => Ok(reply(BoardReply {
-            board: state.pipeline.board().status(),
-        })),
-        Err(e @ BoardError::AboveLimit { .. }) => Err(ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, e.to_string())),
-        Err(e @ BoardError::NoBoard) => Err(ApiError::new(StatusCode::SERVICE_UNAVAILABLE, e.to_string())),
-        Err(e @ BoardError::Link(_)) => Err(ApiError::new(StatusCode::BAD_GATEWAY, error_chain(&e))),
-    }
+    result.map(reply).map_err(|error| {
+        let status = StatusCode::from_u16(error.http_status()).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR);
+        ApiError::new(status, error.to_string())
+    })
+}
+
+/// `Content-Type: application/json` (or `application/...+json`), parameters such as `charset` allowed.
+fn is_json(headers: &HeaderMap) -> bool {
+    let Some(mime) = headers.get(header::CONTENT_TYPE).and_then(|v| v.to_str().ok()) else {
+        return false;
+    };
+    let essence = mime.split(';').next().unwrap_or_default().trim().to_ascii_lowercase();
+    essence == "application/json" || (essence.starts_with("application/") && essence.ends_with("+json"))
 }
 
 #[derive(Debug, Deserialize)]
