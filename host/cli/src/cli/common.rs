@@ -3,11 +3,15 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context};
 use nusense_capture::{
-    CameraSelector, PixelFormat, V4l2Options, SIM_DEFAULT_FPS, SIM_DEFAULT_HEIGHT, SIM_DEFAULT_WIDTH,
+    CameraSelector, PixelFormat, SceneControl, V4l2Options, SIM_DEFAULT_FPS, SIM_DEFAULT_HEIGHT, SIM_DEFAULT_WIDTH,
 };
-use nusense_daemon::pipeline::{BoardChoice, DecodeScale, FrameChoice, PipelineOptions};
+use nusense_daemon::pipeline::{
+    open_sources, Board, BoardChoice, BoardKind, DecodeScale, FrameChoice, Pipeline, PipelineOptions,
+};
 use nusense_estimator::{Mode, SensorConfig};
 
 /// Exit code of `analyze` and `replay` when some frames could not be measured (the others were).
@@ -98,6 +102,60 @@ pub fn board_choice(args: &SourceArgs, frames: &FrameChoice) -> BoardChoice {
         (Some(port), _) => BoardChoice::Port(port.clone()),
         (None, FrameChoice::Simulator { .. }) => BoardChoice::Virtual,
         (None, _) => BoardChoice::None,
+    }
+}
+
+/// One sensor of the daemon: its running pipeline and, on the simulator, its scene.
+pub struct Sensor {
+    pub pipeline: Pipeline,
+    pub scene: Option<SceneControl>,
+}
+
+/// Opens the sources and starts the pipeline of each of `count` sensors. Several sensors are simulated ones,
+/// each with its own virtual board (so its own serial number) and camera.
+pub fn start_sensors(
+    args: &SourceArgs,
+    config: &SensorConfig,
+    frames: &FrameChoice,
+    board: &BoardChoice,
+    count: u16,
+) -> anyhow::Result<Vec<Sensor>> {
+    if count > 1 && !matches!((frames, board), (FrameChoice::Simulator { .. }, BoardChoice::Virtual)) {
+        bail!("several sensors run on the simulator only (--sim without --board)");
+    }
+    (0..count)
+        .map(|i| {
+            let sources = open_sources(frames, board)
+                .with_context(|| format!("opening the frame source and LED board of sensor {}", i + 1))?;
+            let pipeline = Pipeline::start(sources.frames, sources.board, pipeline_options(args, config.clone()))?;
+            Ok(Sensor {
+                pipeline,
+                scene: sources.scene,
+            })
+        })
+        .collect()
+}
+
+/// How long a real board gets to connect and say its serial number, which names the sensor on Zenoh.
+const SERIAL_PATIENCE: Duration = Duration::from_secs(10);
+
+/// The serial number of the sensor's board, waiting for a real board's first connection.
+pub async fn sensor_serial(board: &dyn Board) -> anyhow::Result<String> {
+    let started = Instant::now();
+    loop {
+        if let Some(serial) = board.serial_number() {
+            return Ok(serial);
+        }
+        if board.status().kind == BoardKind::None {
+            bail!("--zenoh names each sensor by its LED board's serial number, and this sensor has no board (--board)");
+        }
+        if started.elapsed() > SERIAL_PATIENCE {
+            bail!(
+                "--zenoh names each sensor by its LED board's serial number, and the board did not connect within {} s",
+                SERIAL_PATIENCE.as_secs()
+            );
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
     }
 }
 

@@ -1,6 +1,9 @@
 //! `nusense serve`: the daemon. With no options it runs on the simulator (a virtual LED board and the
 //! simulated camera) and says so. SIGINT, SIGTERM and SIGHUP stop it cleanly: WebSocket clients are told, the
 //! recording is finished (summary and footer written), the board is left as it is, and the exit code is 0.
+//!
+//! With `--sensors N` (simulator only) the daemon runs N sensors, each with its own virtual board and serial: all
+//! of them on Zenoh, the first on the HTTP API, the dashboard, Foxglove and ROS 2.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -10,12 +13,13 @@ use std::time::Duration;
 use anyhow::{bail, Context};
 use nusense_daemon::api::{self, AccessPolicy, AppState, RecordingsDir};
 use nusense_daemon::foxglove_live::FoxgloveLive;
-use nusense_daemon::pipeline::{open_sources, Pipeline, PipelineHandle};
+use nusense_daemon::pipeline::PipelineHandle;
+use nusense_daemon::zenoh_out::{self, ZenohOut, ZenohSensor};
 use nusense_ros2::{sensor_token, DiscoveryRange, Ros2Out, Ros2Settings};
 use tokio::signal::unix::{signal, SignalKind};
 
 use super::common::{
-    board_choice, describe_start, frame_choice, init_logging, load_config, pipeline_options, SourceArgs,
+    board_choice, describe_start, frame_choice, init_logging, load_config, sensor_serial, start_sensors, SourceArgs,
 };
 
 pub const DEFAULT_PORT: u16 = 8750;
@@ -48,6 +52,19 @@ pub struct Args {
     /// (docs/integrations/ros2.md).
     #[arg(long)]
     pub ros2: bool,
+    /// Simulated sensors to run, each with its own virtual LED board (and serial number). All are on Zenoh; the
+    /// HTTP API, the dashboard, Foxglove and ROS 2 serve the first.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64),
+          conflicts_with_all = ["camera", "replay", "board"])]
+    pub sensors: u16,
+    /// Publish every sensor on Zenoh under nusense/<serial>/ (docs/integrations/zenoh.md): a peer listening on
+    /// ENDPOINT, tcp/127.0.0.1:7447 when given alone, loopback only, no multicast scouting.
+    #[arg(long, value_name = "ENDPOINT", num_args = 0..=1, default_missing_value = zenoh_out::DEFAULT_ENDPOINT)]
+    pub zenoh: Option<String>,
+    /// Publish on Zenoh with this Zenoh configuration (JSON5) instead, e.g. to connect to a router or to listen
+    /// beyond this machine (Zenoh's own access control then applies, not the daemon's).
+    #[arg(long, value_name = "FILE", conflicts_with = "zenoh")]
+    pub zenoh_config: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
@@ -67,26 +84,33 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         None => RecordingsDir::default_location()
             .context("no folder for recordings: neither XDG_DATA_HOME nor HOME is set; pass --recordings DIR")?,
     };
+    let zenoh_config = match (&args.zenoh, &args.zenoh_config) {
+        (_, Some(file)) => Some(zenoh_out::config_from_file(file)?),
+        (Some(endpoint), None) => Some(zenoh_out::loopback_peer_config(endpoint)?),
+        (None, None) => None,
+    };
     let config = load_config(args.source.config.as_ref())?;
     let frames = frame_choice(&args.source);
     let board = board_choice(&args.source, &frames);
-    eprintln!("{}", describe_start(&frames, &board));
+    match args.sensors {
+        1 => eprintln!("{}", describe_start(&frames, &board)),
+        n => eprintln!(
+            "{}; {n} sensors, each its own simulated camera and virtual board",
+            describe_start(&frames, &board)
+        ),
+    }
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
         .context("starting the async runtime")?;
     // Signals are caught from here on, before anything needs finishing: a SIGTERM during start-up is a clean stop.
     let stop = runtime.block_on(async { StopSignals::install() })?;
-    let sources = open_sources(&frames, &board).context("opening the frame source and LED board")?;
-    let pipeline = Pipeline::start(
-        sources.frames,
-        sources.board,
-        pipeline_options(&args.source, config.clone()),
-    )?;
-    let handle = pipeline.handle();
+    let sensors = start_sensors(&args.source, &config, &frames, &board, args.sensors)?;
+    let handle = sensors[0].pipeline.handle();
+    let scene = sensors[0].scene.clone();
     // Before the async runtime takes over this thread: it may wait for the board to say who it is.
     let ros2 = if args.ros2 { Some(start_ros2(&handle)?) } else { None };
-    runtime.block_on(async move {
+    runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind(args.listen)
             .await
             .with_context(|| format!("listening on {}", args.listen))?;
@@ -100,12 +124,25 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             None => None,
         };
         let access = AccessPolicy::new(local, &args.allow_host, token.as_deref());
-        let state = AppState::new(
-            handle,
-            sources.scene,
-            access,
-            RecordingsDir::new(recordings_dir.clone()),
-        );
+        let state = AppState::new(handle, scene, access, RecordingsDir::new(recordings_dir.clone()));
+        let zenoh = match zenoh_config {
+            Some(zenoh_config) => {
+                let mut served = Vec::new();
+                for (i, sensor) in sensors.iter().enumerate() {
+                    let api = match i {
+                        0 => state.clone(),
+                        _ => state.for_sensor(sensor.pipeline.handle(), sensor.scene.clone()),
+                    };
+                    let serial = sensor_serial(sensor.pipeline.handle().board().as_ref()).await?;
+                    served.push(ZenohSensor { serial, api });
+                }
+                let serials: Vec<String> = served.iter().map(|s| s.serial.clone()).collect();
+                let zenoh = ZenohOut::start(zenoh_config, served).await?;
+                eprintln!("nusense serve: on Zenoh as nusense/{{{}}}/", serials.join(","));
+                Some(zenoh)
+            }
+            None => None,
+        };
         eprintln!(
             "nusense serve: dashboard at http://{local}/  (API under /api/v1/, recordings in {}; stop with Ctrl-C)",
             recordings_dir.display()
@@ -115,12 +152,17 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             eprintln!("nusense serve: {name}: stopping");
         })
         .await
-        .context("serving HTTP")
+        .context("serving HTTP")?;
+        // Zenoh clients see every sensor's liveliness end before the sensors stop.
+        if let Some(zenoh) = zenoh {
+            zenoh.close().await;
+        }
+        anyhow::Ok(())
     })?;
-    // The node leaves the DDS domain, then capture and estimation stop and the recording is finished (its summary
-    // and footer).
+    // The node leaves the DDS domain, then capture and estimation stop and the recordings are finished (their
+    // summary and footer).
     drop(ros2);
-    drop(pipeline);
+    drop(sensors);
     eprintln!("nusense serve: stopped");
     Ok(ExitCode::SUCCESS)
 }

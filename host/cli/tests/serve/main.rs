@@ -10,3 +10,4 @@ mod load;
 mod replay;
 mod ros2;
 mod security;
+mod zenoh_sensors;

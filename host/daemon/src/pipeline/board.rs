@@ -142,6 +142,15 @@ pub trait Board: Send + Sync {
     fn status(&self) -> BoardStatus;
     /// The board's events (telemetry, connects, disconnects) as they happen, for recordings. None without a board.
     fn events(&self) -> Option<Receiver<BoardEvent>>;
+    /// The board's USB serial number (its MCU's unique id in hex), once known: at once for the virtual board, from
+    /// the first connection for a real one. None without a board. It names the sensor on Zenoh.
+    fn serial_number(&self) -> Option<String>;
+}
+
+/// The USB serial number a board reports: its MCU's unique id, upper-case hex (as the firmware's USB stack
+/// writes it).
+pub fn serial_number_of(info: &nusense_protocol::DeviceInfo) -> String {
+    info.mcu_uid.iter().map(|byte| format!("{byte:02X}")).collect()
 }
 
 /// No board attached: LEDs are not the daemon's to control (replay, a camera with its own lighting).
@@ -167,6 +176,10 @@ impl Board for NoBoard {
         }
     }
     fn events(&self) -> Option<Receiver<BoardEvent>> {
+        None
+    }
+
+    fn serial_number(&self) -> Option<String> {
         None
     }
 }
@@ -258,6 +271,13 @@ impl Board for LinkedBoard {
 
     fn events(&self) -> Option<Receiver<BoardEvent>> {
         Some(self.link.subscribe())
+    }
+
+    fn serial_number(&self) -> Option<String> {
+        match &self.virtual_board {
+            Some(board) => Some(board.serial_number()),
+            None => self.link.state().info.as_ref().map(serial_number_of),
+        }
     }
 }
 

@@ -36,7 +36,10 @@ use nusense_capture::{
     unix_time_us, CaptureError, DecodeOptions, Decoder, FramePixels, FrameSource, PixelRect, Scale, SourceInfo,
 };
 
-pub use board::{Board, BoardError, BoardKind, BoardStatus, LedCommand, LedState, LinkedBoard, NoBoard, LED_LIMIT_MA};
+pub use board::{
+    serial_number_of, Board, BoardError, BoardKind, BoardStatus, LedCommand, LedState, LinkedBoard, NoBoard,
+    LED_LIMIT_MA,
+};
 pub use queue::DropOldestQueue;
 pub use sources::{open_sources, BoardChoice, FrameChoice, SourceError, Sources};
 pub use stats::{summarise, LatencySummary, LatencyWindow};

@@ -1,0 +1,124 @@
+//! `nusense serve --sim --sensors 2 --zenoh` with a separate process as the consumer: the Python Zenoh client of
+//! the project's .venv (zenoh_consumer.py beside this file) receives both sensors' readings at once, queries
+//! status, sets LEDs, tares, gets the HTTP API's error texts for bad LED bodies, and sees both sensors' liveliness
+//! end when the daemon stops.
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Command, Stdio};
+
+use serde_json::{json, Value};
+
+use crate::daemon::{Daemon, Options};
+
+fn python() -> std::path::PathBuf {
+    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../.venv/bin/python");
+    assert!(
+        venv.exists(),
+        "{} is missing: `scripts/setup test` creates it (eclipse-zenoh for this test)",
+        venv.display()
+    );
+    venv
+}
+
+/// A loopback port nobody listens on now (the daemon's Zenoh endpoint must be known to the consumer).
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_separate_zenoh_process_sees_two_sensors_commands_them_and_sees_them_go() {
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let daemon = Daemon::start(
+        Options::sim(160, 120, 10.0)
+            .arg("--sensors")
+            .arg("2")
+            .arg("--zenoh")
+            .arg(endpoint.clone()),
+    );
+    daemon
+        .wait_reading("with the board's LED state", |r| r["led"].is_object())
+        .await;
+    let first_serial: String = daemon.status().await["board"]["link"]["info"]["mcu_uid"]
+        .as_array()
+        .expect("the virtual board's identity")
+        .iter()
+        .map(|byte| format!("{:02X}", byte.as_u64().unwrap()))
+        .collect();
+    // What the HTTP API answers to bad LED bodies: Zenoh must answer the same, word for word.
+    let mut http_errors = Vec::new();
+    for body in [
+        json!({ "top": 121 }),
+        json!({ "middle": 10 }),
+        json!({}),
+        json!({ "all": 5, "left": 5 }),
+    ] {
+        let (code, reply) = daemon.send("PUT", "/api/v1/led", body.clone()).await;
+        assert_eq!(code, 422, "{reply}");
+        http_errors.push(json!([body, reply["error"]]));
+    }
+    assert!(
+        http_errors[0][1].as_str().unwrap().contains("above the 120 mA limit"),
+        "{http_errors:?}"
+    );
+
+    let schema = Path::new(env!("CARGO_MANIFEST_DIR")).join("../daemon/schema/reading.schema.json");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/serve/zenoh_consumer.py");
+    let mut consumer = Command::new(python())
+        .arg(script)
+        .args(["--connect", &endpoint, "--sensors", "2", "--schema"])
+        .arg(schema)
+        .arg("--http-errors")
+        .arg(Value::Array(http_errors.clone()).to_string())
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the Python consumer");
+    let stdout = BufReader::new(consumer.stdout.take().unwrap());
+    let mut events = stdout
+        .lines()
+        .map_while(Result::ok)
+        .map(|line| serde_json::from_str::<Value>(&line).unwrap_or_else(|e| panic!("consumer said {line:?}: {e}")));
+    let Some(checked) = events.next() else {
+        let output = consumer.wait_with_output().unwrap();
+        panic!(
+            "the consumer failed: {}\ndaemon log:\n{}",
+            String::from_utf8_lossy(&output.stderr),
+            daemon.log()
+        );
+    };
+    assert_eq!(checked["event"], "checked", "{checked}");
+    let serials: Vec<&str> = checked["serials"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_str().unwrap())
+        .collect();
+    assert_eq!(serials.len(), 2, "{checked}");
+    assert_ne!(serials[0], serials[1]);
+    assert!(
+        serials.contains(&first_serial.as_str()),
+        "the HTTP API's sensor ({first_serial}) is one of the Zenoh sensors: {checked}"
+    );
+    let expected_errors: Vec<&Value> = http_errors.iter().map(|pair| &pair[1]).collect();
+    let got_errors: Vec<&Value> = checked["led_errors"].as_array().unwrap().iter().collect();
+    assert_eq!(got_errors, expected_errors);
+
+    let ready = events.next().expect("ready_to_stop");
+    assert_eq!(ready["event"], "ready_to_stop");
+    let status = daemon.stop_with(libc::SIGTERM);
+    assert!(status.success(), "{status:?}");
+    let gone = events.next().expect("the consumer saw the sensors go");
+    assert_eq!(gone, json!({ "event": "gone", "serials": serials }));
+    let output = consumer.wait_with_output().unwrap();
+    assert!(
+        output.status.success(),
+        "consumer: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
