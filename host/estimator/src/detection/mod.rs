@@ -78,6 +78,9 @@ pub struct Detection {
     pub corners: Vec<Option<Point2>>,
     /// Whether this frame needed a full-frame search.
     pub recovered: bool,
+    /// Times the squares were measured in this frame: 1 in a steady scene, 2 when the tracker re-measured them
+    /// from the lattice's rigid motion (the camera jumped or a square slipped), one more after a full search.
+    pub measurement_passes: u32,
 }
 
 /// The fast detector with its tracking state.
@@ -183,6 +186,7 @@ impl FastTracker {
                 squares: squares_px,
                 corners,
                 recovered: false,
+                measurement_passes: 1,
             },
         ))
     }
@@ -214,8 +218,10 @@ impl FastTracker {
     pub fn track(&mut self, frame: &RgbImage) -> Result<Detection, EstimateError> {
         let predicted = self.predictions();
         let mut measured = self.measure(frame, &predicted, Some(&predicted))?;
+        let mut measurement_passes = 1;
         if let Some(relocked) = self.relock(frame, &measured)? {
             measured = relocked;
+            measurement_passes += 1;
         }
         let mut recovered = false;
         if self.tracking_failed(&measured, &predicted) {
@@ -223,6 +229,7 @@ impl FastTracker {
                 if let Some(aligned) = self.align_to_reference(&coarse) {
                     measured = self.measure(frame, &aligned, Some(&aligned))?;
                     recovered = true;
+                    measurement_passes += 1;
                 }
             }
         }
@@ -234,6 +241,7 @@ impl FastTracker {
             squares,
             corners,
             recovered,
+            measurement_passes,
         })
     }
 
@@ -260,12 +268,13 @@ impl FastTracker {
             .collect()
     }
 
-    /// Measures the lattice again when the camera jumped since the last frame or a square slipped: the lattice's
-    /// rigid motion is a robust similarity of the raw image fitted on every square against its reference (a camera's
-    /// roll is exactly that), so the squares still locked on correctly outvote those that slipped onto a neighbour,
-    /// and every square is measured again from where that motion puts it. Windows started far from their square
-    /// (a jump) may stop before they settle, or settle on a neighbour; started there, they settle where a frame of a
-    /// still camera would. `None` when neither happened (the usual case: one measurement per frame).
+    /// Measures the lattice again when the camera jumped since the last frame or a found square slipped (a lost one
+    /// does not count: see below): the lattice's rigid motion is a robust similarity of the raw image fitted on every
+    /// square against its reference (a camera's roll is exactly that), so the squares still locked on correctly
+    /// outvote those that slipped onto a neighbour, and every square is measured again from where that motion puts
+    /// it. Windows started far from their square (a jump) may stop before they settle, or settle on a neighbour;
+    /// started there, they settle where a frame of a still camera would. `None` when neither happened (the usual
+    /// case, a damaged or partly covered pad included: one measurement per frame).
     fn relock(
         &mut self,
         frame: &RgbImage,
@@ -296,6 +305,9 @@ impl FastTracker {
                 (Some(e), Some(r)) => cells(*e, last.apply(r), model) > JUMP_CELLS,
                 _ => false,
             });
+        // A square that is simply gone (ink lost, something covering it) slipped nowhere: measuring the others
+        // again would not find it, and on a damaged pad would double every frame's cost. When a jump lost it, the
+        // squares still found show the jump.
         let slipped = self
             .squares
             .iter()
@@ -303,7 +315,6 @@ impl FastTracker {
             .zip(&expected)
             .any(|((model, m), e)| match (m, e) {
                 (Some((m, _)), Some(e)) => cells(*m, *e, model) > RELOCK_CELLS,
-                (None, Some(_)) => true,
                 _ => false,
             });
         if !(jumped || slipped) {
