@@ -10,5 +10,5 @@ mod messages;
 mod node;
 mod settings;
 
-pub use node::{board_serial, Ros2Error, Ros2Out, Topics};
+pub use node::{Ros2Error, Ros2Out, Topics};
 pub use settings::{sensor_token, DiscoveryRange, Ros2Settings, SettingsError};

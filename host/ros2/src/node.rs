@@ -4,9 +4,8 @@
 use std::net::{IpAddr, Ipv4Addr};
 use std::sync::Arc;
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
 
-use nusense_daemon::pipeline::{BoardKind, PipelineHandle, PublishedReading};
+use nusense_daemon::pipeline::{PipelineHandle, PublishedReading};
 use nusense_daemon::record::encode_jpeg;
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::dds::{Context, Node, Publisher};
@@ -158,22 +157,6 @@ impl Drop for Ros2Out {
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
-    }
-}
-
-/// The LED board's serial number (its MCU's unique id in hex, as its USB descriptor spells it), waiting up to
-/// `wait` for the board to answer; `None` without a board.
-pub fn board_serial(pipeline: &PipelineHandle, wait: Duration) -> Option<String> {
-    let deadline = Instant::now() + wait;
-    loop {
-        let status = pipeline.board().status();
-        if let Some(info) = status.link.as_ref().and_then(|link| link.info.as_ref()) {
-            return Some(info.mcu_uid.iter().map(|byte| format!("{byte:02X}")).collect());
-        }
-        if status.kind == BoardKind::None || Instant::now() >= deadline {
-            return None;
-        }
-        std::thread::sleep(Duration::from_millis(20));
     }
 }
 

@@ -2,7 +2,6 @@
 //! config, logging.
 
 use std::path::PathBuf;
-
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
@@ -10,7 +9,7 @@ use nusense_capture::{
     CameraSelector, PixelFormat, SceneControl, V4l2Options, SIM_DEFAULT_FPS, SIM_DEFAULT_HEIGHT, SIM_DEFAULT_WIDTH,
 };
 use nusense_daemon::pipeline::{
-    open_sources, Board, BoardChoice, BoardKind, DecodeScale, FrameChoice, Pipeline, PipelineOptions,
+    open_sources, BoardChoice, BoardKind, DecodeScale, FrameChoice, Pipeline, PipelineOptions,
 };
 use nusense_estimator::{Mode, SensorConfig};
 
@@ -136,26 +135,28 @@ pub fn start_sensors(
         .collect()
 }
 
-/// How long a real board gets to connect and say its serial number, which names the sensor on Zenoh.
+/// How long a real board gets to connect and say its serial number, which names the sensor.
 const SERIAL_PATIENCE: Duration = Duration::from_secs(10);
 
-/// The serial number of the sensor's board, waiting for a real board's first connection.
-pub async fn sensor_serial(board: &dyn Board) -> anyhow::Result<String> {
-    let started = Instant::now();
-    loop {
-        if let Some(serial) = board.serial_number() {
-            return Ok(serial);
+impl Sensor {
+    /// The sensor's identity wherever the daemon publishes it (its Zenoh keys, its ROS 2 names, the status): its
+    /// LED board's USB serial number, waiting for a real board's first connection. The error says why there is
+    /// none. It blocks: call it before the async runtime takes the thread.
+    pub fn serial_number(&self) -> anyhow::Result<String> {
+        let board = self.pipeline.handle().board().clone();
+        let started = Instant::now();
+        loop {
+            if let Some(serial) = board.serial_number() {
+                return Ok(serial);
+            }
+            if board.status().kind == BoardKind::None {
+                bail!("this sensor has no LED board (--board)");
+            }
+            if started.elapsed() > SERIAL_PATIENCE {
+                bail!("its LED board did not connect within {} s", SERIAL_PATIENCE.as_secs());
+            }
+            std::thread::sleep(Duration::from_millis(20));
         }
-        if board.status().kind == BoardKind::None {
-            bail!("--zenoh names each sensor by its LED board's serial number, and this sensor has no board (--board)");
-        }
-        if started.elapsed() > SERIAL_PATIENCE {
-            bail!(
-                "--zenoh names each sensor by its LED board's serial number, and the board did not connect within {} s",
-                SERIAL_PATIENCE.as_secs()
-            );
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
     }
 }
 

@@ -8,9 +8,8 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Duration;
 
-use anyhow::{bail, Context};
+use anyhow::{anyhow, bail, Context};
 use nusense_daemon::api::{self, AccessPolicy, AppState, RecordingsDir};
 use nusense_daemon::foxglove_live::FoxgloveLive;
 use nusense_daemon::pipeline::PipelineHandle;
@@ -19,7 +18,7 @@ use nusense_ros2::{sensor_token, DiscoveryRange, Ros2Out, Ros2Settings};
 use tokio::signal::unix::{signal, SignalKind};
 
 use super::common::{
-    board_choice, describe_start, frame_choice, init_logging, load_config, sensor_serial, start_sensors, SourceArgs,
+    board_choice, describe_start, frame_choice, init_logging, load_config, start_sensors, Sensor, SourceArgs,
 };
 
 pub const DEFAULT_PORT: u16 = 8750;
@@ -108,8 +107,16 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let sensors = start_sensors(&args.source, &config, &frames, &board, args.sensors)?;
     let handle = sensors[0].pipeline.handle();
     let scene = sensors[0].scene.clone();
-    // Before the async runtime takes over this thread: it may wait for the board to say who it is.
-    let ros2 = if args.ros2 { Some(start_ros2(&handle)?) } else { None };
+    // Each sensor's name on Zenoh and ROS 2, asked before the async runtime takes over this thread: a real board
+    // may take a moment to connect and say it.
+    let serials: Vec<anyhow::Result<String>> = match args.ros2 || zenoh_config.is_some() {
+        true => sensors.iter().map(Sensor::serial_number).collect(),
+        false => Vec::new(),
+    };
+    let ros2 = match args.ros2 {
+        true => Some(start_ros2(&handle, &serials[0])?),
+        false => None,
+    };
     runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind(args.listen)
             .await
@@ -128,13 +135,18 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let zenoh = match zenoh_config {
             Some(zenoh_config) => {
                 let mut served = Vec::new();
-                for (i, sensor) in sensors.iter().enumerate() {
+                for (i, (sensor, serial)) in sensors.iter().zip(&serials).enumerate() {
                     let api = match i {
                         0 => state.clone(),
                         _ => state.for_sensor(sensor.pipeline.handle(), sensor.scene.clone()),
                     };
-                    let serial = sensor_serial(sensor.pipeline.handle().board().as_ref()).await?;
-                    served.push(ZenohSensor { serial, api });
+                    let serial = serial.as_ref().map_err(|why| {
+                        anyhow!("--zenoh names each sensor by its LED board's serial number: {why:#}")
+                    })?;
+                    served.push(ZenohSensor {
+                        serial: serial.clone(),
+                        api,
+                    });
                 }
                 let serials: Vec<String> = served.iter().map(|s| s.serial.clone()).collect();
                 let zenoh = ZenohOut::start(zenoh_config, served).await?;
@@ -167,12 +179,17 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// The sensor's ROS 2 node, named after its board's serial number.
-fn start_ros2(handle: &PipelineHandle) -> anyhow::Result<Ros2Out> {
+/// The sensor's ROS 2 node, named after its board's serial number; a sensor without one is `unknown`.
+fn start_ros2(handle: &PipelineHandle, serial: &anyhow::Result<String>) -> anyhow::Result<Ros2Out> {
     let settings = Ros2Settings::from_env()?;
-    // The board answers within a few hundred ms of the pipeline's start; a sensor without one is "unknown".
-    let serial = nusense_ros2::board_serial(handle, Duration::from_secs(5)).unwrap_or_default();
-    let ros2 = Ros2Out::start(handle.clone(), &sensor_token(&serial), settings)?;
+    let serial = match serial {
+        Ok(serial) => serial.as_str(),
+        Err(why) => {
+            eprintln!("nusense serve: ROS 2: {why:#}, so the sensor is named `unknown`");
+            ""
+        }
+    };
+    let ros2 = Ros2Out::start(handle.clone(), &sensor_token(serial), settings)?;
     let range = match ros2.settings().range {
         DiscoveryRange::Localhost => "this machine only",
         DiscoveryRange::Subnet => "the local network",

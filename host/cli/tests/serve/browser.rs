@@ -364,6 +364,16 @@ async fn dashboard_shows_the_camera_with_its_overlay_and_follows_the_contact() {
         leds.contains("top") && leds.contains("mA"),
         "LED currents shown: {leds}"
     );
+    // The board line names the sensor as its Zenoh keys and ROS 2 names do: by its board's serial number.
+    let serial = daemon.status().await["serial_number"]
+        .as_str()
+        .expect("the virtual board's serial number in the status")
+        .to_owned();
+    let board_line = driver.text("board-state").await;
+    assert!(
+        board_line.starts_with(&format!("virtual board {serial} on ")),
+        "{board_line}"
+    );
 
     // Release: the contact disappears again.
     daemon

@@ -1,7 +1,7 @@
-//! `nusense serve --sim --sensors 2 --zenoh` with a separate process as the consumer: the Python Zenoh client of
-//! the project's .venv (zenoh_consumer.py beside this file) receives both sensors' readings at once, queries
-//! status, sets LEDs, tares, gets the HTTP API's error texts for bad LED bodies, and sees both sensors' liveliness
-//! end when the daemon stops.
+//! `nusense serve --sim --sensors 2 --zenoh --ros2` with a separate process as the consumer: the Python Zenoh
+//! client of the project's .venv (zenoh_consumer.py beside this file) receives both sensors' readings at once,
+//! queries status, sets LEDs, tares, gets the HTTP API's error texts for bad LED bodies, and sees both sensors'
+//! liveliness end when the daemon stops; the first sensor's ROS 2 names carry the same serial.
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
@@ -33,12 +33,16 @@ fn free_port() -> u16 {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_separate_zenoh_process_sees_two_sensors_commands_them_and_sees_them_go() {
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    // ROS 2 on as well (in a DDS domain of this test's own): both ways out at once, naming the sensor alike.
+    let domain = 100 + std::process::id() % 100;
     let daemon = Daemon::start(
         Options::sim(160, 120, 10.0)
             .arg("--sensors")
             .arg("2")
             .arg("--zenoh")
-            .arg(endpoint.clone()),
+            .arg(endpoint.clone())
+            .arg("--ros2")
+            .env("ROS_DOMAIN_ID", &domain.to_string()),
     );
     daemon
         .wait_reading("with the board's LED state", |r| r["led"].is_object())
@@ -49,6 +53,20 @@ async fn a_separate_zenoh_process_sees_two_sensors_commands_them_and_sees_them_g
         .iter()
         .map(|byte| format!("{:02X}", byte.as_u64().unwrap()))
         .collect();
+    // One identity everywhere: the status (and the dashboard) say it, and the ROS 2 names carry it as a ROS name
+    // token (a name must not start with a digit, hence `sn_` before a serial that does).
+    assert_eq!(daemon.status().await["serial_number"], json!(first_serial));
+    let ros2_token = match first_serial.starts_with(|c: char| c.is_ascii_digit()) {
+        true => format!("sn_{first_serial}"),
+        false => first_serial.clone(),
+    };
+    assert!(
+        daemon.log().contains(&format!(
+            "ROS 2 in domain {domain} (this machine only): /nusense/{ros2_token}/wrench "
+        )),
+        "{}",
+        daemon.log()
+    );
     // What the HTTP API answers to bad LED bodies: Zenoh must answer the same, word for word.
     let mut http_errors = Vec::new();
     for body in [

@@ -199,6 +199,10 @@ pub struct StatusMessage {
     pub version: &'static str,
     pub protocol_version: u16,
     pub simulator: bool,
+    /// The sensor's identity: its LED board's USB serial number (its MCU's unique id in upper-case hex), the
+    /// `<serial>` of its Zenoh keys and, as a ROS name token, of its ROS 2 names; none without a board (or before
+    /// a real board's first connection).
+    pub serial_number: Option<String>,
     pub camera: SourceInfo,
     pub pipeline: PipelineStatus,
     pub board: BoardStatus,
@@ -223,6 +227,7 @@ pub fn status_message(state: &AppState) -> Versioned<StatusMessage> {
         version: env!("CARGO_PKG_VERSION"),
         protocol_version: nusense_protocol::PROTOCOL_VERSION,
         simulator: state.scene.is_some(),
+        serial_number: state.pipeline.board().serial_number(),
         camera: pipeline.source.clone(),
         problems: problems(&pipeline, &board, latest_error),
         pipeline,

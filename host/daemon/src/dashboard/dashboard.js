@@ -258,10 +258,11 @@ function drawLeds(led) {
   });
 }
 
-function describeBoard(board) {
+function describeBoard(board, serial) {
   if (board.kind === "none") return "no LED board: the LEDs are not the daemon's to control";
   const link = board.link || {};
-  const name = (board.kind === "virtual" ? "virtual board" : "LED board") + (link.port ? " on " + link.port : "");
+  const name = (board.kind === "virtual" ? "virtual board" : "LED board") + (serial ? " " + serial : "") +
+    (link.port ? " on " + link.port : "");
   if (!board.connected) return name + ": not connected" + (link.last_error ? " (" + link.last_error + ")" : "");
   const t = link.telemetry;
   return name + ", connected" + (t ? "; " + fmt(t.temperature_c, 1) + " °C, supply " + fmt(t.supply_mv / 1000, 2) + " V" : "");
@@ -275,7 +276,7 @@ async function refreshStatus() {
     const cam = status.camera;
     $("source").textContent = (status.simulator ? "simulator: " : cam.kind + ": ") + cam.name + " " + cam.width + "×" + cam.height +
       " — " + status.pipeline.frames_dropped + " frames dropped";
-    $("board-state").textContent = describeBoard(status.board);
+    $("board-state").textContent = describeBoard(status.board, status.serial_number);
     $("recordings-dir").textContent = status.recordings_dir;
     const rec = status.pipeline.recording;
     $("record").textContent = rec ? "Stop recording" : "Start recording";
