@@ -13,6 +13,8 @@ use nusense_daemon::pipeline::{
 };
 use nusense_estimator::{Mode, SensorConfig};
 
+use super::pairing::{pair, Device, DeviceName, Frames, SensorSpec};
+
 /// Exit code of `analyze` and `replay` when some frames could not be measured (the others were).
 pub const EXIT_SOME_FRAMES_FAILED: u8 = 2;
 
@@ -72,15 +74,7 @@ pub fn pipeline_options(args: &SourceArgs, config: SensorConfig) -> PipelineOpti
 /// What the frame-source options of `serve` and `record` select.
 pub fn frame_choice(args: &SourceArgs) -> FrameChoice {
     if let Some(camera) = &args.camera {
-        FrameChoice::Camera {
-            selector: CameraSelector::parse(camera),
-            options: V4l2Options {
-                width: args.width,
-                height: args.height,
-                fps: args.fps.round().clamp(1.0, 1000.0) as u32,
-                format: args.pixel_format,
-            },
-        }
+        camera_choice(args, CameraSelector::parse(camera))
     } else if let Some(path) = &args.replay {
         FrameChoice::Replay {
             path: path.clone(),
@@ -93,6 +87,19 @@ pub fn frame_choice(args: &SourceArgs) -> FrameChoice {
             height: args.height,
             fps: args.fps,
         }
+    }
+}
+
+/// A V4L2 camera with the source options' size, rate and pixel format.
+fn camera_choice(args: &SourceArgs, selector: CameraSelector) -> FrameChoice {
+    FrameChoice::Camera {
+        selector,
+        options: V4l2Options {
+            width: args.width,
+            height: args.height,
+            fps: args.fps.round().clamp(1.0, 1000.0) as u32,
+            format: args.pixel_format,
+        },
     }
 }
 
@@ -110,20 +117,73 @@ pub struct Sensor {
     pub scene: Option<SceneControl>,
 }
 
-/// Opens the sources and starts the pipeline of each of `count` sensors. Several sensors are simulated ones,
-/// each with its own virtual board (so its own serial number) and camera.
+/// What each sensor of the daemon runs on: `--sensors N` simulated ones (each its own virtual board), one per
+/// `--sensor` (its camera or replay, and its board, found among the attached devices), or the one the source
+/// options describe.
+pub fn sensor_sources(
+    args: &SourceArgs,
+    count: u16,
+    paired: &[SensorSpec],
+) -> anyhow::Result<Vec<(FrameChoice, BoardChoice)>> {
+    if !paired.is_empty() {
+        return paired_sources(args, paired);
+    }
+    let frames = frame_choice(args);
+    let board = board_choice(args, &frames);
+    if count > 1 && !matches!((&frames, &board), (FrameChoice::Simulator { .. }, BoardChoice::Virtual)) {
+        bail!("--sensors runs several simulated sensors (--sim without --board); real ones are each a --sensor");
+    }
+    Ok(vec![(frames, board); usize::from(count)])
+}
+
+/// One sensor per `--sensor`, its devices matched against the cameras and boards attached now.
+fn paired_sources(args: &SourceArgs, specs: &[SensorSpec]) -> anyhow::Result<Vec<(FrameChoice, BoardChoice)>> {
+    let cameras: Vec<Device> = nusense_capture::list_cameras()
+        .into_iter()
+        .map(|camera| Device {
+            path: camera.path,
+            serial: camera.usb_serial,
+        })
+        .collect();
+    // Boards named by path need no listing: a machine whose serial ports cannot be listed still runs them.
+    let boards: Vec<Device> = match nusense_board::discover() {
+        Ok(boards) => boards
+            .into_iter()
+            .map(|board| Device {
+                path: board.path,
+                serial: board.serial_number,
+            })
+            .collect(),
+        Err(_) if specs.iter().all(|spec| matches!(spec.board, DeviceName::Path(_))) => Vec::new(),
+        Err(error) => return Err(error).context("listing the LED boards attached"),
+    };
+    Ok(pair(specs, &cameras, &boards)?
+        .into_iter()
+        .map(|sensor| {
+            let frames = match sensor.frames {
+                Frames::Camera(DeviceName::Path(path)) => camera_choice(args, CameraSelector::Path(path.into())),
+                Frames::Camera(DeviceName::Serial(serial)) => camera_choice(args, CameraSelector::Serial(serial)),
+                Frames::Replay(path) => FrameChoice::Replay {
+                    path,
+                    fps: args.fps,
+                    looping: args.looping,
+                },
+            };
+            (frames, BoardChoice::Port(sensor.board_path))
+        })
+        .collect())
+}
+
+/// Opens the sources and starts the pipeline of each sensor.
 pub fn start_sensors(
     args: &SourceArgs,
     config: &SensorConfig,
-    frames: &FrameChoice,
-    board: &BoardChoice,
-    count: u16,
+    sources: &[(FrameChoice, BoardChoice)],
 ) -> anyhow::Result<Vec<Sensor>> {
-    if count > 1 && !matches!((frames, board), (FrameChoice::Simulator { .. }, BoardChoice::Virtual)) {
-        bail!("several sensors run on the simulator only (--sim without --board)");
-    }
-    (0..count)
-        .map(|i| {
+    sources
+        .iter()
+        .enumerate()
+        .map(|(i, (frames, board))| {
             let sources = open_sources(frames, board)
                 .with_context(|| format!("opening the frame source and LED board of sensor {}", i + 1))?;
             let pipeline = Pipeline::start(sources.frames, sources.board, pipeline_options(args, config.clone()))?;

@@ -10,6 +10,7 @@ pub mod devices;
 pub mod hil;
 pub mod info;
 pub mod led;
+mod pairing;
 pub mod record;
 pub mod replay;
 pub mod report;

@@ -2,8 +2,9 @@
 //! simulated camera) and says so. SIGINT, SIGTERM and SIGHUP stop it cleanly: WebSocket clients are told, the
 //! recording is finished (summary and footer written), the board is left as it is, and the exit code is 0.
 //!
-//! With `--sensors N` (simulator only) the daemon runs N sensors, each with its own virtual board and serial: all
-//! of them on Zenoh, the first on the HTTP API, the dashboard, Foxglove and ROS 2.
+//! With `--sensors N` (simulator only) the daemon runs N sensors, each with its own virtual board and serial; with
+//! `--sensor camera=...,board=...` repeated, one sensor per pair of real devices. All of them are on Zenoh, the
+//! first on the HTTP API, the dashboard, Foxglove and ROS 2.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -17,9 +18,8 @@ use nusense_daemon::zenoh_out::{self, ZenohOut, ZenohSensor};
 use nusense_ros2::{sensor_token, DiscoveryRange, Ros2Out, Ros2Settings};
 use tokio::signal::unix::{signal, SignalKind};
 
-use super::common::{
-    board_choice, describe_start, frame_choice, init_logging, load_config, start_sensors, Sensor, SourceArgs,
-};
+use super::common::{describe_start, init_logging, load_config, sensor_sources, start_sensors, Sensor, SourceArgs};
+use super::pairing::SensorSpec;
 
 pub const DEFAULT_PORT: u16 = 8750;
 
@@ -56,6 +56,13 @@ pub struct Args {
     #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64),
           conflicts_with_all = ["camera", "replay", "board"])]
     pub sensors: u16,
+    /// One sensor of real devices: its camera (a V4L2 device path or the camera's USB serial number; or
+    /// replay=DIR|FILE.mcap instead) and its LED board (a serial device path or the board's USB serial number).
+    /// Repeat for several sensors, each its own pipeline and Zenoh key; the HTTP API, the dashboard, Foxglove and
+    /// ROS 2 serve the first. Each device is matched among those attached; a missing or shared one is refused.
+    #[arg(long = "sensor", value_name = "camera=CAMERA,board=BOARD",
+          conflicts_with_all = ["camera", "replay", "board", "sim", "sensors"])]
+    pub paired: Vec<SensorSpec>,
     /// Publish every sensor on Zenoh under nusense/<serial>/ (docs/integrations/zenoh.md): a peer listening on
     /// ENDPOINT, tcp/127.0.0.1:7447 when given alone, loopback only, no multicast scouting.
     #[arg(long, value_name = "ENDPOINT", num_args = 0..=1, default_missing_value = zenoh_out::DEFAULT_ENDPOINT)]
@@ -89,14 +96,19 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         (None, None) => None,
     };
     let config = load_config(args.source.config.as_ref())?;
-    let frames = frame_choice(&args.source);
-    let board = board_choice(&args.source, &frames);
-    match args.sensors {
-        1 => eprintln!("{}", describe_start(&frames, &board)),
-        n => eprintln!(
-            "{}; {n} sensors, each its own simulated camera and virtual board",
-            describe_start(&frames, &board)
+    let sources = sensor_sources(&args.source, args.sensors, &args.paired)?;
+    match sources.as_slice() {
+        [(frames, board)] => eprintln!("{}", describe_start(frames, board)),
+        [(frames, board), ..] if args.paired.is_empty() => eprintln!(
+            "{}; {} sensors, each its own simulated camera and virtual board",
+            describe_start(frames, board),
+            sources.len()
         ),
+        several => {
+            for (i, (frames, board)) in several.iter().enumerate() {
+                eprintln!("{} (sensor {})", describe_start(frames, board), i + 1);
+            }
+        }
     }
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
@@ -104,7 +116,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         .context("starting the async runtime")?;
     // Signals are caught from here on, before anything needs finishing: a SIGTERM during start-up is a clean stop.
     let stop = runtime.block_on(async { StopSignals::install() })?;
-    let sensors = start_sensors(&args.source, &config, &frames, &board, args.sensors)?;
+    let sensors = start_sensors(&args.source, &config, &sources)?;
     let handle = sensors[0].pipeline.handle();
     let scene = sensors[0].scene.clone();
     // Each sensor's name on Zenoh and ROS 2, asked before the async runtime takes over this thread: a real board

@@ -7,6 +7,7 @@ mod corrupt;
 mod daemon;
 mod lifecycle;
 mod load;
+mod paired_sensors;
 mod replay;
 mod ros2;
 mod security;

@@ -22,7 +22,7 @@ fn python() -> std::path::PathBuf {
 }
 
 /// A loopback port nobody listens on now (the daemon's Zenoh endpoint must be known to the consumer).
-fn free_port() -> u16 {
+pub fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
