@@ -253,10 +253,17 @@ pub fn describe_start(frames: &FrameChoice, board: &BoardChoice) -> String {
     format!("nusense serve: running {camera}, with {board}")
 }
 
+/// What is logged unless RUST_LOG says otherwise. RustDDS (serve --ros2) warns about 30 times a second that its
+/// discovery messages have no locator for readers reachable on loopback only, which is the daemon's default range
+/// and nothing a user can act on; its errors still show, and RUST_LOG=info shows everything.
+const DEFAULT_LOG_FILTER: &str = "info,rustdds=error";
+
 /// Logs to stderr; RUST_LOG overrides the level.
 pub fn init_logging() {
     let _ = tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| DEFAULT_LOG_FILTER.into()),
+        )
         .with_writer(std::io::stderr)
         .try_init();
 }
