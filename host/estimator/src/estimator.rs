@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::SensorConfig;
 use crate::contact::{divergence_centre, fit_affine_motion, norm, AffineMotion, FieldPoint};
-use crate::detection::FastTracker;
+use crate::detection::{corners_from_squares, FastTracker};
 use crate::edge::{edge_direction, EdgeEstimate};
 use crate::error::EstimateError;
 use crate::force::force;
@@ -78,6 +78,9 @@ struct FrameLattice {
     /// Squares the detector found (paper mode: quadrilaterals accepted, indexed or not).
     squares_found: usize,
     recovered: bool,
+    /// Per corner: built from a square the camera's motion moved under a change of light (see
+    /// [`crate::detection::Detection::relit`]); the contact test leaves these corners out.
+    relit_corners: Vec<bool>,
 }
 
 enum Detector {
@@ -192,15 +195,29 @@ impl Estimator {
     }
 
     fn detect_frame(&mut self, frame: &RgbImage) -> Result<FrameLattice, EstimateError> {
-        let (squares, corners, squares_found, recovered) = match &mut self.detector {
+        let pad = self.config.pad;
+        let (squares, corners, squares_found, recovered, relit_corners) = match &mut self.detector {
             Detector::Fast(tracker) => {
                 let d = tracker.track(frame)?;
                 let found = d.squares.iter().filter(|s| s.is_some()).count();
-                (d.squares, d.corners, found, d.recovered)
+                // A corner is the midpoint of two squares: without the relit ones, those it loses are relit.
+                let trusted: Vec<Option<Point2>> = d
+                    .squares
+                    .iter()
+                    .zip(&d.relit)
+                    .map(|(s, &relit)| s.filter(|_| !relit))
+                    .collect();
+                let relit_corners = corners_from_squares(&pad, &trusted)
+                    .iter()
+                    .zip(&d.corners)
+                    .map(|(trusted, found)| trusted.is_none() && found.is_some())
+                    .collect();
+                (d.squares, d.corners, found, d.recovered, relit_corners)
             }
             Detector::Paper(detector) => {
                 let (squares, corners, quads) = paper_points(detector, frame, &self.config)?;
-                (squares, corners, quads, false)
+                let relit_corners = vec![false; corners.len()];
+                (squares, corners, quads, false, relit_corners)
             }
         };
         let lattice = build_lattice(&self.config, &self.rest.mapping, squares, &corners);
@@ -208,6 +225,7 @@ impl Estimator {
             lattice,
             squares_found,
             recovered,
+            relit_corners,
         })
     }
 
@@ -228,6 +246,7 @@ impl Estimator {
             lattice,
             squares_found,
             recovered,
+            relit_corners,
         } = self.detect_frame(frame)?;
         let registration = register(
             &self.rest.lattice,
@@ -241,7 +260,7 @@ impl Estimator {
                 needed,
             });
         }
-        let (mut reading, moved_mm) = self.measure(&lattice, &registration)?;
+        let (mut reading, moved_mm) = self.measure(&lattice, &registration, &relit_corners)?;
         reading.recovered = recovered;
         reading.counts.squares_detected = squares_found;
         reading.retared = self.follow_motion(&reading, moved_mm, &lattice)?;
@@ -252,12 +271,32 @@ impl Estimator {
 
     /// Everything after detection and registration.
     /// Also returns the largest displacement the camera motion gave a corner, mm.
-    fn measure(&self, lattice: &Lattice, registration: &Registration) -> Result<(Reading, f64), EstimateError> {
+    fn measure(
+        &self,
+        lattice: &Lattice,
+        registration: &Registration,
+        relit_corners: &[bool],
+    ) -> Result<(Reading, f64), EstimateError> {
         let valid: Vec<bool> = registration.corners.iter().map(|c| c.valid).collect();
         let motion = self.remove_motion(lattice, &valid)?;
         let floor_mm = self.rest.noise_floor_mm;
-        let noise_mm = self.model.frame_noise_mm(&motion.stage, floor_mm).max(floor_mm);
-        let outcome = self.model.test(&motion.stage, noise_mm);
+        // The contact test without the corners a change of light biased (none unless the camera moved): their bias
+        // is no traction, while a contact moves many corners besides them. Everything measured once the test says
+        // contact uses every corner.
+        let tested_valid: Vec<bool> = valid
+            .iter()
+            .zip(relit_corners)
+            .map(|(&v, &relit)| v && !relit)
+            .collect();
+        let relit_stage;
+        let tested = if tested_valid == valid {
+            &motion.stage
+        } else {
+            relit_stage = self.model.stage1(&motion.data, &tested_valid);
+            &relit_stage
+        };
+        let noise_mm = self.model.frame_noise_mm(tested, floor_mm).max(floor_mm);
+        let outcome = self.model.test(tested, noise_mm);
 
         let uncompensated_paper_px: Vec<Point2> = lattice
             .corners

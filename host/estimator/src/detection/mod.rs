@@ -40,6 +40,12 @@ const MAX_PASSES: usize = 5;
 const RELOCK_CELLS: f64 = 0.35;
 /// The camera jumped when its rigid motion moved some square this many cells since the last frame.
 const JUMP_CELLS: f64 = 0.1;
+/// After the camera moved, a square whose yellow area changed by more than this many robust standard deviations
+/// (over the frame's squares) beyond what its lattice neighbours' spacing explains is not trusted: see
+/// `FastTracker::relit_squares`.
+const RELIT_SIGMAS: f64 = 5.0;
+/// MAD to standard deviation for a normal distribution.
+const MAD_TO_SIGMA: f64 = 1.4826;
 /// Samples across a cell the centroid needs; more pixels than this add time, not precision.
 const SAMPLES_PER_CELL: f64 = 36.0;
 /// A found centroid must sit on yellow: the mean membership within CENTRE_HALF cells of it at least this. The
@@ -81,6 +87,9 @@ pub struct Detection {
     /// Times the squares were measured in this frame: 1 in a steady scene, 2 when the tracker re-measured them
     /// from the lattice's rigid motion (the camera jumped or a square slipped), one more after a full search.
     pub measurement_passes: u32,
+    /// Per square (the order of `squares`): found, but the camera's motion moved it into or out of a change of
+    /// light (glare, vignetting), which biases its centroid by an amount no motion model predicts.
+    pub relit: Vec<bool>,
 }
 
 /// The fast detector with its tracking state.
@@ -180,6 +189,7 @@ impl FastTracker {
         tracker.previous = squares_px.clone();
         tracker.previous_area = measured.iter().map(|m| m.map(|(_, a)| a)).collect();
         let corners = corners_from_squares(&pad, &squares_px);
+        let relit = vec![false; squares_px.len()];
         Ok((
             tracker,
             Detection {
@@ -187,6 +197,7 @@ impl FastTracker {
                 corners,
                 recovered: false,
                 measurement_passes: 1,
+                relit,
             },
         ))
     }
@@ -233,6 +244,7 @@ impl FastTracker {
                 }
             }
         }
+        let relit = self.relit_squares(&measured);
         let squares: Vec<Option<Point2>> = measured.iter().map(|m| m.map(|(p, _)| p)).collect();
         self.previous = squares.clone();
         self.previous_area = measured.iter().map(|m| m.map(|(_, a)| a)).collect();
@@ -242,7 +254,74 @@ impl FastTracker {
             corners,
             recovered,
             measurement_passes,
+            relit,
         })
+    }
+
+    /// The squares the camera's motion moved into or out of a change of light. Glare and vignetting belong to the
+    /// camera, not the pad: once the camera has moved against the pad, a square seen through another part of the
+    /// light than in the rest frame has its yellow area, and with it its centroid, biased, and the bias differs from
+    /// square to square, so no motion model removes it. The area shows it: the pad's deformation changes a square's
+    /// area together with its spacing to its diagonal neighbours, a change of light changes the area alone. A
+    /// square whose area change departs from its neighbours' spacing by more than [`RELIT_SIGMAS`] robust standard
+    /// deviations over the frame is flagged. A press changes areas as well (the pattern sinks towards the camera
+    /// under it), so a flag does not drop the square: the contact test leaves it out (see [`Detection::relit`]).
+    /// A still camera flags nothing: the light over the pattern is the rest frame's.
+    fn relit_squares(&self, measured: &[Option<(Point2, f64)>]) -> Vec<bool> {
+        let moved = self.squares.iter().any(|model| {
+            model.reference.is_some_and(|r| {
+                sub(self.last_motion.apply(r), r)[0].hypot(sub(self.last_motion.apply(r), r)[1]) / model.cell.min_step()
+                    > JUMP_CELLS
+            })
+        });
+        let mut relit = vec![false; measured.len()];
+        if !moved {
+            return relit;
+        }
+        let slot_of = |row: i32, col: i32| -> Option<usize> {
+            let index = SquareIndex {
+                row: u16::try_from(row).ok()?,
+                col: u16::try_from(col).ok()?,
+            };
+            self.squares.binary_search_by_key(&index, |m| m.index).ok()
+        };
+        let unexplained: Vec<Option<f64>> = self
+            .squares
+            .iter()
+            .zip(measured)
+            .map(|(model, m)| {
+                let ((at, area), reference) = ((*m)?, model.reference?);
+                if model.reference_area <= 0.0 {
+                    return None;
+                }
+                let spacing: Vec<f64> = [(-1, -1), (-1, 1), (1, -1), (1, 1)]
+                    .into_iter()
+                    .filter_map(|(dr, dc)| {
+                        let n = slot_of(i32::from(model.index.row) + dr, i32::from(model.index.col) + dc)?;
+                        let ((other, _), other_reference) = (measured[n]?, self.squares[n].reference?);
+                        let now = sub(other, at)[0].hypot(sub(other, at)[1]);
+                        let then = sub(other_reference, reference)[0].hypot(sub(other_reference, reference)[1]);
+                        (now > 0.0 && then > 0.0).then(|| 2.0 * (now / then).ln())
+                    })
+                    .collect();
+                if spacing.len() < 2 {
+                    return None;
+                }
+                let explained = spacing.iter().sum::<f64>() / spacing.len() as f64;
+                Some((area / model.reference_area).ln() - explained)
+            })
+            .collect();
+        let mut values: Vec<f64> = unexplained.iter().flatten().copied().collect();
+        if values.len() < MIN_NEIGHBOURS * 3 {
+            return relit;
+        }
+        let centre = median(&mut values);
+        let mut deviations: Vec<f64> = values.iter().map(|v| (v - centre).abs()).collect();
+        let limit = RELIT_SIGMAS * MAD_TO_SIGMA * median(&mut deviations);
+        for (flag, u) in relit.iter_mut().zip(&unexplained) {
+            *flag = u.is_some_and(|u| (u - centre).abs() > limit);
+        }
+        relit
     }
 
     /// Where each square is expected: where it was last seen, else its reference position moved by the median
