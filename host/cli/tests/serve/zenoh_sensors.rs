@@ -21,13 +21,25 @@ fn python() -> std::path::PathBuf {
     venv
 }
 
-/// A loopback port nobody listens on now (the daemon's Zenoh endpoint must be known to the consumer).
+/// A loopback port nobody listens on now (the daemon's Zenoh endpoint must be known to the consumer), below the
+/// kernel's ephemeral range: a port the kernel hands out (to another test's `:0` listener or outgoing connection)
+/// could be taken between this check and the daemon's bind, and the daemon would then fail to start.
 pub fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
+    let range = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range").unwrap_or_default();
+    let ephemeral_from: u16 = range
+        .split_whitespace()
+        .next()
+        .and_then(|p| p.parse().ok())
+        .unwrap_or(32768);
+    let below = ephemeral_from.saturating_sub(10_000).max(1024)..ephemeral_from;
+    let start = rand::Rng::gen_range(&mut rand::thread_rng(), below.clone());
+    below
+        .clone()
+        .cycle()
+        .skip((start - below.start).into())
+        .take(below.len())
+        .find(|&port| std::net::TcpListener::bind(("127.0.0.1", port)).is_ok())
+        .expect("a free loopback port below the ephemeral range")
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
