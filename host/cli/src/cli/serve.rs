@@ -3,8 +3,8 @@
 //! recording is finished (summary and footer written), the board is left as it is, and the exit code is 0.
 //!
 //! With `--sensors N` (simulator only) the daemon runs N sensors, each with its own virtual board and serial; with
-//! `--sensor camera=...,board=...` repeated, one sensor per pair of real devices. All of them are on Zenoh, the
-//! first on the HTTP API, the dashboard, Foxglove and ROS 2.
+//! `--sensor camera=...,board=...` repeated, one sensor per pair of real devices. All of them are on Zenoh and
+//! ROS 2, the first on the HTTP API, the dashboard and Foxglove.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -46,20 +46,20 @@ pub struct Args {
     /// given alone. Loopback only: the protocol has no authentication (reach it from elsewhere through SSH).
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
     pub foxglove: Option<SocketAddr>,
-    /// Also publish the sensor as ROS 2 topics (/nusense/<serial>/wrench, image/compressed, contacts) over DDS,
+    /// Also publish each sensor as ROS 2 topics (/nusense/<serial>/wrench, image/compressed, contacts) over DDS,
     /// in ROS_DOMAIN_ID (0 when unset), to this machine only unless ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET
     /// (docs/integrations/ros2.md).
     #[arg(long)]
     pub ros2: bool,
-    /// Simulated sensors to run, each with its own virtual LED board (and serial number). All are on Zenoh; the
-    /// HTTP API, the dashboard, Foxglove and ROS 2 serve the first.
+    /// Simulated sensors to run, each with its own virtual LED board (and serial number). All are on Zenoh and
+    /// ROS 2; the HTTP API, the dashboard and Foxglove serve the first.
     #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=64),
           conflicts_with_all = ["camera", "replay", "board"])]
     pub sensors: u16,
     /// One sensor of real devices: its camera (a V4L2 device path or the camera's USB serial number; or
     /// replay=DIR|FILE.mcap instead) and its LED board (a serial device path or the board's USB serial number).
-    /// Repeat for several sensors, each its own pipeline and Zenoh key; the HTTP API, the dashboard, Foxglove and
-    /// ROS 2 serve the first. Each device is matched among those attached; a missing or shared one is refused.
+    /// Repeat for several sensors, each its own pipeline, Zenoh keys and ROS 2 topics; the HTTP API, the dashboard
+    /// and Foxglove serve the first. Each device is matched among those attached; a missing or shared one is refused.
     #[arg(long = "sensor", value_name = "camera=CAMERA,board=BOARD",
           conflicts_with_all = ["camera", "replay", "board", "sim", "sensors"])]
     pub paired: Vec<SensorSpec>,
@@ -125,9 +125,13 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         true => sensors.iter().map(Sensor::serial_number).collect(),
         false => Vec::new(),
     };
-    let ros2 = match args.ros2 {
-        true => Some(start_ros2(&handle, &serials[0])?),
-        false => None,
+    let ros2: Vec<Ros2Out> = match args.ros2 {
+        true => sensors
+            .iter()
+            .zip(&serials)
+            .map(|(sensor, serial)| start_ros2(&sensor.pipeline.handle(), serial))
+            .collect::<anyhow::Result<_>>()?,
+        false => Vec::new(),
     };
     runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind(args.listen)
@@ -183,7 +187,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         }
         anyhow::Ok(())
     })?;
-    // The node leaves the DDS domain, then capture and estimation stop and the recordings are finished (their
+    // The nodes leave the DDS domain, then capture and estimation stop and the recordings are finished (their
     // summary and footer).
     drop(ros2);
     drop(sensors);

@@ -1,7 +1,7 @@
 //! `nusense serve --sim --sensors 2 --zenoh --ros2` with a separate process as the consumer: the Python Zenoh
 //! client of the project's .venv (zenoh_consumer.py beside this file) receives both sensors' readings at once,
 //! queries status, sets LEDs, tares, gets the HTTP API's error texts for bad LED bodies, and sees both sensors'
-//! liveliness end when the daemon stops; the first sensor's ROS 2 names carry the same serial.
+//! liveliness end when the daemon stops; each sensor's ROS 2 names carry the serial of its Zenoh keys.
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
@@ -19,6 +19,15 @@ fn python() -> std::path::PathBuf {
         venv.display()
     );
     venv
+}
+
+/// A serial as a ROS name token: a ROS 2 name must not start with a digit, hence `sn_` before a serial that does
+/// (serials are hex, so nothing else changes).
+fn ros2_token(serial: &str) -> String {
+    match serial.starts_with(|c: char| c.is_ascii_digit()) {
+        true => format!("sn_{serial}"),
+        false => serial.to_owned(),
+    }
 }
 
 /// A loopback port nobody listens on now (the daemon's Zenoh endpoint must be known to the consumer), below the
@@ -65,20 +74,8 @@ async fn a_separate_zenoh_process_sees_two_sensors_commands_them_and_sees_them_g
         .iter()
         .map(|byte| format!("{:02X}", byte.as_u64().unwrap()))
         .collect();
-    // One identity everywhere: the status (and the dashboard) say it, and the ROS 2 names carry it as a ROS name
-    // token (a name must not start with a digit, hence `sn_` before a serial that does).
+    // One identity everywhere: the status (and the dashboard) say it, and the ROS 2 names carry it.
     assert_eq!(daemon.status().await["serial_number"], json!(first_serial));
-    let ros2_token = match first_serial.starts_with(|c: char| c.is_ascii_digit()) {
-        true => format!("sn_{first_serial}"),
-        false => first_serial.clone(),
-    };
-    assert!(
-        daemon.log().contains(&format!(
-            "ROS 2 in domain {domain} (this machine only): /nusense/{ros2_token}/wrench "
-        )),
-        "{}",
-        daemon.log()
-    );
     // What the HTTP API answers to bad LED bodies: Zenoh must answer the same, word for word.
     let mut http_errors = Vec::new();
     for body in [
@@ -135,6 +132,18 @@ async fn a_separate_zenoh_process_sees_two_sensors_commands_them_and_sees_them_g
         serials.contains(&first_serial.as_str()),
         "the HTTP API's sensor ({first_serial}) is one of the Zenoh sensors: {checked}"
     );
+    // Each sensor is on ROS 2 too, named after the serial of its Zenoh keys.
+    for serial in &serials {
+        let topic = format!("/nusense/{}/wrench ", ros2_token(serial));
+        assert!(
+            daemon
+                .log()
+                .lines()
+                .any(|l| l.contains(&format!("ROS 2 in domain {domain} (this machine only): {topic}"))),
+            "{topic}\n{}",
+            daemon.log()
+        );
+    }
     let expected_errors: Vec<&Value> = http_errors.iter().map(|pair| &pair[1]).collect();
     let got_errors: Vec<&Value> = checked["led_errors"].as_array().unwrap().iter().collect();
     assert_eq!(got_errors, expected_errors);
