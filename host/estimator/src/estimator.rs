@@ -280,23 +280,21 @@ impl Estimator {
         let valid: Vec<bool> = registration.corners.iter().map(|c| c.valid).collect();
         let motion = self.remove_motion(lattice, &valid)?;
         let floor_mm = self.rest.noise_floor_mm;
-        // The contact test without the corners a change of light biased (none unless the camera moved): their bias
-        // is no traction, while a contact moves many corners besides them. Everything measured once the test says
-        // contact uses every corner.
+        let noise_mm = self.model.frame_noise_mm(&motion.stage, floor_mm).max(floor_mm);
+        // The contact test's statistic without the corners a change of light biased (none unless the camera moved):
+        // their bias is no traction, while a contact moves many corners besides them. The noise, the floor and
+        // everything measured once the test says contact use every corner.
         let tested_valid: Vec<bool> = valid
             .iter()
             .zip(relit_corners)
             .map(|(&v, &relit)| v && !relit)
             .collect();
-        let relit_stage;
-        let tested = if tested_valid == valid {
-            &motion.stage
+        let outcome = if tested_valid == valid {
+            self.model.test(&motion.stage, noise_mm)
         } else {
-            relit_stage = self.model.stage1(&motion.data, &tested_valid);
-            &relit_stage
+            self.model
+                .test(&self.model.stage1(&motion.data, &tested_valid), noise_mm)
         };
-        let noise_mm = self.model.frame_noise_mm(tested, floor_mm).max(floor_mm);
-        let outcome = self.model.test(tested, noise_mm);
 
         let uncompensated_paper_px: Vec<Point2> = lattice
             .corners
