@@ -9,7 +9,7 @@ use nusense_capture::{
     CameraSelector, PixelFormat, SceneControl, V4l2Options, SIM_DEFAULT_FPS, SIM_DEFAULT_HEIGHT, SIM_DEFAULT_WIDTH,
 };
 use nusense_daemon::pipeline::{
-    open_sources, BoardChoice, BoardKind, DecodeScale, FrameChoice, Pipeline, PipelineOptions,
+    open_sources, BoardChoice, BoardKind, DecodeScale, FrameChoice, Pipeline, PipelineOptions, Stages,
 };
 use nusense_estimator::{Mode, SensorConfig};
 
@@ -61,6 +61,10 @@ pub struct SourceArgs {
     /// Decode whole frames for the estimator, not only the pattern's region.
     #[arg(long)]
     pub decode_whole: bool,
+    /// Decode and estimate each frame on one thread, one after the other, instead of overlapping the two: the
+    /// daemon as it was before, kept as the pipeline benchmark's baseline.
+    #[arg(long, hide = true)]
+    pub one_thread: bool,
 }
 
 /// The pipeline the source options ask for.
@@ -68,6 +72,9 @@ pub fn pipeline_options(args: &SourceArgs, config: SensorConfig) -> PipelineOpti
     let mut options = PipelineOptions::new(config, args.mode);
     options.decode_scale = args.decode_scale;
     options.decode_region = !args.decode_whole;
+    if args.one_thread {
+        options.stages = Stages::OneThread;
+    }
     options
 }
 

@@ -4,10 +4,10 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use nusense_capture::{ImageFolder, Scale};
+use nusense_capture::{CaptureError, Frame, FramePixels, FrameSource, Scale, SourceInfo};
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 
-use super::{DecodeScale, NoBoard, Pipeline, PipelineOptions, PublishedReading};
+use super::{DecodeScale, NoBoard, Pipeline, PipelineOptions, PublishedReading, StageDrops, Stages};
 
 fn real(name: &str) -> Vec<u8> {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -37,32 +37,80 @@ fn auto_scale_keeps_the_decoded_frame_at_least_1024_px_wide() {
 /// The real pair through the pipeline with a truncated frame between them: that frame is a typed decode error,
 /// counted in the status, and the frames after it are measured. The touch frame, decoded at 1/2 scale inside
 /// the pattern's region, gives the corners and contact a plain full decode gives, in the full frame's raw px.
+/// Decoding and estimation overlapped (two threads) and one after the other (one thread) give the same.
 #[test]
 fn a_truncated_frame_is_a_decode_error_and_the_pipeline_goes_on() {
-    let folder = tempfile::tempdir().unwrap();
-    let (reference, touch) = (real("reference_fisheye.jpg"), real("touch_fisheye.jpg"));
-    for (name, bytes) in [
-        ("0.jpg", &reference[..]),
-        ("1.jpg", &touch[..touch.len() / 2]),
-        ("2.jpg", &touch[..]),
-        ("3.jpg", &touch[..]),
-    ] {
-        std::fs::write(folder.path().join(name), bytes).unwrap();
+    truncated_frame_among_good_ones(Stages::Overlapped);
+}
+
+#[test]
+fn a_truncated_frame_is_a_decode_error_and_the_pipeline_goes_on_in_one_thread() {
+    truncated_frame_among_good_ones(Stages::OneThread);
+}
+
+/// Frames the test hands over one at a time: the real pipeline, in an order no slow build can change.
+struct HandedFrames(std::sync::mpsc::Receiver<Vec<u8>>);
+
+impl FrameSource for HandedFrames {
+    fn info(&self) -> SourceInfo {
+        SourceInfo {
+            kind: "replay",
+            name: "the test's frames".into(),
+            width: 2048,
+            height: 1536,
+            fps: 5.0,
+        }
     }
-    let source = ImageFolder::open(folder.path(), 5.0, false).unwrap();
+
+    fn next_frame(&mut self) -> Result<Frame, CaptureError> {
+        let bytes = self.0.recv().map_err(|_| CaptureError::EndOfStream)?;
+        Ok(Frame::now(FramePixels::Jpeg(Arc::new(bytes))))
+    }
+}
+
+fn truncated_frame_among_good_ones(stages: Stages) {
+    let (reference, touch) = (real("reference_fisheye.jpg"), real("touch_fisheye.jpg"));
+    let (frames, handed) = std::sync::mpsc::channel();
     let mut options = PipelineOptions::new(SensorConfig::default(), Mode::Fast);
     // Nothing dropped however slow this build is: every frame must reach the estimator.
     options.queue_len = 8;
-    let pipeline = Pipeline::start(Box::new(source), Arc::new(NoBoard), options).unwrap();
+    options.stages = stages;
+    let pipeline = Pipeline::start(Box::new(HandedFrames(handed)), Arc::new(NoBoard), options).unwrap();
     let handle = pipeline.handle();
     let mut readings = handle.subscribe();
     let deadline = Instant::now() + Duration::from_secs(300);
     let mut published: Vec<Arc<PublishedReading>> = Vec::new();
-    while published.last().is_none_or(|p| p.message.frame_id != 3) && Instant::now() < deadline {
-        match readings.try_recv() {
-            Ok(reading) => published.push(reading),
-            Err(_) => std::thread::sleep(Duration::from_millis(20)),
+    // Each frame is handed over once the one before has been dealt with, so that (overlapped too) the touch
+    // frames are decoded after the rest frame has set the pattern's region.
+    for (frame_id, bytes) in [
+        reference.clone(),
+        touch[..touch.len() / 2].to_vec(),
+        touch.clone(),
+        touch.clone(),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let truncated = frame_id == 1;
+        frames.send(bytes).unwrap();
+        while Instant::now() < deadline {
+            match readings.try_recv() {
+                Ok(reading) => published.push(reading),
+                Err(_) => std::thread::sleep(Duration::from_millis(20)),
+            }
+            let done = match truncated {
+                true => handle.status().decode.errors > 0,
+                false => published.iter().any(|p| p.message.frame_id == frame_id as u64),
+            };
+            if done {
+                break;
+            }
         }
+    }
+    drop(frames);
+    // The stage latencies of the last frame are kept just after its reading is published.
+    while handle.status().stage_latency_ms.estimate_to_publish.samples < 3 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
     }
     let frame_ids: Vec<u64> = published.iter().map(|p| p.message.frame_id).collect();
     assert_eq!(
@@ -81,6 +129,8 @@ fn a_truncated_frame_is_a_decode_error_and_the_pipeline_goes_on() {
         (status.frames_captured, status.frames_processed, status.frames_dropped),
         (4, 4, 0)
     );
+    assert_eq!(status.frames_dropped_by_stage, StageDrops::default());
+    assert_eq!(status.stages, stages);
     assert_eq!(status.estimate_errors, 0);
     assert_eq!(status.decode.scale, Some(Scale::Half));
     let region = status

@@ -1,13 +1,16 @@
-//! The live pipeline: a capture thread feeds a bounded drop-oldest queue with the camera's bytes, an estimator
-//! thread decodes each frame (only the scale and region the estimator reads) and turns it into a reading, and
-//! readings are published (latest value, a broadcast for WebSocket clients, the recorder). Latency is measured
-//! from the frame's capture timestamp, decoding included.
+//! The live pipeline: a capture thread feeds a bounded drop-oldest queue with the camera's bytes, a decode thread
+//! decodes each frame (only the scale and region the estimator reads) into a second drop-oldest queue, and an
+//! estimator thread turns it into a reading and publishes it (latest value, a broadcast for WebSocket clients,
+//! the recorder): decoding a frame overlaps with estimating the one before ([`stages`], which also keeps the
+//! one-thread arrangement as a baseline). Frames dropped in front of each stage are counted. Latency is measured
+//! from the frame's capture timestamp, decoding included, and kept per stage.
 //!
 //! The first frame, and the first frame after a tare, is the rest frame the estimator measures against: it is
 //! decoded whole at the decode scale, and later frames only inside the pattern's region around its lattice
-//! (whole again after a frame that could not be measured, in case the pattern left the region). The whole frame
-//! is decoded at full size only when someone asks for the picture (`/api/v1/frame.jpg`, Foxglove); recordings
-//! keep the camera's JPEG bytes as they came.
+//! (whole again after a frame that could not be measured, in case the pattern left the region); [`stages`] says
+//! how a tare stays ordered with the frames already decoded. The whole frame is decoded at full size only when
+//! someone asks for the picture (`/api/v1/frame.jpg`, Foxglove); recordings keep the camera's JPEG bytes as they
+//! came.
 //!
 //! A recording that fails (a full disk) stops by itself: the pipeline keeps running and publishing, and the
 //! failure stays in the status until the next recording starts.
@@ -17,6 +20,7 @@ mod board;
 mod decode_tests;
 mod queue;
 mod sources;
+mod stages;
 mod stats;
 
 use std::path::{Path, PathBuf};
@@ -26,15 +30,14 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use nusense_board::BoardEvent;
-use nusense_estimator::{Estimator, Mode, SensorConfig};
+use nusense_estimator::{Mode, SensorConfig};
 use serde::Serialize;
 use tokio::sync::broadcast;
 
 use crate::reading::{ReadingMessage, SCHEMA_VERSION};
 use crate::record::{RecordError, RecordFailure, RecordItem, RecordSummary, Recorder, RecorderOptions};
-use nusense_capture::{
-    unix_time_us, CaptureError, DecodeOptions, Decoder, FramePixels, FrameSource, PixelRect, Scale, SourceInfo,
-};
+use nusense_capture::{unix_time_us, CaptureError, FramePixels, FrameSource, PixelRect, Scale, SourceInfo};
+use stages::{DecodePlan, DecodeStage, DecodedItem, EstimateStage};
 
 pub use board::{
     serial_number_of, Board, BoardError, BoardKind, BoardStatus, LedCommand, LedState, LinkedBoard, NoBoard,
@@ -42,6 +45,7 @@ pub use board::{
 };
 pub use queue::DropOldestQueue;
 pub use sources::{open_sources, BoardChoice, FrameChoice, SourceError, Sources};
+pub use stages::Stages;
 pub use stats::{summarise, LatencySummary, LatencyWindow};
 
 /// A reading with its JSON, serialised once for every consumer.
@@ -120,7 +124,7 @@ impl std::str::FromStr for DecodeScale {
 pub struct PipelineOptions {
     pub config: SensorConfig,
     pub mode: Mode,
-    /// Frames waiting for the estimator; beyond this the oldest is dropped (and counted).
+    /// Frames waiting for each stage (decoding, estimating); beyond this the oldest is dropped (and counted).
     pub queue_len: usize,
     /// Readings a WebSocket client may fall behind by before it misses some.
     pub broadcast_len: usize,
@@ -128,6 +132,7 @@ pub struct PipelineOptions {
     /// Decode only the pattern's region of frames after the rest frame (fast and inverse modes: the paper's
     /// detector searches its own region of interest).
     pub decode_region: bool,
+    pub stages: Stages,
 }
 
 impl PipelineOptions {
@@ -139,6 +144,7 @@ impl PipelineOptions {
             broadcast_len: 64,
             decode_scale: DecodeScale::Auto,
             decode_region: true,
+            stages: Stages::Overlapped,
         }
     }
 }
@@ -238,22 +244,68 @@ pub struct RecordingFailure {
 struct Shared {
     source_info: Mutex<SourceInfo>,
     capture_state: Mutex<CaptureState>,
+    /// Captured frames waiting for the decoder.
     queue: DropOldestQueue<QueuedFrame>,
+    /// Decoded frames waiting for the estimator ([`Stages::Overlapped`]).
+    decoded: DropOldestQueue<DecodedItem>,
+    /// How the estimator wants frames decoded; written by the estimate stage only.
+    plan: Mutex<DecodePlan>,
     counters: Counters,
     latency: Mutex<LatencyWindow>,
     stage_latency: Mutex<StageWindows>,
     decode: Mutex<DecodeStatus>,
     latest: RwLock<Option<ProcessedFrame>>,
     readings: broadcast::Sender<Arc<PublishedReading>>,
-    tare_requested: AtomicBool,
+    /// Tares asked for so far (each makes a later frame the rest frame; see [`stages`]).
+    tares_requested: AtomicU64,
     stop: AtomicBool,
     recording: Mutex<RecordingSlot>,
     board: Arc<dyn Board>,
     mode: Mode,
+    stages: Stages,
     started: Instant,
 }
 
 impl Shared {
+    fn new(source_info: SourceInfo, board: Arc<dyn Board>, options: &PipelineOptions) -> Self {
+        let (readings, _) = broadcast::channel(options.broadcast_len.max(1));
+        Self {
+            source_info: Mutex::new(source_info),
+            capture_state: Mutex::new(CaptureState {
+                running: true,
+                ..Default::default()
+            }),
+            queue: DropOldestQueue::new(options.queue_len),
+            decoded: DropOldestQueue::new(options.queue_len),
+            plan: Mutex::new(DecodePlan::default()),
+            counters: Counters::default(),
+            latency: Mutex::new(LatencyWindow::new(LATENCY_WINDOW)),
+            stage_latency: Mutex::new(StageWindows {
+                capture_to_decode: LatencyWindow::new(LATENCY_WINDOW),
+                decode_to_estimate: LatencyWindow::new(LATENCY_WINDOW),
+                estimate_to_publish: LatencyWindow::new(LATENCY_WINDOW),
+            }),
+            decode: Mutex::new(DecodeStatus::default()),
+            latest: RwLock::new(None),
+            readings,
+            tares_requested: AtomicU64::new(0),
+            stop: AtomicBool::new(false),
+            recording: Mutex::new(RecordingSlot::default()),
+            board,
+            mode: options.mode,
+            stages: options.stages,
+            started: Instant::now(),
+        }
+    }
+
+    /// Frames dropped in front of each stage.
+    fn dropped(&self) -> StageDrops {
+        StageDrops {
+            decode: self.queue.dropped(),
+            estimate: self.decoded.dropped(),
+        }
+    }
+
     /// Hands an item to the recorder, if one runs. A recorder whose writer stopped (a full disk, an I/O error)
     /// is finished here and its failure kept for the status: recording ends, the pipeline goes on.
     fn record(&self, item: impl FnOnce() -> RecordItem) {
@@ -345,60 +397,36 @@ impl Pipeline {
         board: Arc<dyn Board>,
         options: PipelineOptions,
     ) -> Result<Self, PipelineError> {
-        let (readings, _) = broadcast::channel(options.broadcast_len.max(1));
-        let shared = Arc::new(Shared {
-            source_info: Mutex::new(source.info()),
-            capture_state: Mutex::new(CaptureState {
-                running: true,
-                ..Default::default()
-            }),
-            queue: DropOldestQueue::new(options.queue_len),
-            counters: Counters::default(),
-            latency: Mutex::new(LatencyWindow::new(LATENCY_WINDOW)),
-            stage_latency: Mutex::new(StageWindows {
-                capture_to_decode: LatencyWindow::new(LATENCY_WINDOW),
-                decode_to_estimate: LatencyWindow::new(LATENCY_WINDOW),
-                estimate_to_publish: LatencyWindow::new(LATENCY_WINDOW),
-            }),
-            decode: Mutex::new(DecodeStatus::default()),
-            latest: RwLock::new(None),
-            readings,
-            tare_requested: AtomicBool::new(false),
-            stop: AtomicBool::new(false),
-            recording: Mutex::new(RecordingSlot::default()),
-            board: board.clone(),
-            mode: options.mode,
-            started: Instant::now(),
-        });
+        let shared = Arc::new(Shared::new(source.info(), board.clone(), &options));
         let mut threads = Vec::new();
-        let capture_shared = shared.clone();
-        threads.push(
-            std::thread::Builder::new()
-                .name("capture".into())
-                .spawn(move || capture_loop(source, &capture_shared))
-                .map_err(|e| PipelineError::Thread("capture", e))?,
-        );
-        let estimate_shared = shared.clone();
-        let stage = EstimateStage {
-            config: options.config,
-            mode: options.mode,
-            decode_scale: options.decode_scale,
-            decode_region: options.decode_region && options.mode != Mode::Paper,
+        let mut spawn = |name: &'static str, run: Box<dyn FnOnce(&Shared) + Send>| -> Result<(), PipelineError> {
+            let thread_shared = shared.clone();
+            let thread = std::thread::Builder::new()
+                .name(name.into())
+                .spawn(move || run(&thread_shared))
+                .map_err(|e| PipelineError::Thread(name, e))?;
+            threads.push(thread);
+            Ok(())
         };
-        threads.push(
-            std::thread::Builder::new()
-                .name("estimator".into())
-                .spawn(move || stage.run(&estimate_shared))
-                .map_err(|e| PipelineError::Thread("estimator", e))?,
-        );
+        spawn("capture", Box::new(move |shared: &Shared| capture_loop(source, shared)))?;
+        let decode = DecodeStage::new(options.mode, options.decode_scale);
+        let decode_region = options.decode_region && options.mode != Mode::Paper;
+        let estimate = EstimateStage::new(options.config, options.mode, decode_region);
+        match options.stages {
+            Stages::Overlapped => {
+                spawn("decode", Box::new(move |shared: &Shared| decode.run(shared)))?;
+                spawn("estimator", Box::new(move |shared: &Shared| estimate.run(shared)))?;
+            }
+            Stages::OneThread => spawn(
+                "estimator",
+                Box::new(move |shared: &Shared| stages::run_one_thread(decode, estimate, shared)),
+            )?,
+        }
         if let Some(events) = board.events() {
-            let telemetry_shared = shared.clone();
-            threads.push(
-                std::thread::Builder::new()
-                    .name("telemetry".into())
-                    .spawn(move || telemetry_loop(events, &telemetry_shared))
-                    .map_err(|e| PipelineError::Thread("telemetry", e))?,
-            );
+            spawn(
+                "telemetry",
+                Box::new(move |shared: &Shared| telemetry_loop(events, shared)),
+            )?;
         }
         Ok(Self {
             handle: PipelineHandle { shared },
@@ -501,153 +529,6 @@ fn sleep_unless_stopped(duration: Duration, shared: &Shared) {
     }
 }
 
-/// The estimator's thread: decodes what the estimator reads, estimates, publishes.
-struct EstimateStage {
-    config: SensorConfig,
-    mode: Mode,
-    decode_scale: DecodeScale,
-    decode_region: bool,
-}
-
-/// The estimator and how frames are decoded for it.
-struct Measuring {
-    estimator: Estimator,
-    /// The rest frame's decode scale: every later frame is decoded at the same size.
-    scale: Scale,
-    /// The pattern's part of the frame, full-size raw px.
-    region: Option<PixelRect>,
-    reference_frame_id: u64,
-}
-
-impl Measuring {
-    fn region_of(estimator: &Estimator, scale: Scale, frame: (u32, u32)) -> Option<PixelRect> {
-        let (min, max) = estimator.pattern_region_px()?;
-        PixelRect::from_scaled_bounds(min, max, scale, frame)
-    }
-}
-
-impl EstimateStage {
-    fn run(self, shared: &Shared) {
-        let mut decoder = Decoder::new();
-        let mut measuring: Option<Measuring> = None;
-        // Until a frame measures (the first, or after one that failed), frames are decoded whole.
-        let mut last_measured = false;
-        while !shared.stop.load(Ordering::Relaxed) {
-            let Some(frame) = shared.queue.pop_timeout(POLL_INTERVAL) else {
-                continue;
-            };
-            let dequeued_at = Instant::now();
-            if shared.tare_requested.swap(false, Ordering::Relaxed) {
-                measuring = None;
-            }
-            let options = match &measuring {
-                Some(m) => DecodeOptions {
-                    scale: m.scale,
-                    region: m.region.filter(|_| last_measured),
-                },
-                None => {
-                    let width = frame.pixels.dimensions().map_or(0, |(width, _)| width);
-                    DecodeOptions::scaled(self.decode_scale.for_frame(self.mode, width))
-                }
-            };
-            let decoded = match decoder.decode(&frame.pixels, &options) {
-                Ok(decoded) => decoded,
-                Err(source) => {
-                    // A truncated or corrupt frame is skipped (and counted); the next one may be fine.
-                    let error = CaptureError::Decode {
-                        origin: format!("frame {} of {}", frame.frame_id, lock(&shared.source_info).name),
-                        source,
-                    };
-                    tracing::warn!("decode: {error}");
-                    shared.counters.decode_errors.fetch_add(1, Ordering::Relaxed);
-                    shared.counters.frames_processed.fetch_add(1, Ordering::Relaxed);
-                    lock(&shared.decode).last_error = Some(error.to_string());
-                    continue;
-                }
-            };
-            let decoded_at = Instant::now();
-            {
-                let mut status = lock(&shared.decode);
-                status.scale = Some(decoded.scale);
-                status.region = options.region;
-            }
-            let mut error = None;
-            if measuring.is_none() {
-                let frame_size = (decoded.frame_width, decoded.frame_height);
-                match Estimator::new(self.config.clone(), self.mode, &decoded.image) {
-                    Ok(estimator) => {
-                        let region = self
-                            .decode_region
-                            .then(|| Measuring::region_of(&estimator, decoded.scale, frame_size))
-                            .flatten();
-                        measuring = Some(Measuring {
-                            estimator,
-                            scale: decoded.scale,
-                            region,
-                            reference_frame_id: frame.frame_id,
-                        });
-                        shared.counters.tares.fetch_add(1, Ordering::Relaxed);
-                    }
-                    Err(e) => error = Some(format!("no rest frame yet: {e}")),
-                }
-            }
-            let estimate = match measuring.as_mut() {
-                None => None,
-                Some(m) => match m.estimator.estimate(&decoded.image) {
-                    Ok(mut reading) => {
-                        if reading.retared && self.decode_region {
-                            // A new rest lattice: the region follows it.
-                            m.region = Measuring::region_of(
-                                &m.estimator,
-                                m.scale,
-                                (decoded.frame_width, decoded.frame_height),
-                            );
-                        }
-                        reading.scale_px(f64::from(decoded.scale.divisor()));
-                        Some(reading)
-                    }
-                    Err(e) => {
-                        error = Some(e.to_string());
-                        None
-                    }
-                },
-            };
-            last_measured = estimate.is_some();
-            if error.is_some() {
-                shared.counters.estimate_errors.fetch_add(1, Ordering::Relaxed);
-            }
-            shared.counters.frames_processed.fetch_add(1, Ordering::Relaxed);
-            let estimated_at = Instant::now();
-            let captured_at = frame.captured_at;
-            let since_capture = |t: Instant| t.saturating_duration_since(captured_at).as_secs_f64() * 1e3;
-            let message = ReadingMessage {
-                schema_version: SCHEMA_VERSION,
-                frame_id: frame.frame_id,
-                file: None,
-                capture_time_us: frame.capture_time_us,
-                processed_time_us: unix_time_us(),
-                latency_ms: since_capture(estimated_at),
-                queue_ms: since_capture(dequeued_at),
-                reference_frame_id: measuring.as_ref().map(|m| m.reference_frame_id),
-                estimate,
-                error,
-                led: shared.board.led_state(),
-            };
-            lock(&shared.latency).push(message.latency_ms);
-            publish(shared, frame, message);
-            let published_at = Instant::now();
-            let mut stages = lock(&shared.stage_latency);
-            stages.capture_to_decode.push(since_capture(decoded_at));
-            stages
-                .decode_to_estimate
-                .push(estimated_at.duration_since(decoded_at).as_secs_f64() * 1e3);
-            stages
-                .estimate_to_publish
-                .push(published_at.duration_since(estimated_at).as_secs_f64() * 1e3);
-        }
-    }
-}
-
 /// `value` as JSON; a failure is logged and counted in `counter` (see [`EncodeError`]).
 fn encode_json<T: Serialize>(value: &T, what: &'static str, counter: &AtomicU64) -> Result<String, EncodeError> {
     serde_json::to_string(value).map_err(|source| {
@@ -729,8 +610,11 @@ pub struct PipelineStatus {
     pub uptime_s: f64,
     pub frames_captured: u64,
     pub frames_processed: u64,
-    /// Frames the estimator could not keep up with (drop-oldest queue).
+    /// Frames a stage could not keep up with (drop-oldest queues), all stages together.
     pub frames_dropped: u64,
+    pub frames_dropped_by_stage: StageDrops,
+    /// Whether decoding and estimation overlap.
+    pub stages: Stages,
     pub capture_errors: u64,
     pub estimate_errors: u64,
     /// Readings and telemetry messages that could not be written as JSON ([`EncodeError`]): logged, not sent.
@@ -744,6 +628,21 @@ pub struct PipelineStatus {
     pub recording: Option<RecordingStatus>,
     /// How the last recording failed, when it stopped by itself (cleared when the next one starts).
     pub recording_failure: Option<RecordingFailure>,
+}
+
+/// Frames dropped in front of each stage because it was still busy with earlier ones.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct StageDrops {
+    /// Captured frames the decoder did not get to.
+    pub decode: u64,
+    /// Decoded frames the estimator did not get to ([`Stages::Overlapped`] only).
+    pub estimate: u64,
+}
+
+impl StageDrops {
+    pub fn total(&self) -> u64 {
+        self.decode + self.estimate
+    }
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -776,7 +675,7 @@ impl PipelineHandle {
 
     /// The next frame becomes the rest frame.
     pub fn request_tare(&self) {
-        self.shared.tare_requested.store(true, Ordering::Relaxed);
+        self.shared.tares_requested.fetch_add(1, Ordering::Release);
     }
 
     pub fn board(&self) -> &Arc<dyn Board> {
@@ -784,7 +683,7 @@ impl PipelineHandle {
     }
 
     pub fn frames_dropped(&self) -> u64 {
-        self.shared.queue.dropped()
+        self.shared.dropped().total()
     }
 
     pub fn frames_processed(&self) -> u64 {
@@ -842,7 +741,9 @@ impl PipelineHandle {
             uptime_s: shared.started.elapsed().as_secs_f64(),
             frames_captured: shared.counters.frames_captured.load(Ordering::Relaxed),
             frames_processed: shared.counters.frames_processed.load(Ordering::Relaxed),
-            frames_dropped: shared.queue.dropped(),
+            frames_dropped: shared.dropped().total(),
+            frames_dropped_by_stage: shared.dropped(),
+            stages: shared.stages,
             capture_errors: shared.counters.capture_errors.load(Ordering::Relaxed),
             estimate_errors: shared.counters.estimate_errors.load(Ordering::Relaxed),
             encode_errors: shared.counters.encode_errors.load(Ordering::Relaxed),
