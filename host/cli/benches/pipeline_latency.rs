@@ -22,19 +22,13 @@ use std::time::{Duration, Instant};
 use daemon::{Daemon, Options, NOMINAL_MA};
 use futures_util::StreamExt;
 use image::codecs::jpeg::JpegEncoder;
+use nusense_capture::unix_time_us;
 use nusense_daemon::pipeline::{summarise, LatencySummary};
 use serde_json::Value;
 
 const QUALITY: u8 = 85;
 const DEMO_FRAMES: usize = 40;
 const TARGET_P99_MS: f64 = 8.0;
-
-fn unix_us() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_micros() as u64
-}
 
 fn load_average() -> String {
     std::fs::read_to_string("/proc/loadavg")
@@ -141,7 +135,7 @@ async fn run(dir: &Path, frames: &str, fps: f64, one_thread: bool, seconds: f64)
             .expect("a reading within 30 s")
             .expect("the stream is open")
             .expect("a message");
-        let arrived = unix_us();
+        let arrived = unix_time_us();
         let Ok(text) = message.to_text() else { continue };
         let reading: Value = serde_json::from_str(text).expect("JSON");
         let Some(capture_us) = reading["capture_time_us"].as_u64() else {

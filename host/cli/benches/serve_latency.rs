@@ -11,15 +11,9 @@ use std::time::Duration;
 
 use daemon::{pipeline_counters, press, Daemon, Options};
 use futures_util::StreamExt;
+use nusense_capture::unix_time_us;
 use nusense_daemon::pipeline::summarise;
 use serde_json::Value;
-
-fn unix_us() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_micros() as u64
-}
 
 fn main() {
     let frames: usize = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(300);
@@ -46,7 +40,7 @@ fn main() {
                 .expect("reading")
                 .unwrap()
                 .unwrap();
-            let arrived = unix_us();
+            let arrived = unix_time_us();
             let Ok(text) = message.to_text() else { continue };
             let reading: Value = serde_json::from_str(text).unwrap();
             let latency_ms = arrived.saturating_sub(reading["capture_time_us"].as_u64().unwrap()) as f64 / 1e3;

@@ -17,16 +17,10 @@ use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use daemon::{Daemon, Options};
+use daemon::{free_port, zenoh_client, Daemon, Options};
+use nusense_capture::unix_time_us;
 use nusense_daemon::pipeline::summarise;
 use serde_json::{json, Value};
-
-fn unix_us() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_micros() as u64
-}
 
 /// CPU time the process has used so far (user + system), seconds.
 fn cpu_seconds(pid: u32) -> f64 {
@@ -86,14 +80,6 @@ fn machine_busy_seconds() -> f64 {
         .sum();
     // SAFETY: sysconf has no preconditions.
     busy as f64 / unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }
 
 struct Arrival {
@@ -162,22 +148,13 @@ async fn measure(settings: &Settings, sensors: u16) -> Value {
             .arg("--zenoh")
             .arg(endpoint.clone()),
     );
-    let mut config = zenoh::Config::default();
-    for (key, value) in [
-        ("mode", r#""peer""#.to_string()),
-        ("connect/endpoints", format!(r#"["{endpoint}"]"#)),
-        ("listen/endpoints", "[]".into()),
-        ("scouting/multicast/enabled", "false".into()),
-    ] {
-        config.insert_json5(key, &value).unwrap();
-    }
-    let session = zenoh::open(config).await.expect("open a Zenoh session");
+    let session = zenoh_client(&endpoint).await;
     let arrivals: Arc<Mutex<Vec<Arrival>>> = Arc::default();
     let sink = arrivals.clone();
     let subscriber = session
         .declare_subscriber("nusense/*/reading")
         .callback(move |sample| {
-            let arrived = unix_us();
+            let arrived = unix_time_us();
             let Ok(reading) = serde_json::from_slice::<Value>(&sample.payload().to_bytes()) else {
                 return;
             };

@@ -360,3 +360,50 @@ pub fn contact_px(width: u32, height: u32, scene: &Scene) -> [f64; 2] {
     let truth = renderer.ground_truth(scene, [NOMINAL_MA; 4], 0).expect("ground truth");
     truth.contacts[0].centre_px
 }
+
+/// A loopback port nobody listens on now (the daemon's Zenoh endpoint must be known to the consumer), below the
+/// kernel's ephemeral range: a port the kernel hands out (to another test's `:0` listener or outgoing connection)
+/// could be taken between this check and the daemon's bind, and the daemon would then fail to start.
+pub fn free_port() -> u16 {
+    let range = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range").unwrap_or_default();
+    let ephemeral_from: u16 = range
+        .split_whitespace()
+        .next()
+        .and_then(|p| p.parse().ok())
+        .unwrap_or(32768);
+    let below = ephemeral_from.saturating_sub(10_000).max(1024)..ephemeral_from;
+    let start = rand::Rng::gen_range(&mut rand::thread_rng(), below.clone());
+    below
+        .clone()
+        .cycle()
+        .skip((start - below.start).into())
+        .take(below.len())
+        .find(|&port| std::net::TcpListener::bind(("127.0.0.1", port)).is_ok())
+        .expect("a free loopback port below the ephemeral range")
+}
+
+/// A Zenoh session of this process that reaches the daemon's loopback endpoint only (no listening, no multicast
+/// scouting), as a client on the same machine would.
+pub async fn zenoh_client(endpoint: &str) -> zenoh::Session {
+    let mut config = zenoh::Config::default();
+    for (key, value) in [
+        ("mode", r#""peer""#.to_string()),
+        ("connect/endpoints", format!(r#"["{endpoint}"]"#)),
+        ("listen/endpoints", "[]".into()),
+        ("scouting/multicast/enabled", "false".into()),
+    ] {
+        config.insert_json5(key, &value).unwrap();
+    }
+    zenoh::open(config).await.expect("open a Zenoh session")
+}
+
+/// The project's .venv interpreter (`scripts/setup test` creates it); `needed_for` says what the test needs from it.
+pub fn venv_python(needed_for: &str) -> PathBuf {
+    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../.venv/bin/python");
+    assert!(
+        venv.exists(),
+        "{} is missing: `scripts/setup test` creates it ({needed_for})",
+        venv.display()
+    );
+    venv
+}

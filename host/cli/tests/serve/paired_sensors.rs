@@ -10,8 +10,7 @@ use std::time::Duration;
 use nusense_board::virtual_board::VirtualBoard;
 use serde_json::{json, Value};
 
-use crate::daemon::{press, render_folder, rest, Daemon, Options};
-use crate::zenoh_sensors::free_port;
+use crate::daemon::{free_port, press, render_folder, rest, zenoh_client, Daemon, Options};
 
 const PATIENCE: Duration = Duration::from_secs(120);
 
@@ -56,16 +55,7 @@ async fn two_replays_paired_with_two_boards_are_two_sensors_named_and_commanded_
         daemon.log()
     );
 
-    let mut config = zenoh::Config::default();
-    for (key, value) in [
-        ("mode", r#""peer""#.to_string()),
-        ("connect/endpoints", format!(r#"["{endpoint}"]"#)),
-        ("listen/endpoints", "[]".into()),
-        ("scouting/multicast/enabled", "false".into()),
-    ] {
-        config.insert_json5(key, &value).unwrap();
-    }
-    let session = zenoh::open(config).await.expect("open a Zenoh session");
+    let session = zenoh_client(&endpoint).await;
     let subscriber = session
         .declare_subscriber("nusense/*/reading")
         .await

@@ -4,27 +4,17 @@
 //! must be the readings the daemon's HTTP API reports for the same frames, matched by their capture time.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use base64::Engine;
 use serde_json::Value;
 
-use crate::daemon::{jpeg_dimensions, press_at, rest, Daemon, Options};
+use crate::daemon::{jpeg_dimensions, press_at, rest, venv_python, Daemon, Options};
 
 /// Wrenches each of the subscriber's two readers (reliable, best effort) must take.
 const WRENCHES: usize = 8;
-
-fn python() -> PathBuf {
-    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../.venv/bin/python");
-    assert!(
-        venv.exists(),
-        "{} is missing: `scripts/setup test` creates it (Cyclone DDS for the ROS 2 test)",
-        venv.display()
-    );
-    venv
-}
 
 /// The topics and frame from the daemon's start-up line: `ROS 2 in domain D (...): WRENCH IMAGE CONTACTS (frame F)`.
 fn announced(log: &str) -> (String, String, String) {
@@ -68,7 +58,7 @@ async fn a_dds_subscriber_in_another_process_receives_each_frames_wrench_and_ima
     daemon.settle(&rest(), true).await;
     daemon.settle(&press_at(4.0, [6.0, -5.0]), false).await;
 
-    let subscriber = Command::new(python())
+    let subscriber = Command::new(venv_python("Cyclone DDS for the ROS 2 test"))
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/serve/ros2_subscriber.py"))
         .args(["--domain", &domain.to_string(), "--topic", &wrench_topic])
         .args(["--count", &WRENCHES.to_string(), "--timeout", "100", "--localhost"])

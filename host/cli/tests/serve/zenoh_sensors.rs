@@ -9,17 +9,7 @@ use std::process::{Command, Stdio};
 
 use serde_json::{json, Value};
 
-use crate::daemon::{Daemon, Options};
-
-fn python() -> std::path::PathBuf {
-    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../.venv/bin/python");
-    assert!(
-        venv.exists(),
-        "{} is missing: `scripts/setup test` creates it (eclipse-zenoh for this test)",
-        venv.display()
-    );
-    venv
-}
+use crate::daemon::{free_port, venv_python, Daemon, Options};
 
 /// A serial as a ROS name token: a ROS 2 name must not start with a digit, hence `sn_` before a serial that does
 /// (serials are hex, so nothing else changes).
@@ -28,27 +18,6 @@ fn ros2_token(serial: &str) -> String {
         true => format!("sn_{serial}"),
         false => serial.to_owned(),
     }
-}
-
-/// A loopback port nobody listens on now (the daemon's Zenoh endpoint must be known to the consumer), below the
-/// kernel's ephemeral range: a port the kernel hands out (to another test's `:0` listener or outgoing connection)
-/// could be taken between this check and the daemon's bind, and the daemon would then fail to start.
-pub fn free_port() -> u16 {
-    let range = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range").unwrap_or_default();
-    let ephemeral_from: u16 = range
-        .split_whitespace()
-        .next()
-        .and_then(|p| p.parse().ok())
-        .unwrap_or(32768);
-    let below = ephemeral_from.saturating_sub(10_000).max(1024)..ephemeral_from;
-    let start = rand::Rng::gen_range(&mut rand::thread_rng(), below.clone());
-    below
-        .clone()
-        .cycle()
-        .skip((start - below.start).into())
-        .take(below.len())
-        .find(|&port| std::net::TcpListener::bind(("127.0.0.1", port)).is_ok())
-        .expect("a free loopback port below the ephemeral range")
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -95,7 +64,7 @@ async fn a_separate_zenoh_process_sees_two_sensors_commands_them_and_sees_them_g
 
     let schema = Path::new(env!("CARGO_MANIFEST_DIR")).join("../daemon/schema/reading.schema.json");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/serve/zenoh_consumer.py");
-    let mut consumer = Command::new(python())
+    let mut consumer = Command::new(venv_python("eclipse-zenoh for this test"))
         .arg(script)
         .args(["--connect", &endpoint, "--sensors", "2", "--schema"])
         .arg(schema)
