@@ -222,7 +222,7 @@ fn theil_sen(x: &[f64], y: &[f64]) -> Option<(f64, f64)> {
     for i in 0..n {
         for j in i + 1..n {
             pair += 1;
-            if pair % stride != 0 {
+            if !pair.is_multiple_of(stride) {
                 continue;
             }
             let dx = x[j] - x[i];

@@ -222,7 +222,7 @@ pub fn hankel(spectra: &[Spectra], dk: f64, r: f64) -> Radial {
 /// Samples `f` every `dk` over [0, k_max] with an odd number of points (Simpson).
 pub fn sample_spectra(k_max: f64, dk: f64, f: impl Fn(f64) -> Spectra) -> Vec<Spectra> {
     let mut n = (k_max / dk).ceil() as usize + 1;
-    if n % 2 == 0 {
+    if n.is_multiple_of(2) {
         n += 1;
     }
     (0..n).map(|i| f(i as f64 * dk)).collect()

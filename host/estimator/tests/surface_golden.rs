@@ -92,13 +92,11 @@ fn bilinear(points: &[[f64; 2]], rows: usize, cols: usize, u: f64, v: f64) -> [f
     let j = (fv.floor() as usize).min(cols - 2);
     let (tu, tv) = (fu - i as f64, fv - j as f64);
     let at = |r: usize, c: usize| points[r * cols + c];
-    let mut out = [0.0; 2];
-    for k in 0..2 {
+    std::array::from_fn(|k| {
         let top = at(i, j)[k] * (1.0 - tv) + at(i, j + 1)[k] * tv;
         let bottom = at(i + 1, j)[k] * (1.0 - tv) + at(i + 1, j + 1)[k] * tv;
-        out[k] = top * (1.0 - tu) + bottom * tu;
-    }
-    out
+        top * (1.0 - tu) + bottom * tu
+    })
 }
 
 #[test]

@@ -110,9 +110,9 @@ impl FisheyeCamera {
         if width == 0 || height == 0 {
             return Err(CameraError::EmptyFrame { width, height });
         }
-        if !(fx.is_finite() && fy.is_finite() && fx > 0.0 && fy > 0.0)
-            || !(intrinsics.cx.is_finite() && intrinsics.cy.is_finite())
-        {
+        let focal_ok = fx.is_finite() && fy.is_finite() && fx > 0.0 && fy > 0.0;
+        let centre_ok = intrinsics.cx.is_finite() && intrinsics.cy.is_finite();
+        if !(focal_ok && centre_ok) {
             return Err(CameraError::BadFocalLength { fx, fy });
         }
         if distortion.iter().any(|k| !k.is_finite()) {

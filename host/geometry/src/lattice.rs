@@ -77,7 +77,7 @@ impl PadGeometry {
     }
 
     pub fn is_yellow(&self, cell: SquareIndex) -> bool {
-        ((cell.row + cell.col) % 2 == 0) == self.top_left_yellow
+        (cell.row + cell.col).is_multiple_of(2) == self.top_left_yellow
     }
 
     /// Row-major.

@@ -144,7 +144,7 @@ pub fn run_suite(
     record("camera_brightness", started, outcome, &mut session);
 
     let started = Instant::now();
-    let outcome = match camera.as_deref_mut() {
+    let outcome = match camera {
         Some(camera) => camera_confirms_each_current(&mut session, camera),
         None => no_camera(),
     };

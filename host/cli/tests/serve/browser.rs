@@ -325,7 +325,7 @@ async fn dashboard_shows_the_camera_with_its_overlay_and_follows_the_contact() {
         .eval("return document.getElementById('overlay').dataset.frameId;")
         .await;
     let (_, reading) = daemon.get("/api/v1/reading").await;
-    if reading["frame_id"].to_string() == shown.as_str().unwrap_or_default() {
+    if reading["frame_id"].as_u64() == shown.as_str().and_then(|id| id.parse().ok()) {
         let c = &reading["estimate"]["contact_px"];
         let (cx, cy) = (c[0].as_f64().unwrap(), c[1].as_f64().unwrap());
         assert!(

@@ -25,6 +25,10 @@ use indexing::index_lattice;
 use window::{add_to_histogram, centroid, mean_membership, CellFrame, Pixels};
 use yellowness::{otsu, Histogram, YellownessMap};
 
+/// Every square's sub-pixel centroid (raw px) and area (px^2), in the pad's square order; `None` where the square
+/// could not be measured.
+type Measurements = Vec<Option<(Point2, f64)>>;
+
 /// Half-size of a square's search window in cell units: the square (about 0.8 cell) plus room for motion,
 /// while the diagonal neighbours (from 0.5 + their gap) stay outside.
 const WINDOW_HALF: f64 = 0.55;
@@ -358,7 +362,7 @@ impl FastTracker {
         &mut self,
         frame: &RgbImage,
         measured: &[Option<(Point2, f64)>],
-    ) -> Result<Option<Vec<Option<(Point2, f64)>>>, EstimateError> {
+    ) -> Result<Option<Measurements>, EstimateError> {
         let pairs: Vec<(Point2, Point2)> = self
             .squares
             .iter()
@@ -492,7 +496,7 @@ impl FastTracker {
         frame: &RgbImage,
         predicted: &[Option<Point2>],
         check_area: Option<&[Option<Point2>]>,
-    ) -> Result<Vec<Option<(Point2, f64)>>, EstimateError> {
+    ) -> Result<Measurements, EstimateError> {
         let (width, height) = frame.dimensions();
         if (width, height) != (self.width, self.height) {
             return Err(EstimateError::FrameSizeMismatch {
@@ -542,7 +546,7 @@ impl FastTracker {
             .zip(predicted)
             .map(|(model, p)| p.map(|start| self.measure_square(&px, model, start, &membership, check_area)))
             .collect();
-        let mut result: Vec<Option<(Point2, f64)>> = outcomes
+        let mut result: Measurements = outcomes
             .iter()
             .map(|o| match o {
                 Some(SquareOutcome::Found(at, area)) => Some((*at, *area)),
