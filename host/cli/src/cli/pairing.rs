@@ -141,7 +141,7 @@ pub fn pair(specs: &[SensorSpec], cameras: &[Device], boards: &[Device]) -> Resu
         let (frames, camera_identity) = match &spec.frames {
             Frames::Camera(name) => {
                 let camera = resolve(sensor, "camera", name, cameras, true)?;
-                let identity = camera.serial.clone().unwrap_or_else(|| camera.path.clone());
+                let identity = camera.serial.clone().unwrap_or_else(|| canonical(&camera.path));
                 let frames = match (name, camera.serial) {
                     // As the camera spells it: opening it compares serials exactly.
                     (DeviceName::Serial(_), Some(serial)) => Frames::Camera(DeviceName::Serial(serial)),
@@ -153,7 +153,7 @@ pub fn pair(specs: &[SensorSpec], cameras: &[Device], boards: &[Device]) -> Resu
             Frames::Replay(path) => (Frames::Replay(path.clone()), None),
         };
         let board = resolve(sensor, "board", &spec.board, boards, false)?;
-        let board_identity = board.serial.clone().unwrap_or_else(|| board.path.clone());
+        let board_identity = board.serial.clone().unwrap_or_else(|| canonical(&board.path));
         for (other, (other_camera, other_board)) in taken.iter().enumerate() {
             let shared = |kind, device: String| PairingError::Shared {
                 first: other + 1,
@@ -190,10 +190,20 @@ fn resolve(
     grouped: bool,
 ) -> Result<Device, PairingError> {
     match name {
-        DeviceName::Path(path) => Ok(attached.iter().find(|d| d.path == *path).cloned().unwrap_or(Device {
-            path: path.clone(),
-            serial: None,
-        })),
+        DeviceName::Path(path) => {
+            // A link (`/dev/serial/by-id/...`, `/dev/v4l/by-id/...`) names the device it points to, so it is
+            // compared by its target. The path stays as given: a by-id link survives the replug that can move
+            // the device to another `ttyACM` number.
+            let target = canonical(path);
+            let serial = attached
+                .iter()
+                .find(|d| d.path == *path || canonical(&d.path) == target)
+                .and_then(|d| d.serial.clone());
+            Ok(Device {
+                path: path.clone(),
+                serial,
+            })
+        }
         DeviceName::Serial(serial) => {
             // USB serial numbers are hex more often than not; people type them in either case.
             let matching: Vec<&Device> = attached
@@ -217,6 +227,12 @@ fn resolve(
             }
         }
     }
+}
+
+/// The path with every symbolic link resolved, or as given when it does not resolve (a device unplugged now, a
+/// dangling by-id link): two names of one device are then one identity.
+fn canonical(path: &str) -> String {
+    std::fs::canonicalize(path).map_or_else(|_| path.to_owned(), |target| target.display().to_string())
 }
 
 fn describe(devices: &[Device]) -> String {
@@ -465,6 +481,89 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    /// `/dev/serial/by-id/...` beside `/dev/ttyACM0`, in a temporary folder: a link and the node it points to.
+    struct LinkedNode {
+        _folder: tempfile::TempDir,
+        node: String,
+        link: String,
+    }
+
+    fn linked_node() -> LinkedNode {
+        let folder = tempfile::tempdir().unwrap();
+        let node = folder.path().join("ttyACM0");
+        std::fs::write(&node, b"").unwrap();
+        let by_id = folder.path().join("serial").join("by-id");
+        std::fs::create_dir_all(&by_id).unwrap();
+        let link = by_id.join("usb-NUSense_LED_board_3F0042001151333137383932-if00");
+        std::os::unix::fs::symlink("../../ttyACM0", &link).unwrap();
+        LinkedNode {
+            node: node.display().to_string(),
+            link: link.display().to_string(),
+            _folder: folder,
+        }
+    }
+
+    #[test]
+    fn a_board_named_by_its_by_id_link_is_the_board_it_points_to() {
+        let devices = linked_node();
+        let cameras = attached().0;
+        let boards = vec![
+            device(&devices.node, Some("3F0042001151333137383932")),
+            device("/dev/ttyACM1", Some("2A0031000D51333137383932")),
+        ];
+        let used_twice = |first: &str, second: &str| {
+            pair(
+                &[
+                    spec(&format!("camera=CAM-A,board={first}")),
+                    spec(&format!("camera=CAM-B,board={second}")),
+                ],
+                &cameras,
+                &boards,
+            )
+        };
+        let refused = |second: &str| {
+            Err(PairingError::Shared {
+                first: 1,
+                second: 2,
+                kind: "board",
+                device: second.to_owned(),
+            })
+        };
+        // The link, then the node it points to by path, and by serial.
+        assert_eq!(used_twice(&devices.link, &devices.node), refused(&devices.node));
+        assert_eq!(
+            used_twice(&devices.link, "3f0042001151333137383932"),
+            refused("with USB serial number 3f0042001151333137383932")
+        );
+        assert_eq!(used_twice(&devices.node, &devices.link), refused(&devices.link));
+        // The link is kept as given (it outlives a replug) and its board's serial found.
+        let pairs = used_twice(&devices.link, "/dev/ttyACM1").unwrap();
+        assert_eq!(pairs[0].board_path, devices.link);
+        assert_eq!(pairs[0].board_serial.as_deref(), Some("3F0042001151333137383932"));
+    }
+
+    #[test]
+    fn a_link_and_its_target_are_one_board_even_when_the_board_is_not_listed() {
+        let devices = linked_node();
+        let (cameras, boards) = attached();
+        assert_eq!(
+            pair(
+                &[
+                    spec(&format!("camera=CAM-A,board={}", devices.node)),
+                    spec(&format!("camera=CAM-B,board={}", devices.link)),
+                ],
+                &cameras,
+                &boards
+            ),
+            Err(PairingError::Shared {
+                first: 1,
+                second: 2,
+                kind: "board",
+                device: devices.link.clone(),
+            })
+        );
     }
 
     #[test]
