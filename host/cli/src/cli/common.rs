@@ -9,7 +9,7 @@ use nusense_capture::{
     CameraSelector, PixelFormat, SceneControl, V4l2Options, SIM_DEFAULT_FPS, SIM_DEFAULT_HEIGHT, SIM_DEFAULT_WIDTH,
 };
 use nusense_daemon::pipeline::{
-    open_sources, BoardChoice, BoardKind, DecodeScale, FrameChoice, Pipeline, PipelineOptions, Stages,
+    open_sources, Board, BoardChoice, BoardKind, DecodeScale, FrameChoice, Pipeline, PipelineOptions, Stages,
 };
 use nusense_estimator::{Mode, SensorConfig};
 
@@ -210,20 +210,26 @@ impl Sensor {
     /// LED board's USB serial number, waiting for a real board's first connection. The error says why there is
     /// none. It blocks: call it before the async runtime takes the thread.
     pub fn serial_number(&self) -> anyhow::Result<String> {
-        let board = self.pipeline.handle().board().clone();
-        let started = Instant::now();
-        loop {
-            if let Some(serial) = board.serial_number() {
-                return Ok(serial);
-            }
-            if board.status().kind == BoardKind::None {
-                bail!("this sensor has no LED board (--board)");
-            }
-            if started.elapsed() > SERIAL_PATIENCE {
-                bail!("its LED board did not connect within {} s", SERIAL_PATIENCE.as_secs());
-            }
-            std::thread::sleep(Duration::from_millis(20));
+        board_serial_number(self.pipeline.handle().board().as_ref())?
+            .ok_or_else(|| anyhow::anyhow!("this sensor has no LED board (--board)"))
+    }
+}
+
+/// The LED board's USB serial number, waiting for a real board's first connection; `None` without a board. The
+/// error says the board did not connect in time. It blocks.
+pub fn board_serial_number(board: &dyn Board) -> anyhow::Result<Option<String>> {
+    let started = Instant::now();
+    loop {
+        if let Some(serial) = board.serial_number() {
+            return Ok(Some(serial));
         }
+        if board.status().kind == BoardKind::None {
+            return Ok(None);
+        }
+        if started.elapsed() > SERIAL_PATIENCE {
+            bail!("its LED board did not connect within {} s", SERIAL_PATIENCE.as_secs());
+        }
+        std::thread::sleep(Duration::from_millis(20));
     }
 }
 

@@ -13,7 +13,8 @@ use nusense_daemon::pipeline::{open_sources, Pipeline};
 use nusense_daemon::record::{recover, RecorderOptions, SensorContext, DEFAULT_FLUSH_INTERVAL};
 
 use super::common::{
-    board_choice, describe_start, frame_choice, init_logging, load_config, pipeline_options, SourceArgs,
+    board_choice, board_serial_number, describe_start, frame_choice, init_logging, load_config, pipeline_options,
+    SourceArgs,
 };
 
 #[derive(clap::Args, Debug)]
@@ -61,7 +62,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     );
     let sources = open_sources(&frames, &board).context("opening the frame source and LED board")?;
     let source = sources.frames.info();
-    let identity = BTreeMap::from([
+    let mut identity = BTreeMap::from([
         ("source_kind".to_string(), source.kind.to_string()),
         ("source".to_string(), source.name),
         ("width".to_string(), source.width.to_string()),
@@ -69,12 +70,22 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         ("fps".to_string(), source.fps.to_string()),
         ("mode".to_string(), args.source.mode.to_string()),
     ]);
-    let sensor = SensorContext {
-        config: config.clone(),
-        identity,
-    };
-    let pipeline = Pipeline::start(sources.frames, sources.board, pipeline_options(&args.source, config))?;
+    let pipeline = Pipeline::start(
+        sources.frames,
+        sources.board,
+        pipeline_options(&args.source, config.clone()),
+    )?;
     let handle = pipeline.handle();
+    // The board names the sensor (as on Zenoh and ROS 2), so a recording says which sensor made it. A board that
+    // does not connect in time does not stop the recording: its file then says nothing of the board.
+    match board_serial_number(handle.board().as_ref()) {
+        Ok(Some(serial)) => {
+            identity.insert("board_serial".to_string(), serial);
+        }
+        Ok(None) => {}
+        Err(error) => eprintln!("nusense record: recording without the board's serial number: {error:#}"),
+    }
+    let sensor = SensorContext { config, identity };
     let options = RecorderOptions {
         flush_interval: Duration::from_millis(args.flush_ms.max(10)),
         sensor: Some(sensor),

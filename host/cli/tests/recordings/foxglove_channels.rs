@@ -68,10 +68,13 @@ fn check_message(schema: &str, data: &[u8], width: u32, height: u32) {
 fn a_recording_carries_foxglove_schemas_that_every_reader_decodes() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("foxglove.mcap");
-    let status = record_command(&path, &["--frames", &FRAMES.to_string()])
-        .status()
+    let mut recorder = record_command(&path, &["--frames", &FRAMES.to_string()])
+        .spawn()
         .unwrap();
-    assert!(status.success());
+    // The simulator's virtual board is named after the process that runs it (see `nusense_board`'s
+    // `virtual_identity`): "VB" and the process id, as hex, then a counter.
+    let board_serial_prefix = format!("5642{:08X}", recorder.id());
+    assert!(recorder.wait().unwrap().success());
 
     // The reference Python reader, in its own process: every message decodes against the file's own schema.
     let reports = python_reports(std::slice::from_ref(&path), true);
@@ -122,6 +125,12 @@ fn a_recording_carries_foxglove_schemas_that_every_reader_decodes() {
         .collect();
     assert_eq!(metadata["nusense.sensor"]["source_kind"], "simulator");
     assert_eq!(metadata["nusense.sensor"]["width"], "320");
+    let board_serial = &metadata["nusense.sensor"]["board_serial"];
+    assert!(
+        board_serial.len() == 24 && board_serial.starts_with(&board_serial_prefix),
+        "the virtual board of process {} is {board_serial}",
+        &board_serial_prefix[4..]
+    );
     let config: serde_json::Value = serde_json::from_str(&metadata["nusense.config"]["json"]).unwrap();
     assert!(config["camera"]["fx"].as_f64().unwrap() > 0.0);
     let lens: serde_json::Value = serde_json::from_str(&metadata["nusense.calibration"]["lens"]).unwrap();
@@ -138,6 +147,27 @@ fn a_recording_carries_foxglove_schemas_that_every_reader_decodes() {
         "replay reads every frame: {}",
         String::from_utf8_lossy(&replay.stderr)
     );
+
+    // Recorded again from that file, with no board: the sensor's metadata names none.
+    let again = dir.path().join("again.mcap");
+    let status = nusense()
+        .arg("record")
+        .arg(&again)
+        .args(["--replay", path.to_str().unwrap(), "--frames", "3"])
+        .stdout(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let bytes = std::fs::read(&again).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    let sensor = summary
+        .metadata_indexes
+        .iter()
+        .map(|index| mcap::read::metadata(&bytes, index).unwrap())
+        .find(|record| record.name == "nusense.sensor")
+        .expect("nusense.sensor metadata");
+    assert_eq!(sensor.metadata["source_kind"], "replay", "{:?}", sensor.metadata);
+    assert!(!sensor.metadata.contains_key("board_serial"), "{:?}", sensor.metadata);
 }
 
 #[test]
