@@ -1,11 +1,12 @@
 //! Bounded load on loopback: 50 WebSocket clients at once and one that never reads. What the daemon owes them
 //! whatever else the machine is doing: the stalled client is cut off (or decimated) and counted, it holds up
-//! neither the pipeline nor any other client, and every reading a client did not get is one the daemon counted
-//! as missed, by that client's stream or by the pipeline.
+//! neither the pipeline nor any other client, every reading client gets every reading the daemon published, and
+//! every frame that became no reading was counted lost by the pipeline.
 //!
 //! Whether the pipeline keeps up with the camera depends on the machine's load (its drops are counted, and
 //! measured in docs/benchmarks/pipeline.md), so this test does not ask for zero drops: it asks that none goes
-//! uncounted.
+//! uncounted. A reading client, though, has the broadcast buffer (64 readings, 4 s here) to fall behind by before
+//! it misses one, which no load short of a stall uses up: missing one means something held it up.
 
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
@@ -34,7 +35,7 @@ fn counter(value: &Value, pointer: &str) -> u64 {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn fifty_clients_get_every_reading_or_a_counted_miss_and_a_stalled_client_is_cut_off() {
+async fn fifty_clients_get_every_published_reading_and_a_stalled_client_is_cut_off() {
     let daemon = Daemon::start(Options::sim(320, 240, 15.0));
     daemon.wait_reading("at all", |_| true).await;
 
@@ -117,22 +118,22 @@ async fn fifty_clients_get_every_reading_or_a_counted_miss_and_a_stalled_client_
         .filter(|(id, _)| window.contains(id))
         .collect();
 
-    // Readings one client got and another did not: each a miss the daemon counted for the one that lagged.
+    // Every reading client got every reading published in the window (a miss would be counted in
+    // websocket.dropped, but only a client held up for the whole broadcast buffer can have one).
     let stream_missed = counter(&after, "/websocket/dropped");
-    let mut missed_by_clients = 0;
-    for ids in &received {
-        let ids = ids.lock().unwrap();
-        missed_by_clients += published.keys().filter(|id| !ids.contains_key(id)).count() as u64;
+    for (client, ids) in received.iter().enumerate() {
+        let missed: Vec<u64> = {
+            let ids = ids.lock().unwrap();
+            published.keys().filter(|id| !ids.contains_key(id)).copied().collect()
+        };
+        assert!(
+            missed.is_empty(),
+            "client {client} missed frames {missed:?} that others got (the daemon counted {stream_missed} missed)"
+        );
     }
-    assert!(
-        missed_by_clients <= stream_missed,
-        "the clients missed {missed_by_clients} readings that others got, the daemon counted {stream_missed} \
-         missed; stream stats {}",
-        after["websocket"]
-    );
 
-    // Frames of the window that no client got: each dropped by a stage, undecodable or unencodable (counted by
-    // the pipeline), or missed by every client's stream (counted once per client).
+    // Frames of the window that became no reading: each dropped by a stage, undecodable or unencodable, and
+    // counted so by the pipeline.
     let counted = |status: &Value| {
         counter(status, "/pipeline/frames_dropped")
             + counter(status, "/pipeline/decode/errors")
@@ -141,9 +142,8 @@ async fn fifty_clients_get_every_reading_or_a_counted_miss_and_a_stalled_client_
     let pipeline_lost = counted(&after) - counted(&before);
     let unpublished = (last - first + 1) - published.len() as u64;
     assert!(
-        unpublished <= pipeline_lost + stream_missed / CLIENTS as u64,
-        "{unpublished} of frames {first}..={last} reached no client; the pipeline counted {pipeline_lost} lost, \
-         the streams {stream_missed} missed: {}",
+        unpublished <= pipeline_lost,
+        "{unpublished} of frames {first}..={last} reached no client; the pipeline counted {pipeline_lost} lost: {}",
         after["pipeline"]
     );
 
@@ -161,7 +161,7 @@ async fn fifty_clients_get_every_reading_or_a_counted_miss_and_a_stalled_client_
 
     println!(
         "load: {CLIENTS} clients, {} of frames {first}..={last} published, {pipeline_lost} lost in the pipeline, \
-         {missed_by_clients} missed by clients, longest gap {:.0} ms, stream stats {}",
+         longest gap {:.0} ms, stream stats {}",
         published.len(),
         longest_gap_us as f64 / 1e3,
         after["websocket"]
