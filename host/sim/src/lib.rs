@@ -25,6 +25,11 @@ pub mod sweep;
 pub mod truth;
 pub mod validation;
 
+/// The estimator's sensor configuration (TOML) for the simulated sensor: the force line and the gel's modulus as
+/// a calibration on the simulator's presses gives them (the real sensor's defaults read its forces 5x low). The
+/// simulator does not depend on the estimator, so it ships the text; `SensorConfig::from_toml_str` reads it.
+pub const SENSOR_CONFIG_TOML: &str = include_str!("../simulated-sensor.toml");
+
 pub use model::{Glare, Mechanics, ModelError, PadPose, SensorModel, NOMINAL_LED_CURRENT_MA};
 pub use render::{RenderError, Renderer};
 pub use scene::{Contact, Damage, Indenter, Occlusion, Scene, SceneError, SceneFile, SensorOverrides};

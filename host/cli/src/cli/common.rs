@@ -34,7 +34,7 @@ pub struct SourceArgs {
     /// Run on the simulated sensor (the default when neither --camera nor --replay is given).
     #[arg(long)]
     pub sim: bool,
-    /// Sensor configuration (TOML); the default fits the real sensor.
+    /// Sensor configuration (TOML); the default fits the real sensor, or the simulated one on the simulator.
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
     /// Estimator variant: inverse (the traction inverse), fast or paper (the paper's gamma line).
@@ -230,6 +230,16 @@ pub fn board_serial_number(board: &dyn Board) -> anyhow::Result<Option<String>> 
             bail!("its LED board did not connect within {} s", SERIAL_PATIENCE.as_secs());
         }
         std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The sensor configuration of `serve` and `record`: the file given, or else the default of the sensor the frames
+/// come from. The simulated sensor has its own calibration; the real sensor's would read its forces 5x low.
+pub fn source_config(path: Option<&PathBuf>, frames: &FrameChoice) -> anyhow::Result<SensorConfig> {
+    match (path, frames) {
+        (None, FrameChoice::Simulator { .. }) => SensorConfig::from_toml_str(nusense_sim::SENSOR_CONFIG_TOML)
+            .context("the simulated sensor's built-in configuration"),
+        (path, _) => load_config(path),
     }
 }
 

@@ -13,7 +13,7 @@ use nusense_daemon::pipeline::{open_sources, Pipeline};
 use nusense_daemon::record::{recover, RecorderOptions, SensorContext, DEFAULT_FLUSH_INTERVAL};
 
 use super::common::{
-    board_choice, board_serial_number, describe_start, frame_choice, init_logging, load_config, pipeline_options,
+    board_choice, board_serial_number, describe_start, frame_choice, init_logging, pipeline_options, source_config,
     SourceArgs,
 };
 
@@ -53,8 +53,8 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     if output.extension().and_then(|e| e.to_str()) != Some("mcap") {
         anyhow::bail!("the recording's file name must end in .mcap (got {})", output.display());
     }
-    let config = load_config(args.source.config.as_ref())?;
     let frames = frame_choice(&args.source);
+    let config = source_config(args.source.config.as_ref(), &frames)?;
     let board = board_choice(&args.source, &frames);
     eprintln!(
         "{}",

@@ -18,7 +18,7 @@ use nusense_daemon::zenoh_out::{self, ZenohOut, ZenohSensor};
 use nusense_ros2::{sensor_token, DiscoveryRange, Ros2Out, Ros2Settings};
 use tokio::signal::unix::{signal, SignalKind};
 
-use super::common::{describe_start, init_logging, load_config, sensor_sources, start_sensors, Sensor, SourceArgs};
+use super::common::{describe_start, init_logging, sensor_sources, source_config, start_sensors, Sensor, SourceArgs};
 use super::pairing::SensorSpec;
 
 pub const DEFAULT_PORT: u16 = 8750;
@@ -95,8 +95,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         (Some(endpoint), None) => Some(zenoh_out::loopback_peer_config(endpoint)?),
         (None, None) => None,
     };
-    let config = load_config(args.source.config.as_ref())?;
     let sources = sensor_sources(&args.source, args.sensors, &args.paired)?;
+    // Every sensor of one daemon is simulated, or none is.
+    let config = source_config(args.source.config.as_ref(), &sources[0].0)?;
     match sources.as_slice() {
         [(frames, board)] => eprintln!("{}", describe_start(frames, board)),
         [(frames, board), ..] if args.paired.is_empty() => eprintln!(
