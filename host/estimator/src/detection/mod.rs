@@ -23,7 +23,7 @@ use crate::error::EstimateError;
 use blobs::find_square_blobs;
 use indexing::index_lattice;
 use window::{add_to_histogram, centroid, mean_membership, CellFrame, Pixels};
-use yellowness::{otsu, Histogram, YellownessMap};
+use yellowness::{otsu, Histogram, MembershipTable, YellownessMap};
 
 /// Every square's sub-pixel centroid (raw px) and area (px^2), in the pad's square order; `None` where the square
 /// could not be measured.
@@ -586,7 +586,7 @@ impl FastTracker {
         px: &Pixels,
         model: &SquareModel,
         start: Point2,
-        membership: &[f32],
+        membership: &MembershipTable,
         check_area: bool,
     ) -> SquareOutcome {
         // The window holds the whole square with room to spare, but a square that moved since the last frame may

@@ -4,7 +4,7 @@
 
 use nusense_geometry::Point2;
 
-use super::yellowness::Histogram;
+use super::yellowness::{Histogram, MembershipTable};
 
 /// The local cell of a square in raw px: one column step and one row step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -109,6 +109,25 @@ fn for_each_row(
     }
 }
 
+/// Calls `f` on the pixels `x0, x0 + stride, ...` up to `x1` of one row (`x0 <= x1 < width`), as RGB triples.
+/// One slice check per row rather than one per pixel: this loop is most of a frame's time.
+#[inline(always)]
+fn for_each_pixel(line: &[u8], x0: usize, x1: usize, stride: usize, mut f: impl FnMut([u8; 3])) {
+    let row = &line[x0 * 3..x1 * 3 + 3];
+    let step = 3 * stride;
+    let mut i = 0;
+    while i + 2 < row.len() {
+        f([row[i], row[i + 1], row[i + 2]]);
+        i += step;
+    }
+}
+
+/// Membership of one pixel: the table's entry for its yellowness (in -255..=255, so the index is in bounds).
+#[inline(always)]
+fn member(table: &MembershipTable, [r, g, b]: [u8; 3]) -> f32 {
+    table[usize::from(r.min(g)) + 255 - usize::from(b)]
+}
+
 /// Adds the window's yellowness values to a histogram; returns how many pixels it visited and how many of them
 /// were clipped.
 pub fn add_to_histogram(
@@ -121,12 +140,11 @@ pub fn add_to_histogram(
 ) -> (usize, usize) {
     let (mut visited, mut clipped) = (0usize, 0usize);
     for_each_row(px, centre, cell, half, stride, |_, line, x0, x1| {
-        for x in (x0..=x1).step_by(stride) {
-            let p = &line[x * 3..x * 3 + 3];
+        for_each_pixel(line, x0, x1, stride, |p| {
             h.add(super::yellowness::yellowness(p[0], p[1], p[2]));
             visited += 1;
             clipped += usize::from(p[0].min(p[1]).min(p[2]) >= CLIPPED_LEVEL);
-        }
+        });
     });
     (visited, clipped)
 }
@@ -153,22 +171,22 @@ pub fn centroid(
     cell: &CellFrame,
     half: f64,
     stride: usize,
-    membership: &[f32],
+    membership: &MembershipTable,
 ) -> Option<WindowCentroid> {
     let (mut sum_w, mut sum_x, mut sum_y) = (0f64, 0f64, 0f64);
     let (mut visited, mut clipped) = (0usize, 0usize);
     for_each_row(px, centre, cell, half, stride, |y, line, x0, x1| {
         let (mut w_row, mut x_row) = (0f32, 0f32);
-        for x in (x0..=x1).step_by(stride) {
-            let p = &line[x * 3..x * 3 + 3];
-            let low = p[0].min(p[1]);
-            clipped += usize::from(low.min(p[2]) >= CLIPPED_LEVEL);
+        // x stays an exact integer in f32 (frames are far narrower than 2^24 px).
+        let mut x = x0 as f32;
+        for_each_pixel(line, x0, x1, stride, |p| {
+            clipped += usize::from(p[0].min(p[1]).min(p[2]) >= CLIPPED_LEVEL);
             visited += 1;
-            let value = i32::from(low) - i32::from(p[2]);
-            let w = membership[(value + 255) as usize];
+            let w = member(membership, p);
             w_row += w;
-            x_row += w * x as f32;
-        }
+            x_row += w * x;
+            x += stride as f32;
+        });
         sum_w += f64::from(w_row);
         sum_x += f64::from(x_row);
         sum_y += f64::from(w_row) * y as f64;
@@ -192,16 +210,14 @@ pub fn mean_membership(
     cell: &CellFrame,
     half: f64,
     stride: usize,
-    membership: &[f32],
+    membership: &MembershipTable,
 ) -> f32 {
     let (mut sum, mut visited) = (0f32, 0usize);
     for_each_row(px, centre, cell, half, stride, |_, line, x0, x1| {
-        for x in (x0..=x1).step_by(stride) {
-            let p = &line[x * 3..x * 3 + 3];
-            let value = i32::from(p[0].min(p[1])) - i32::from(p[2]);
-            sum += membership[(value + 255) as usize];
+        for_each_pixel(line, x0, x1, stride, |p| {
+            sum += member(membership, p);
             visited += 1;
-        }
+        });
     });
     if visited == 0 {
         0.0
@@ -235,9 +251,8 @@ mod tests {
             height: h,
         };
         let cell = CellFrame::new([30.0, 0.0], [0.0, 30.0]).unwrap();
-        let membership: Vec<f32> = (-255..=255)
-            .map(|v| ((f32::from(v as i16) + 20.0) / 140.0).clamp(0.0, 1.0))
-            .collect();
+        let membership: MembershipTable =
+            std::array::from_fn(|bin| ((bin as f32 - 255.0 + 20.0) / 140.0).clamp(0.0, 1.0));
         let found = centroid(&px, [48.0, 43.0], &cell, 0.55, 1, &membership).unwrap();
         let (c, area) = (found.at, found.area);
         assert!((c[0] - 50.5).abs() < 0.05 && (c[1] - 40.5).abs() < 0.05, "{c:?}");

@@ -2,6 +2,12 @@
 //! mid) inside a dark frame. `min(R, G) - B` is high only on yellow, whatever the overall brightness, and the
 //! split between "yellow" and "not yellow" is taken from each image by Otsu's method, never hard-coded.
 
+/// Number of yellowness values (-255..=255), the length of a histogram and of a membership table.
+pub const YELLOWNESS_BINS: usize = 511;
+
+/// Membership of the yellow class for every yellowness value (bin = value + 255).
+pub type MembershipTable = [f32; YELLOWNESS_BINS];
+
 /// Yellowness of one RGB pixel, in -255..=255.
 #[inline(always)]
 pub fn yellowness(r: u8, g: u8, b: u8) -> i32 {
@@ -11,12 +17,14 @@ pub fn yellowness(r: u8, g: u8, b: u8) -> i32 {
 /// Histogram of yellowness values (bin = value + 255).
 #[derive(Clone)]
 pub struct Histogram {
-    pub bins: [u32; 511],
+    pub bins: [u32; YELLOWNESS_BINS],
 }
 
 impl Default for Histogram {
     fn default() -> Self {
-        Self { bins: [0; 511] }
+        Self {
+            bins: [0; YELLOWNESS_BINS],
+        }
     }
 }
 
@@ -65,10 +73,8 @@ pub struct Ramp {
 
 impl Ramp {
     /// Lookup table of the membership for every yellowness value (bin = value + 255).
-    pub fn table(&self) -> Vec<f32> {
-        (-255..=255)
-            .map(|v| ((f64::from(v) - self.start) * self.inv_width).clamp(0.0, 1.0) as f32)
-            .collect()
+    pub fn table(&self) -> MembershipTable {
+        std::array::from_fn(|bin| ((bin as f64 - 255.0 - self.start) * self.inv_width).clamp(0.0, 1.0) as f32)
     }
 }
 

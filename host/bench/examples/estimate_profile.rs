@@ -1,0 +1,164 @@
+//! The estimator's per-frame work alone, for profilers (`valgrind --tool=callgrind`, `perf`) and for checking
+//! that a speed change leaves the readings as they were:
+//!
+//! - `cargo run --release -p nusense-bench --example estimate_profile -- run MODE WxH REPEATS [DECODE_SCALE]`
+//!   renders the validation sensor's rest frame and a 5 N press at that size (JPEG q85, decoded once), builds
+//!   the estimator in MODE (fast, inverse, paper) and runs `estimate` REPEATS times on the press; with
+//!   DECODE_SCALE (1, 2, 4, 8) each repeat decodes the press's JPEG bytes first (the pattern's region at that
+//!   scale, as the daemon does), i.e. camera bytes to reading. Prints CPU ms per frame.
+//! - `... -- dump OUT CACHE_DIR` writes every reading (elapsed time zeroed) of the quick validation set in fast
+//!   and inverse modes to OUT, to diff before and after a change, and prints CPU ms per frame (the frames are
+//!   rendered once into CACHE_DIR as raw RGB).
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use image::RgbImage;
+use nusense_capture::{DecodeOptions, Decoder, FramePixels, PixelRect, Scale};
+use nusense_estimator::{Estimator, Mode, SensorConfig};
+use nusense_sim::validation::{Case, CaseKind, Profile, ValidationRenderer, ValidationSet};
+use nusense_sim::{Contact, Scene, NOMINAL_LED_CURRENT_MA};
+
+type Error = Box<dyn std::error::Error>;
+
+fn encode(image: &RgbImage) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    let _ = image.write_with_encoder(image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, 85));
+    bytes
+}
+
+fn thread_cpu_s() -> f64 {
+    let mut now = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes the timespec it is given.
+    unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut now) };
+    now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9
+}
+
+fn run(mode: Mode, size: (u32, u32), repeats: usize, decode_scale: Option<Scale>) -> Result<(), Error> {
+    let renderer = ValidationRenderer::new(size)?;
+    let reference_jpeg = encode(&renderer.reference(7)?);
+    let case = Case {
+        name: "press".into(),
+        kind: CaseKind::Press,
+        size,
+        scene: Scene::with_contact(Contact::sphere(5.0, [3.0, -2.0], 5.0)),
+        camera_motion: None,
+        led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
+        seed: 11,
+    };
+    let touch_jpeg = encode(&renderer.render(&case)?.0);
+    let scale = decode_scale.unwrap_or(Scale::Full);
+    let mut decoder = Decoder::new();
+    let reference = decoder
+        .decode(
+            &FramePixels::Jpeg(Arc::new(reference_jpeg)),
+            &DecodeOptions::scaled(scale),
+        )?
+        .image;
+    let mut estimator = Estimator::new(SensorConfig::default(), mode, &reference)?;
+    let region = estimator
+        .pattern_region_px()
+        .and_then(|(min, max)| PixelRect::from_scaled_bounds(min, max, scale, size));
+    let options = DecodeOptions { scale, region };
+    let touch_bytes = FramePixels::Jpeg(Arc::new(touch_jpeg));
+    let touch = decoder.decode(&touch_bytes, &options)?.image;
+    let first = estimator.estimate(&touch)?;
+    let started = (thread_cpu_s(), Instant::now());
+    for _ in 0..repeats {
+        let reading = match decode_scale {
+            Some(_) => estimator.estimate(&decoder.decode(&touch_bytes, &options)?.image)?,
+            None => estimator.estimate(&touch)?,
+        };
+        std::hint::black_box(reading);
+    }
+    let cpu_ms = (thread_cpu_s() - started.0) * 1e3 / repeats.max(1) as f64;
+    let wall_ms = started.1.elapsed().as_secs_f64() * 1e3 / repeats.max(1) as f64;
+    println!(
+        "{mode} {}x{} decode {:?}: {cpu_ms:.3} ms CPU, {wall_ms:.3} ms wall per frame ({repeats} frames); contact {:?} force {:.3} N",
+        size.0,
+        size.1,
+        decode_scale.map(Scale::divisor),
+        first.contact_mm(),
+        first.force_n(),
+    );
+    Ok(())
+}
+
+/// The validation frames, rendered once and kept as raw RGB in `cache` (rendering dominates a run otherwise).
+fn validation_frame(renderer: &ValidationRenderer, case: &Case, cache: &std::path::Path) -> Result<RgbImage, Error> {
+    let path = cache.join(format!(
+        "{}x{}-{}.rgb",
+        case.size.0,
+        case.size.1,
+        case.name.replace('/', "_")
+    ));
+    if let Ok(raw) = std::fs::read(&path) {
+        if let Some(image) = RgbImage::from_raw(case.size.0, case.size.1, raw) {
+            return Ok(image);
+        }
+    }
+    let (frame, _) = renderer.render(case)?;
+    std::fs::create_dir_all(cache)?;
+    std::fs::write(&path, frame.as_raw())?;
+    Ok(frame)
+}
+
+fn dump(out: &str, cache: &std::path::Path) -> Result<(), Error> {
+    let set = ValidationSet::new(Profile::Quick, 7);
+    let mut text = String::new();
+    for size in set.sizes() {
+        let renderer = ValidationRenderer::new(size)?;
+        let reference = renderer.reference(7)?;
+        let frames = set
+            .cases
+            .iter()
+            .filter(|c| c.size == size)
+            .map(|case| Ok((case, validation_frame(&renderer, case, cache)?)))
+            .collect::<Result<Vec<_>, Error>>()?;
+        for mode in [Mode::Fast, Mode::Inverse] {
+            let mut estimator = Estimator::new(SensorConfig::default(), mode, &reference)?;
+            let mut cpu_ms = Vec::new();
+            for (case, frame) in &frames {
+                let started = thread_cpu_s();
+                let reading = estimator.estimate(frame);
+                cpu_ms.push((thread_cpu_s() - started) * 1e3);
+                let line = match reading {
+                    Ok(mut reading) => {
+                        reading.elapsed_ms = 0.0;
+                        format!("{reading:?}")
+                    }
+                    Err(error) => format!("error: {error}"),
+                };
+                text.push_str(&format!("{mode} {}x{} {}: {line}\n", size.0, size.1, case.name));
+            }
+            cpu_ms.sort_by(f64::total_cmp);
+            eprintln!(
+                "{mode} {}x{}: {} frames, CPU ms per frame median {:.3}, p90 {:.3}, max {:.3}, total {:.1}",
+                size.0,
+                size.1,
+                cpu_ms.len(),
+                cpu_ms[cpu_ms.len() / 2],
+                cpu_ms[cpu_ms.len() * 9 / 10],
+                cpu_ms[cpu_ms.len() - 1],
+                cpu_ms.iter().sum::<f64>()
+            );
+        }
+    }
+    std::fs::write(out, text)?;
+    Ok(())
+}
+
+fn main() -> Result<(), Error> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.first().map(String::as_str) {
+        Some("run") if args.len() >= 4 => {
+            let mode: Mode = args[1].parse()?;
+            let (w, h) = args[2].split_once('x').ok_or("size is WxH")?;
+            let repeats: usize = args[3].parse()?;
+            let scale = args.get(4).map(|s| s.parse::<Scale>()).transpose()?;
+            run(mode, (w.parse()?, h.parse()?), repeats, scale)
+        }
+        Some("dump") if args.len() == 3 => dump(&args[1], std::path::Path::new(&args[2])),
+        _ => Err("usage: estimate_profile run MODE WxH REPEATS [DECODE_SCALE] | dump OUT CACHE_DIR".into()),
+    }
+}
