@@ -116,8 +116,8 @@ fn for_each_pixel(line: &[u8], x0: usize, x1: usize, stride: usize, mut f: impl 
     let row = &line[x0 * 3..x1 * 3 + 3];
     let step = 3 * stride;
     let mut i = 0;
-    while i + 2 < row.len() {
-        f([row[i], row[i + 1], row[i + 2]]);
+    while let Some(&[r, g, b]) = row.get(i..i + 3) {
+        f([r, g, b]);
         i += step;
     }
 }
