@@ -1,6 +1,6 @@
-//! Speed per stage and per frame, fast and paper mode, on the real frames at full, 1/2 and 1/4 size.
-//! `cargo bench -p nusense-estimator` (add `-- --quick` for a short run). After criterion's own report it
-//! prints a table of ms per frame of both modes measured in the same run, with the paper/fast ratio.
+//! Speed per stage and per frame, fast, inverse and paper mode, on the real frames at full, 1/2 and 1/4 size and at
+//! 640x480. `cargo bench -p nusense-estimator` (add `-- --quick` for a short run). After criterion's own report it
+//! prints a table of ms per frame of every mode measured in the same run, with the ratios between them.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -33,6 +33,11 @@ fn sizes() -> Vec<(&'static str, RgbImage, RgbImage)> {
         ("2048x1536", reference.clone(), touch.clone()),
         ("1024x768", scaled(&reference, 2), scaled(&touch, 2)),
         ("512x384", scaled(&reference, 4), scaled(&touch, 4)),
+        (
+            "640x480",
+            imageops::resize(&reference, 640, 480, imageops::FilterType::Triangle),
+            imageops::resize(&touch, 640, 480, imageops::FilterType::Triangle),
+        ),
     ]
 }
 
@@ -100,6 +105,15 @@ fn fast_stages(c: &mut Criterion, label: &str, reference: &RgbImage, touch: &Rgb
     group.finish();
 }
 
+fn inverse_frame(c: &mut Criterion, label: &str, reference: &RgbImage, touch: &RgbImage) {
+    let mut estimator = Estimator::new(SensorConfig::default(), Mode::Inverse, reference).expect("reference");
+    let mut group = c.benchmark_group(format!("inverse/{label}"));
+    group.bench_function("frame (estimate)", |b| {
+        b.iter(|| estimator.estimate(black_box(touch)).unwrap())
+    });
+    group.finish();
+}
+
 fn paper_frame(c: &mut Criterion, label: &str, reference: &RgbImage, touch: &RgbImage) {
     let Ok(mut estimator) = Estimator::new(SensorConfig::default(), Mode::Paper, reference) else {
         eprintln!("paper mode unavailable at {label}");
@@ -156,21 +170,33 @@ fn main() {
     let frames = sizes();
     for (label, reference, touch) in &frames {
         fast_stages(&mut c, label, reference, touch);
+        inverse_frame(&mut c, label, reference, touch);
         paper_frame(&mut c, label, reference, touch);
         paper_stages(&mut c, label, touch);
     }
     c.final_summary();
 
-    println!("\nms per frame (estimate only, no decoding), both modes in this run:");
-    println!("{:>10} {:>10} {:>10} {:>12}", "size", "fast", "paper", "paper/fast");
+    println!("\nms per frame (estimate only, no decoding; wall time, one thread), every mode in this run:");
+    println!(
+        "{:>10} {:>10} {:>10} {:>10} {:>14} {:>12}",
+        "size", "fast", "inverse", "paper", "inverse/fast", "paper/fast"
+    );
     for (label, reference, touch) in &frames {
         let fast = ms_per_frame(Mode::Fast, reference, touch, 200);
+        let inverse = ms_per_frame(Mode::Inverse, reference, touch, 200);
         let paper = ms_per_frame(Mode::Paper, reference, touch, 3);
         let show = |v: Option<f64>| v.map(|v| format!("{v:.3}")).unwrap_or_else(|| "n/a".into());
-        let ratio = match (fast, paper) {
-            (Some(f), Some(p)) if f > 0.0 => format!("{:.0}x", p / f),
+        let ratio = |a: Option<f64>, b: Option<f64>, digits: usize| match (a, b) {
+            (Some(a), Some(b)) if b > 0.0 => format!("{:.digits$}x", a / b),
             _ => "n/a".into(),
         };
-        println!("{label:>10} {:>10} {:>10} {ratio:>12}", show(fast), show(paper));
+        println!(
+            "{label:>10} {:>10} {:>10} {:>10} {:>14} {:>12}",
+            show(fast),
+            show(inverse),
+            show(paper),
+            ratio(inverse, fast, 2),
+            ratio(paper, fast, 0)
+        );
     }
 }

@@ -94,6 +94,10 @@ struct Rest {
     mapping: PadMapping,
     /// Each corner in pad mm (nominal grid position where the rest frame missed it).
     corners_mm: Vec<Point2>,
+    /// Each of `corners_mm` in raw px (`None` outside the camera's view): where motion removal starts from.
+    corners_raw: Vec<Option<Point2>>,
+    /// The pad's centre in raw px: the camera motion is reported about it.
+    centre_raw: Option<Point2>,
     /// Each corner in paper px (zero where missed; masked by validity).
     paper_px: Vec<Point2>,
     sampler: ShearSampler,
@@ -415,11 +419,11 @@ impl Estimator {
         let degenerate = || EstimateError::NoPattern {
             reason: "the pad's motion is degenerate".into(),
         };
-        let rest_raw: Vec<Option<Point2>> = rest.iter().map(|&r| mapping.mm_to_raw(r)).collect();
+        let rest_raw = &self.rest.corners_raw;
         let pairs: Vec<(Point2, Point2)> = lattice
             .corners
             .iter()
-            .zip(&rest_raw)
+            .zip(rest_raw)
             .zip(valid)
             .filter_map(|((c, r), &ok)| if ok { r.zip(c.raw_px) } else { None })
             .collect();
@@ -456,7 +460,7 @@ impl Estimator {
         };
         let mut reported_pairs = Vec::with_capacity(rest.len());
         let mut largest_mm: f64 = 0.0;
-        for (&r, from) in rest.iter().zip(&rest_raw) {
+        for (&r, from) in rest.iter().zip(rest_raw) {
             let Some((from, to)) = from.zip(moved_raw(r)) else {
                 continue;
             };
@@ -465,8 +469,7 @@ impl Estimator {
                 largest_mm = largest_mm.max((q[0] - r[0]).hypot(q[1] - r[1]));
             }
         }
-        let centre = mapping.mm_to_raw([0.0, 0.0]);
-        let reported = match centre.zip(moved_raw([0.0, 0.0])) {
+        let reported = match self.rest.centre_raw.zip(moved_raw([0.0, 0.0])) {
             Some((from, to)) => camera_motion(&reported_pairs, from, to),
             None => CameraMotion::NONE,
         };
@@ -731,6 +734,8 @@ impl Rest {
             .iter()
             .map(|c| c.mm.unwrap_or_else(|| pad.corner_mm(c.index)))
             .collect();
+        let corners_raw = corners_mm.iter().map(|&r| mapping.mm_to_raw(r)).collect();
+        let centre_raw = mapping.mm_to_raw([0.0, 0.0]);
         let paper_px: Vec<Point2> = lattice
             .corners
             .iter()
@@ -752,6 +757,8 @@ impl Rest {
             lattice,
             mapping,
             corners_mm,
+            corners_raw,
+            centre_raw,
             paper_px,
             sampler,
             noise_floor_mm,

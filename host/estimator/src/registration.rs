@@ -66,8 +66,8 @@ pub fn register(reference: &Lattice, current: &Lattice, max_displacement_cells: 
     for corner in corners.iter_mut().filter(|c| c.valid) {
         let Some(d) = corner.displacement_mm else { continue };
         let (r, c) = (i32::from(corner.index.row), i32::from(corner.index.col));
-        let mut dx = Vec::new();
-        let mut dy = Vec::new();
+        // At most 8 neighbours: on the stack, not two allocations per corner and frame.
+        let (mut dx, mut dy, mut n) = ([0.0; 8], [0.0; 8], 0);
         for (nr, nc) in [
             (r - 1, c),
             (r + 1, c),
@@ -81,20 +81,21 @@ pub fn register(reference: &Lattice, current: &Lattice, max_displacement_cells: 
             if nr < 0 || nc < 0 || nr >= rows || nc >= cols {
                 continue;
             }
-            let n = &snapshot[(nr * cols + nc) as usize];
-            if let (true, Some(nd)) = (n.valid, n.displacement_mm) {
-                dx.push(nd[0]);
-                dy.push(nd[1]);
+            let neighbour = &snapshot[(nr * cols + nc) as usize];
+            if let (true, Some(nd)) = (neighbour.valid, neighbour.displacement_mm) {
+                dx[n] = nd[0];
+                dy[n] = nd[1];
+                n += 1;
             }
         }
-        if dx.len() < 3 {
+        if n < 3 {
             continue;
         }
-        let mid = |v: &mut Vec<f64>| {
+        let mid = |v: &mut [f64]| {
             v.sort_unstable_by(f64::total_cmp);
             v[v.len() / 2]
         };
-        let (mx, my) = (mid(&mut dx), mid(&mut dy));
+        let (mx, my) = (mid(&mut dx[..n]), mid(&mut dy[..n]));
         if (d[0] - mx).hypot(d[1] - my) > NEIGHBOUR_DISAGREEMENT_CELLS * cell_mm {
             corner.valid = false;
         }

@@ -672,9 +672,9 @@ enum SquareOutcome {
     Clipped,
 }
 
+/// The element a sort would put in the middle (the upper one of an even count); reorders `values`.
 fn median(values: &mut [f64]) -> f64 {
-    values.sort_unstable_by(f64::total_cmp);
-    values[values.len() / 2]
+    *values.select_nth_unstable_by(values.len() / 2, f64::total_cmp).1
 }
 
 /// Full-frame search: coarse square centres by lattice index (row-major `yellow_squares` order). The absolute
