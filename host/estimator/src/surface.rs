@@ -309,16 +309,25 @@ impl BSplineSurface {
         Ok(self.sample_on(&SampleBasis::new(&self.knots_u, &self.knots_v, &values, &values)))
     }
 
-    /// Samples with precomputed basis functions (the per-frame path: the knots never change).
+    /// Samples with precomputed basis functions (the per-frame path: the knots never change). Each sample is
+    /// [`Self::combine`] of its u and v spans, term by term in the same order from the basis's precomputed terms,
+    /// so the result is the same to the bit.
     pub fn sample_on(&self, basis: &SampleBasis) -> SampleGrid {
-        let mut points = Vec::with_capacity(basis.u.len() * basis.v.len());
+        let mut points = Vec::with_capacity(basis.len());
         let mut rests_on_valid = Vec::with_capacity(points.capacity());
-        for bu in &basis.u {
-            for bv in &basis.v {
-                let (p, ok) = self.combine(bu, bv);
-                points.push(p);
-                rests_on_valid.push(ok);
+        let mut start = 0;
+        for &end in &basis.term_ends {
+            let mut point = [0.0, 0.0];
+            let mut valid = true;
+            for term in &basis.terms[start..end as usize] {
+                let i = term.row as usize * self.net.cols + term.col as usize;
+                valid &= self.net.valid[i];
+                point[0] += term.weight * self.net.points[i][0];
+                point[1] += term.weight * self.net.points[i][1];
             }
+            points.push(point);
+            rests_on_valid.push(valid);
+            start = end as usize;
         }
         SampleGrid {
             u_values: basis.u_values.clone(),
@@ -336,15 +345,51 @@ pub struct SampleBasis {
     v_values: Vec<f64>,
     u: Vec<BasisSpan>,
     v: Vec<BasisSpan>,
+    /// Every sample's terms (u-major samples; within a sample the order of [`BSplineSurface::combine`]), with the
+    /// negligible ones left out: a sample costs a few multiply-adds, not a pass over both spans.
+    terms: Vec<SampleTerm>,
+    /// Where each sample's terms end in `terms`.
+    term_ends: Vec<u32>,
+}
+
+/// One control point's weight in one sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct SampleTerm {
+    row: u32,
+    col: u32,
+    weight: f64,
 }
 
 impl SampleBasis {
     pub fn new(knots_u: &KnotVector, knots_v: &KnotVector, u_values: &[f64], v_values: &[f64]) -> Self {
+        let u: Vec<BasisSpan> = u_values.iter().map(|&t| knots_u.basis(t.clamp(0.0, 1.0))).collect();
+        let v: Vec<BasisSpan> = v_values.iter().map(|&t| knots_v.basis(t.clamp(0.0, 1.0))).collect();
+        let (mut terms, mut term_ends) = (Vec::new(), Vec::with_capacity(u.len() * v.len()));
+        for bu in &u {
+            for bv in &v {
+                for (a, &wu) in bu.weights.iter().enumerate() {
+                    for (b, &wv) in bv.weights.iter().enumerate() {
+                        let weight = wu * wv;
+                        // As in `combine`: round-off weights at knots do not carry the sample.
+                        if weight.abs() >= NEGLIGIBLE_WEIGHT {
+                            terms.push(SampleTerm {
+                                row: (bu.first + a) as u32,
+                                col: (bv.first + b) as u32,
+                                weight,
+                            });
+                        }
+                    }
+                }
+                term_ends.push(terms.len() as u32);
+            }
+        }
         Self {
             u_values: u_values.to_vec(),
             v_values: v_values.to_vec(),
-            u: u_values.iter().map(|&t| knots_u.basis(t.clamp(0.0, 1.0))).collect(),
-            v: v_values.iter().map(|&t| knots_v.basis(t.clamp(0.0, 1.0))).collect(),
+            u,
+            v,
+            terms,
+            term_ends,
         }
     }
 
