@@ -114,11 +114,19 @@ fn for_each_row(
 #[inline(always)]
 fn for_each_pixel(line: &[u8], x0: usize, x1: usize, stride: usize, mut f: impl FnMut([u8; 3])) {
     let row = &line[x0 * 3..x1 * 3 + 3];
-    let step = 3 * stride;
-    let mut i = 0;
-    while let Some(&[r, g, b]) = row.get(i..i + 3) {
-        f([r, g, b]);
-        i += step;
+    if stride == 1 {
+        // Every pixel (frames up to about 1024 px wide): the loop the compiler makes tightest.
+        for p in row.chunks_exact(3) {
+            if let &[r, g, b] = p {
+                f([r, g, b]);
+            }
+        }
+    } else {
+        for p in row.chunks(3 * stride) {
+            if let Some(&[r, g, b]) = p.first_chunk::<3>() {
+                f([r, g, b]);
+            }
+        }
     }
 }
 
