@@ -5,7 +5,8 @@
 //!   renders the validation sensor's rest frame and a 5 N press at that size (JPEG q85, decoded once), builds
 //!   the estimator in MODE (fast, inverse, paper) and runs `estimate` REPEATS times on the press; with
 //!   DECODE_SCALE (1, 2, 4, 8) each repeat decodes the press's JPEG bytes first (the pattern's region at that
-//!   scale, as the daemon does), i.e. camera bytes to reading. Prints CPU ms per frame.
+//!   scale, as the daemon does), i.e. camera bytes to reading. Prints CPU ms per frame. The two frames are
+//!   rendered once and kept in `$NUSENSE_PROFILE_CACHE` (else the temporary folder).
 //! - `... -- dump OUT CACHE_DIR` writes every reading (elapsed time zeroed) of the quick validation set in fast
 //!   and inverse modes to OUT, to diff before and after a change, and prints CPU ms per frame (the frames are
 //!   rendered once into CACHE_DIR as raw RGB).
@@ -34,9 +35,14 @@ fn thread_cpu_s() -> f64 {
     now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9
 }
 
-fn run(mode: Mode, size: (u32, u32), repeats: usize, decode_scale: Option<Scale>) -> Result<(), Error> {
+/// The rest frame and the 5 N press at `size` as JPEG (q85), rendered once and kept in `cache`.
+fn press_pair(size: (u32, u32), cache: &std::path::Path) -> Result<(Vec<u8>, Vec<u8>), Error> {
+    let path = |name: &str| cache.join(format!("{}x{}-{name}.jpg", size.0, size.1));
+    if let (Ok(reference), Ok(touch)) = (std::fs::read(path("rest")), std::fs::read(path("press"))) {
+        return Ok((reference, touch));
+    }
     let renderer = ValidationRenderer::new(size)?;
-    let reference_jpeg = encode(&renderer.reference(7)?);
+    let reference = encode(&renderer.reference(7)?);
     let case = Case {
         name: "press".into(),
         kind: CaseKind::Press,
@@ -46,7 +52,16 @@ fn run(mode: Mode, size: (u32, u32), repeats: usize, decode_scale: Option<Scale>
         led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
         seed: 11,
     };
-    let touch_jpeg = encode(&renderer.render(&case)?.0);
+    let touch = encode(&renderer.render(&case)?.0);
+    std::fs::create_dir_all(cache)?;
+    std::fs::write(path("rest"), &reference)?;
+    std::fs::write(path("press"), &touch)?;
+    Ok((reference, touch))
+}
+
+fn run(mode: Mode, size: (u32, u32), repeats: usize, decode_scale: Option<Scale>) -> Result<(), Error> {
+    let cache = std::env::var_os("NUSENSE_PROFILE_CACHE").map_or_else(std::env::temp_dir, Into::into);
+    let (reference_jpeg, touch_jpeg) = press_pair(size, &cache)?;
     let scale = decode_scale.unwrap_or(Scale::Full);
     let mut decoder = Decoder::new();
     let reference = decoder
