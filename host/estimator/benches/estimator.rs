@@ -1,6 +1,7 @@
 //! Speed per stage and per frame, fast, inverse and paper mode, on the real frames at full, 1/2 and 1/4 size and at
 //! 640x480. `cargo bench -p nusense-estimator` (add `-- --quick` for a short run). After criterion's own report it
-//! prints a table of ms per frame of every mode measured in the same run, with the ratios between them.
+//! prints a table of ms per frame of every mode measured in the same run (thread CPU time, and wall time), with the
+//! ratios between them. `-- table` (a filter no criterion benchmark matches) prints the table alone.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -151,15 +152,25 @@ fn paper_stages(c: &mut Criterion, label: &str, touch: &RgbImage) {
     group.finish();
 }
 
-/// Mean ms per `estimate` over `repeats` frames (after one warm-up frame); `None` if the mode fails.
-fn ms_per_frame(mode: Mode, reference: &RgbImage, touch: &RgbImage, repeats: usize) -> Option<f64> {
+/// CPU time of this thread, s: on a machine shared with other builds, the work itself, not the waits for a core.
+fn thread_cpu_s() -> f64 {
+    let mut now = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes the timespec it is given.
+    unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut now) };
+    now.tv_sec as f64 + now.tv_nsec as f64 * 1e-9
+}
+
+/// Mean ms per `estimate` over `repeats` frames (after one warm-up frame), (thread CPU, wall); `None` if the mode
+/// fails.
+fn ms_per_frame(mode: Mode, reference: &RgbImage, touch: &RgbImage, repeats: usize) -> Option<(f64, f64)> {
     let mut estimator = Estimator::new(SensorConfig::default(), mode, reference).ok()?;
     estimator.estimate(touch).ok()?;
-    let started = Instant::now();
+    let (cpu, wall) = (thread_cpu_s(), Instant::now());
     for _ in 0..repeats {
         black_box(estimator.estimate(touch).ok()?);
     }
-    Some(started.elapsed().as_secs_f64() * 1e3 / repeats as f64)
+    let per_frame = |s: f64| s * 1e3 / repeats as f64;
+    Some((per_frame(thread_cpu_s() - cpu), per_frame(wall.elapsed().as_secs_f64())))
 }
 
 fn main() {
@@ -176,22 +187,27 @@ fn main() {
     }
     c.final_summary();
 
-    println!("\nms per frame (estimate only, no decoding; wall time, one thread), every mode in this run:");
     println!(
-        "{:>10} {:>10} {:>10} {:>10} {:>14} {:>12}",
+        "\nms per frame (estimate only, no decoding; thread CPU time, wall time in brackets), every mode in this run:"
+    );
+    println!(
+        "{:>10} {:>18} {:>18} {:>20} {:>13} {:>11}",
         "size", "fast", "inverse", "paper", "inverse/fast", "paper/fast"
     );
     for (label, reference, touch) in &frames {
         let fast = ms_per_frame(Mode::Fast, reference, touch, 200);
         let inverse = ms_per_frame(Mode::Inverse, reference, touch, 200);
         let paper = ms_per_frame(Mode::Paper, reference, touch, 3);
-        let show = |v: Option<f64>| v.map(|v| format!("{v:.3}")).unwrap_or_else(|| "n/a".into());
-        let ratio = |a: Option<f64>, b: Option<f64>, digits: usize| match (a, b) {
-            (Some(a), Some(b)) if b > 0.0 => format!("{:.digits$}x", a / b),
+        let show = |v: Option<(f64, f64)>| {
+            v.map(|(cpu, wall)| format!("{cpu:.3} ({wall:.3})"))
+                .unwrap_or_else(|| "n/a".into())
+        };
+        let ratio = |a: Option<(f64, f64)>, b: Option<(f64, f64)>, digits: usize| match (a, b) {
+            (Some((a, _)), Some((b, _))) if b > 0.0 => format!("{:.digits$}x", a / b),
             _ => "n/a".into(),
         };
         println!(
-            "{label:>10} {:>10} {:>10} {:>10} {:>14} {:>12}",
+            "{label:>10} {:>18} {:>18} {:>20} {:>13} {:>11}",
             show(fast),
             show(inverse),
             show(paper),
