@@ -497,6 +497,7 @@ impl Estimator {
         let Stage2 {
             regions: kept,
             tractions,
+            edge_region,
             ..
         } = self.model.stage2(
             &motion.data,
@@ -505,9 +506,9 @@ impl Estimator {
             outcome.noise_mm,
             outcome.detection_floor_n,
         );
-        let Some(first) = kept.first() else {
+        if kept.is_empty() {
             return (None, Some(zero_map));
-        };
+        }
         let contacts: Vec<ContactRegion> = kept.iter().filter_map(|r| self.region_at(r)).collect();
         if contacts.is_empty() {
             return (None, Some(zero_map));
@@ -525,7 +526,19 @@ impl Estimator {
                 (p[0] - centre[0]) * f[1] - (p[1] - centre[1]) * f[0]
             })
             .sum();
-        let moments = self.model.moments(first, self.config.thresholds.edge_min_confidence);
+        let moments = edge_region
+            .as_ref()
+            .map(|region| self.model.moments(region, self.config.thresholds.edge_min_confidence));
+        let edge = moments.map_or(
+            EdgeReading {
+                angle_deg: None,
+                confidence: 0.0,
+            },
+            |m| EdgeReading {
+                angle_deg: m.angle_deg,
+                confidence: m.confidence,
+            },
+        );
         let mut contacts = contacts.into_iter();
         let strongest = contacts.next().expect("checked non-empty above");
         let touch = Touch {
@@ -534,10 +547,7 @@ impl Estimator {
             force_n: force[2],
             force_vector_n: Some(force),
             torque_nmm: Some(torque),
-            edge: EdgeReading {
-                angle_deg: moments.angle_deg,
-                confidence: moments.confidence,
-            },
+            edge,
         };
         (Some(touch), Some(self.pressure_map(&tractions)))
     }

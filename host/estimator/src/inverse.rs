@@ -25,8 +25,9 @@
 //! **Stage 2, only when the test says contact.** Friction acts only where something touches, and pressure only
 //! pushes: the tractions are re-estimated on the cells where stage 1 finds pressure above its own noise (and a ring
 //! around them), with normal pressure >= 0 (an active-set solve of the small problem, from precomputed Gram
-//! blocks). Contacts are the watershed regions of that pressure; force vectors, torque, centres, areas and the edge
-//! direction (second moments of the pressure) come from it.
+//! blocks). Contacts are the watershed regions of that pressure; force vectors, torque, centres and areas come from
+//! it. The edge direction (second moments of the pressure) comes from a second solve with the pressure's unknowns on
+//! the grid's nodes instead of its cells, which has no checkerboard noise (see [`PressureBasis`]).
 
 use std::sync::{Arc, Mutex};
 
@@ -53,6 +54,16 @@ const NOISE_TRIM: f64 = 0.05;
 const TRIMMED_MEAN_RATIO: f64 = 0.83;
 /// Fewer corners than this do not make a noise estimate.
 const MIN_NOISE_CORNERS: usize = 10;
+/// Whether a contact is elongated is judged on its core, each cell weighted by its pressure above this fraction of
+/// the contact's peak: the solve leaves a low ring of pressure around every contact (its noise, kept positive by
+/// p >= 0) whose shape is the noise's, and with it a round 3 mm press measures 14 mm by 11. Above the floor the
+/// weights still vary smoothly with the pressure, so no cell enters or leaves abruptly. (The direction itself
+/// comes from all of the contact's pressure: cutting the map at a level bends the axis towards the grid's.)
+const MOMENT_FLOOR_FRACTION: f64 = 0.3;
+/// A contact has a direction only when its core is longer than wide by more than this many grid pitches: the
+/// smallest contact the node unknowns can show covers 2 x 2 to 3 x 3 cells depending on where it falls on the grid,
+/// so a round contact can look up to about a pitch longer one way than the other.
+const ROUND_EXTENT_PITCHES: f64 = 2.0;
 
 /// Everything precomputed for one sensor config.
 #[derive(Debug)]
@@ -136,15 +147,62 @@ pub struct Stage2 {
     pub motion: [f64; MOTION_PARAMETERS],
     /// Strongest (largest normal force) first.
     pub regions: Vec<Region>,
+    /// The strongest contact as the node solve sees it (see [`PressureBasis`]), for its edge direction.
+    pub edge_region: Option<Region>,
+}
+
+/// The unknowns of stage 2's pressure.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum PressureBasis {
+    /// One per cell: the sharpest map, which keeps contacts 10 mm apart apart (and gives the contacts, their forces
+    /// and centres). But a pressure that alternates cell by cell (a checkerboard) moves no corner to first order, as
+    /// each corner lies between two high and two low cells, so the solve fills it with noise: it splits a long
+    /// contact into bumps and turns its second moments.
+    Cells,
+    /// One per grid node (the pattern's corners and its outline), shared equally by the group's cells that meet
+    /// there, each >= 0: no checkerboard, a map one pitch blurrier, for the edge direction.
+    Nodes,
 }
 
 /// Second moments of a pressure distribution.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Moments {
-    /// Degrees from +x towards +y, in [0, 180); `None` when round (confidence below the minimum).
+    /// Degrees from +x towards +y, in [0, 180); `None` when round (confidence below the minimum, or not longer
+    /// than wide by more than the grid can fake).
     pub angle_deg: Option<f64>,
     /// 1 - minor / major.
     pub confidence: f64,
+    /// Length and width (mm) of the contact's core: the uniform strip with its second moments.
+    pub length_mm: f64,
+    pub width_mm: f64,
+}
+
+struct SecondMoments {
+    xx: f64,
+    yy: f64,
+    xy: f64,
+}
+
+impl SecondMoments {
+    /// Variances along the major and minor axes.
+    fn axes(&self) -> (f64, f64) {
+        let half_trace = 0.5 * (self.xx + self.yy);
+        let root = (0.25 * (self.xx - self.yy).powi(2) + self.xy * self.xy).sqrt();
+        (half_trace + root, (half_trace - root).max(0.0))
+    }
+
+    /// The major axis, degrees from +x towards +y in [0, 180).
+    fn angle_deg(&self) -> f64 {
+        let angle = (0.5 * (2.0 * self.xy).atan2(self.xx - self.yy))
+            .to_degrees()
+            .rem_euclid(180.0);
+        // rem_euclid can return exactly 180.0 for tiny negative angles.
+        if angle >= 180.0 {
+            0.0
+        } else {
+            angle
+        }
+    }
 }
 
 static CACHE: Mutex<Vec<(String, Arc<InverseModel>)>> = Mutex::new(Vec::new());
@@ -439,12 +497,13 @@ impl InverseModel {
             tractions: vec![0.0; 3 * cells],
             motion: seed.motion,
             regions: Vec::new(),
+            edge_region: None,
         };
         let groups = self.loaded_groups(seed, noise_mm);
         if groups.is_empty() {
             return empty;
         }
-        let Some((tractions, motion)) = self.constrained_solve(d, valid, seed, &groups) else {
+        let Some((tractions, motion)) = self.constrained_solve(d, valid, seed, &groups, PressureBasis::Cells) else {
             return empty;
         };
         let mut support: Vec<usize> = groups.iter().flatten().copied().collect();
@@ -454,6 +513,14 @@ impl InverseModel {
             .into_iter()
             .filter(|r| r.force_vector_n[2] >= min_force_n)
             .collect();
+        // The strongest contact's shape, from the node solve: its region there that holds the contact's peak cell.
+        let edge_region = regions.first().and_then(|first| {
+            let peak = first.cells.iter().max_by(|a, b| a.1[2].total_cmp(&b.1[2]))?.0;
+            let (smooth, _) = self.constrained_solve(d, valid, seed, &groups, PressureBasis::Nodes)?;
+            self.regions(&smooth, &support)
+                .into_iter()
+                .find(|r| r.cells.iter().any(|c| c.0 == peak))
+        });
         // Tractions outside the contacts are not reported (they are below the floor).
         let mut kept = vec![0.0; 3 * cells];
         for (j, f) in regions.iter().flat_map(|r| &r.cells) {
@@ -463,6 +530,7 @@ impl InverseModel {
             tractions: kept,
             motion,
             regions,
+            edge_region,
         }
     }
 
@@ -515,15 +583,28 @@ impl InverseModel {
         valid: &[bool],
         seed: &Stage1,
         groups: &[Vec<usize>],
+        basis: PressureBasis,
     ) -> Option<(Vec<f64>, [f64; MOTION_PARAMETERS])> {
         let cells = self.cells.len();
         // Each unknown as a combination of traction components: (component index, weight).
         let mut unknowns: Vec<Vec<(usize, f64)>> = Vec::new();
         let mut prior_scale: Vec<f64> = Vec::new();
         let prior = (self.lambda).sqrt().recip();
-        for group in groups {
+        for group in groups.iter().filter(|_| basis == PressureBasis::Cells) {
             for &j in group {
                 unknowns.push(vec![(3 * j + 2, 1.0)]);
+                prior_scale.push(1.0);
+            }
+        }
+        for group in groups.iter().filter(|_| basis == PressureBasis::Nodes) {
+            for node in self.group_nodes(group) {
+                let around: Vec<usize> = self
+                    .node_cells(node)
+                    .into_iter()
+                    .filter(|j| group.binary_search(j).is_ok())
+                    .collect();
+                let share = 1.0 / around.len() as f64;
+                unknowns.push(around.into_iter().map(|j| (3 * j + 2, share)).collect());
                 prior_scale.push(1.0);
             }
         }
@@ -613,6 +694,39 @@ impl InverseModel {
         }
         let motion = std::array::from_fn(|p| x[nt + p]);
         Some((tractions, motion))
+    }
+
+    /// The grid's nodes ((rows + 1) x (cols + 1), row-major: the pattern's corners and its outline) at the corners
+    /// of a group's cells.
+    fn group_nodes(&self, group: &[usize]) -> Vec<usize> {
+        let cols = usize::from(self.pad.cols);
+        let mut nodes: Vec<usize> = group
+            .iter()
+            .flat_map(|&j| {
+                let (r, c) = (j / cols, j % cols);
+                [(r, c), (r, c + 1), (r + 1, c), (r + 1, c + 1)]
+            })
+            .map(|(r, c)| r * (cols + 1) + c)
+            .collect();
+        nodes.sort_unstable();
+        nodes.dedup();
+        nodes
+    }
+
+    /// The cells (up to four) that meet at a node.
+    fn node_cells(&self, node: usize) -> Vec<usize> {
+        let (cols, rows) = (usize::from(self.pad.cols), usize::from(self.pad.rows));
+        let (r, c) = (node / (cols + 1), node % (cols + 1));
+        [
+            (r.wrapping_sub(1), c.wrapping_sub(1)),
+            (r.wrapping_sub(1), c),
+            (r, c.wrapping_sub(1)),
+            (r, c),
+        ]
+        .into_iter()
+        .filter(|&(r, c)| r < rows && c < cols)
+        .map(|(r, c)| r * cols + c)
+        .collect()
     }
 
     /// Watershed of the pressure over the support: each cell climbs to its highest neighbour until a local
@@ -730,43 +844,68 @@ impl InverseModel {
         regions
     }
 
-    /// Second moments of a region's pressure: direction of the major axis and its contrast.
+    /// The edge direction of a region: the major axis of its pressure's second moments, and their contrast as the
+    /// confidence. Round (no direction) below `min_confidence`, or when the contact's core, its pressure above
+    /// `MOMENT_FLOOR_FRACTION` of the peak, is longer than wide by no more than `ROUND_EXTENT_PITCHES`.
     pub fn moments(&self, region: &Region, min_confidence: f64) -> Moments {
-        let weight: f64 = region.cells.iter().map(|c| c.1[2].max(0.0)).sum();
-        if !(weight > 0.0) || region.cells.len() < 3 {
-            return Moments {
-                angle_deg: None,
-                confidence: 0.0,
-            };
-        }
-        let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
-        for (j, f) in &region.cells {
-            let w = f[2].max(0.0) / weight;
-            let p = self.cells[*j].centre_mm;
-            let (dx, dy) = (p[0] - region.centre_mm[0], p[1] - region.centre_mm[1]);
-            sxx += w * dx * dx;
-            syy += w * dy * dy;
-            sxy += w * dx * dy;
-        }
-        // Each cell spreads its pressure over its own area.
-        sxx += self.pad.pitch_x_mm().powi(2) / 12.0;
-        syy += self.pad.pitch_y_mm().powi(2) / 12.0;
-        let half_trace = 0.5 * (sxx + syy);
-        let root = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
-        let (major, minor) = (half_trace + root, half_trace - root);
+        let none = Moments {
+            angle_deg: None,
+            confidence: 0.0,
+            length_mm: 0.0,
+            width_mm: 0.0,
+        };
+        let Some(all) = self.second_moments(region, 0.0) else {
+            return none;
+        };
+        let Some(core) = self.second_moments(region, MOMENT_FLOOR_FRACTION) else {
+            return none;
+        };
+        let (major, minor) = all.axes();
         if !(major > 0.0) {
-            return Moments {
-                angle_deg: None,
-                confidence: 0.0,
-            };
+            return none;
         }
-        let confidence = (1.0 - minor.max(0.0) / major).clamp(0.0, 1.0);
-        let angle = (0.5 * (2.0 * sxy).atan2(sxx - syy)).to_degrees().rem_euclid(180.0);
-        let angle = if angle >= 180.0 { 0.0 } else { angle };
+        let confidence = (1.0 - minor / major).clamp(0.0, 1.0);
+        let (core_major, core_minor) = core.axes();
+        let (length_mm, width_mm) = ((12.0 * core_major).sqrt(), (12.0 * core_minor).sqrt());
+        let elongated = length_mm - width_mm > ROUND_EXTENT_PITCHES * self.pad.pitch_x_mm().max(self.pad.pitch_y_mm());
         Moments {
-            angle_deg: (confidence >= min_confidence).then_some(angle),
+            angle_deg: (confidence >= min_confidence && elongated).then(|| all.angle_deg()),
             confidence,
+            length_mm,
+            width_mm,
         }
+    }
+
+    /// Second moments (mm^2) of a region's pressure above `fraction` of its peak, each cell weighted by its pressure
+    /// less that floor and spread over its own area.
+    fn second_moments(&self, region: &Region, fraction: f64) -> Option<SecondMoments> {
+        let floor = fraction * region.cells.iter().map(|c| c.1[2]).fold(0.0, f64::max);
+        let above: Vec<(Point2, f64)> = region
+            .cells
+            .iter()
+            .filter(|c| c.1[2] > floor)
+            .map(|(j, f)| (self.cells[*j].centre_mm, f[2] - floor))
+            .collect();
+        let weight: f64 = above.iter().map(|a| a.1).sum();
+        if !(weight > 0.0) {
+            return None;
+        }
+        let centre = [
+            above.iter().map(|(p, w)| w * p[0]).sum::<f64>() / weight,
+            above.iter().map(|(p, w)| w * p[1]).sum::<f64>() / weight,
+        ];
+        let (mut xx, mut yy, mut xy) = (0.0, 0.0, 0.0);
+        for (p, w) in &above {
+            let (dx, dy) = (p[0] - centre[0], p[1] - centre[1]);
+            xx += w * dx * dx;
+            yy += w * dy * dy;
+            xy += w * dx * dy;
+        }
+        Some(SecondMoments {
+            xx: xx / weight + self.pad.pitch_x_mm().powi(2) / 12.0,
+            yy: yy / weight + self.pad.pitch_y_mm().powi(2) / 12.0,
+            xy: xy / weight,
+        })
     }
 
     /// Pressure in kPa on the cell grid (row-major), from tractions.
@@ -959,7 +1098,9 @@ mod tests {
     fn field(model: &InverseModel, forces: &[(usize, [f64; 3])], motion: [f64; MOTION_PARAMETERS]) -> Vec<f64> {
         let mut t = vec![0.0; 3 * model.cells.len()];
         for (j, f) in forces {
-            t[3 * j..3 * j + 3].copy_from_slice(f);
+            for k in 0..3 {
+                t[3 * j + k] += f[k];
+            }
         }
         let mut d = vec![0.0; model.observations];
         model.a.mul_vec(&t, &mut d);
@@ -980,6 +1121,28 @@ mod tests {
                 da.total_cmp(&db)
             })
             .unwrap()
+    }
+
+    /// A force at the grid node at (row, col) (an interior corner), shared equally by the four cells that meet there:
+    /// the smallest load stage 2's node unknowns represent exactly.
+    fn node_press(model: &InverseModel, row: usize, col: usize, force: [f64; 3]) -> Vec<(usize, [f64; 3])> {
+        let cols = usize::from(model.pad.cols);
+        model
+            .node_cells(row * (cols + 1) + col)
+            .into_iter()
+            .map(|j| (j, force.map(|f| f / 4.0)))
+            .collect()
+    }
+
+    /// The interior node nearest `p` (mm).
+    fn node_at(model: &InverseModel, p: Point2) -> (usize, usize) {
+        let pad = &model.pad;
+        let col = ((p[0] + pad.width_mm / 2.0) / pad.pitch_x_mm()).round() as usize;
+        let row = ((p[1] + pad.height_mm / 2.0) / pad.pitch_y_mm()).round() as usize;
+        (
+            row.clamp(1, usize::from(pad.rows) - 1),
+            col.clamp(1, usize::from(pad.cols) - 1),
+        )
     }
 
     #[test]
@@ -1094,7 +1257,7 @@ mod tests {
         let stage = model.stage1(&d, &valid);
         let stage2 = model.stage2(&d, &valid, &stage, 0.002, 0.1);
         assert_eq!(stage2.regions.len(), 1, "{:?}", stage2.regions);
-        let moments = model.moments(&stage2.regions[0], 0.35);
+        let moments = model.moments(stage2.edge_region.as_ref().expect("a contact"), 0.35);
         let angle = moments.angle_deg.expect("a line has a direction");
         let truth = (3.333f64).atan2(3.3125).to_degrees();
         assert!(
@@ -1102,6 +1265,39 @@ mod tests {
             "{angle} vs {truth}: {moments:?} {:?}",
             stage2.regions[0].cells
         );
+    }
+
+    #[test]
+    fn round_presses_have_no_direction_wherever_they_fall_on_the_grid() {
+        // A force at one node, and the same force shared by two and by four neighbouring nodes (the press centred
+        // on a cell's edge and on its centre): all round, whatever the grid makes of them.
+        let model = model();
+        let valid = vec![true; model.observations / 2];
+        let (row, col) = node_at(&model, [3.0, 2.0]);
+        let presses: [Vec<(usize, [f64; 3])>; 3] = [
+            node_press(&model, row, col, [0.0, 0.0, 4.0]),
+            [(row, col), (row, col + 1)]
+                .iter()
+                .flat_map(|&(r, c)| node_press(&model, r, c, [0.0, 0.0, 2.0]))
+                .collect(),
+            [(row, col), (row, col + 1), (row + 1, col), (row + 1, col + 1)]
+                .iter()
+                .flat_map(|&(r, c)| node_press(&model, r, c, [0.0, 0.0, 1.0]))
+                .collect(),
+        ];
+        for press in presses {
+            let d = field(&model, &press, [0.0; MOTION_PARAMETERS]);
+            let stage = model.stage1(&d, &valid);
+            let stage2 = model.stage2(&d, &valid, &stage, 0.002, 0.1);
+            assert_eq!(stage2.regions.len(), 1, "{:?}", stage2.regions);
+            let moments = model.moments(stage2.edge_region.as_ref().expect("a contact"), 0.35);
+            assert_eq!(moments.angle_deg, None, "{moments:?}");
+            assert!(
+                (stage2.regions[0].force_vector_n[2] - 4.0).abs() < 0.1,
+                "{:?}",
+                stage2.regions
+            );
+        }
     }
 
     #[test]

@@ -1,0 +1,155 @@
+//! What the traction inverse (`--mode inverse`) says about a contact's shape, on frames of the validation sensor
+//! (`nusense_sim::validation`: another lens, pose and pad model than the estimator assumes) at 1024x768: an edge's
+//! direction at any angle, no direction for a round press of any tip, and two presses 10 mm apart as two contacts
+//! with their own forces.
+
+use nusense_estimator::{Estimator, Mode, Reading, SensorConfig};
+use nusense_sim::validation::{Case, CaseKind, CaseTruth, ValidationRenderer};
+use nusense_sim::{Contact, Scene, NOMINAL_LED_CURRENT_MA};
+
+const SIZE: (u32, u32) = (1024, 768);
+
+struct Bench {
+    renderer: ValidationRenderer,
+    estimator: Estimator,
+}
+
+impl Bench {
+    fn new() -> Self {
+        let renderer = ValidationRenderer::new(SIZE).unwrap();
+        let reference = renderer.reference(7).unwrap();
+        let estimator = Estimator::new(SensorConfig::default(), Mode::Inverse, &reference).unwrap();
+        Self { renderer, estimator }
+    }
+
+    fn read(&mut self, name: &str, kind: CaseKind, scene: Scene, seed: u64) -> (Reading, CaseTruth) {
+        let case = Case {
+            name: name.into(),
+            kind,
+            size: SIZE,
+            scene,
+            camera_motion: None,
+            led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
+            seed,
+        };
+        let (frame, truth) = self.renderer.render(&case).unwrap();
+        let reading = self
+            .estimator
+            .estimate(&frame)
+            .unwrap_or_else(|e| panic!("{name}: refused: {e}"));
+        (reading, truth)
+    }
+}
+
+fn angle_error_deg(found: f64, truth: f64) -> f64 {
+    let d = (found - truth).rem_euclid(180.0);
+    d.min(180.0 - d)
+}
+
+/// Issue 12's target is 2 deg; measured here: 1.8 deg mean, 6.9 worst (at 98 deg), so the bounds are 2.5 deg on the
+/// mean and 8 on each edge (before the node solve: 5.7 and 15.9).
+#[test]
+fn an_edge_has_its_direction_at_every_angle() {
+    let mut bench = Bench::new();
+    let edges = [
+        (12.0, [-6.0, 3.0], 5.0),
+        (41.0, [7.0, -2.0], 6.5),
+        (77.0, [-9.0, -5.0], 4.0),
+        (98.0, [3.0, 6.0], 7.5),
+        (133.0, [10.0, 4.0], 3.5),
+        (161.0, [-2.0, -6.0], 6.0),
+    ];
+    let mut errors = Vec::new();
+    for (k, (angle, at, force)) in edges.into_iter().enumerate() {
+        let name = format!("edge at {angle} deg");
+        let scene = Scene::with_contact(Contact::edge(20.0, 1.0, angle, at, force));
+        let (reading, truth) = bench.read(&name, CaseKind::Edge, scene, 100 + k as u64);
+        let truth = truth.frame.contacts[0].edge_angle_deg.unwrap();
+        let touch = reading.touch.as_ref().unwrap_or_else(|| panic!("{name}: no contact"));
+        let found = touch
+            .edge
+            .angle_deg
+            .unwrap_or_else(|| panic!("{name}: no direction (confidence {})", touch.edge.confidence));
+        let error = angle_error_deg(found, truth);
+        assert!(error <= 8.0, "{name}: found {found:.1} deg, truth {truth:.1}");
+        errors.push(error);
+    }
+    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+    assert!(mean <= 2.5, "mean error {mean:.2} deg: {errors:.2?}");
+}
+
+#[test]
+fn a_round_press_has_no_direction() {
+    let mut bench = Bench::new();
+    let presses = [
+        Contact::sphere(3.0, [-8.0, -10.0], 1.5),
+        Contact::sphere(5.0, [4.0, 2.0], 6.0),
+        Contact::sphere(8.0, [-12.0, 6.0], 7.0),
+        Contact::flat_punch(1.5, [15.0, -8.0], 1.5),
+        Contact::flat_punch(1.5, [-4.0, 12.0], 1.8),
+        Contact::flat_punch(3.0, [9.0, 9.0], 4.0),
+        // Small tips near the border: the fewest corners see them.
+        Contact::flat_punch(1.5, [21.5, 8.0], 1.3),
+        Contact::flat_punch(1.5, [2.0, -11.5], 1.8),
+        Contact::sphere(3.0, [7.0, -16.0], 1.5),
+        Contact::sphere(3.0, [-4.0, 15.0], 2.2),
+    ];
+    for (k, press) in presses.into_iter().enumerate() {
+        let name = format!("{:?} at {:?}", press.indenter, press.position_mm);
+        let (reading, _) = bench.read(&name, CaseKind::Press, Scene::with_contact(press), 200 + k as u64);
+        let touch = reading.touch.as_ref().unwrap_or_else(|| panic!("{name}: no contact"));
+        assert_eq!(touch.edge.angle_deg, None, "{name}: {:?}", touch.edge);
+    }
+}
+
+#[test]
+fn two_presses_ten_mm_apart_are_two_contacts_with_their_own_forces() {
+    let mut bench = Bench::new();
+    // The model's newtons on this sensor, from one press at the centre (the validation pad is softer than the
+    // default config says).
+    let (reading, truth) = bench.read(
+        "calibration",
+        CaseKind::Calibration,
+        Scene::with_contact(Contact::sphere(5.0, [0.0, 0.0], 5.0)),
+        300,
+    );
+    let scale = truth.frame.total_force_n / reading.touch.as_ref().expect("the calibration press").force_n;
+    // Not yet: 4 N beside 2.5 N about [6, -4], along 60 or 90 deg, read as one contact of 6.5 N between them, and
+    // 3.5 N beside 3.5 N about [2, 8] along 120 deg as one of 7.4 N (their pressures, blurred by the 2.8 mm cover
+    // and the node elements, make one peak, or two joined by a saddle at 60 % of them); issue 12 keeps that open.
+    let pairs = [([-12.0, 2.0], 0.0, 3.0, 4.5), ([6.0, -4.0], 90.0, 3.5, 3.0)];
+    for (k, (mid, direction, fa, fb)) in pairs.into_iter().enumerate() {
+        let name = format!("two presses about {mid:?} at {direction} deg");
+        let (c, s) = (
+            f64::cos(f64::to_radians(direction)),
+            f64::sin(f64::to_radians(direction)),
+        );
+        let scene = Scene {
+            contacts: vec![
+                Contact::sphere(4.0, [mid[0] - 5.0 * c, mid[1] - 5.0 * s], fa),
+                Contact::sphere(4.0, [mid[0] + 5.0 * c, mid[1] + 5.0 * s], fb),
+            ],
+            ..Scene::default()
+        };
+        let (reading, truth) = bench.read(&name, CaseKind::TwoContacts, scene, 310 + k as u64);
+        let touch = reading.touch.as_ref().unwrap_or_else(|| panic!("{name}: no contact"));
+        let listed: Vec<([f64; 2], f64)> = touch.contacts().map(|c| (c.centre_mm, c.force_n * scale)).collect();
+        for press in &truth.frame.contacts {
+            let nearest = listed
+                .iter()
+                .min_by(|a, b| {
+                    let da = (a.0[0] - press.centre_mm[0]).hypot(a.0[1] - press.centre_mm[1]);
+                    let db = (b.0[0] - press.centre_mm[0]).hypot(b.0[1] - press.centre_mm[1]);
+                    da.total_cmp(&db)
+                })
+                .unwrap();
+            let distance = (nearest.0[0] - press.centre_mm[0]).hypot(nearest.0[1] - press.centre_mm[1]);
+            assert!(
+                distance <= 3.0 && (nearest.1 - press.normal_force_n).abs() <= 0.2 * press.normal_force_n,
+                "{name}: the press at {:?} ({:.2} N) is nearest to {nearest:.2?}; listed {listed:.2?}",
+                press.centre_mm,
+                press.normal_force_n
+            );
+        }
+    }
+}
