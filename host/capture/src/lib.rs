@@ -15,7 +15,9 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use image::RgbImage;
 use serde::Serialize;
 
-pub use decode::{jpeg_dimensions, yuyv_to_rgb, DecodeError, DecodeOptions, DecodedFrame, Decoder, PixelRect, Scale};
+pub use decode::{
+    jpeg_dimensions, rgb_to_yuyv, yuyv_to_rgb, DecodeError, DecodeOptions, DecodedFrame, Decoder, PixelRect, Scale,
+};
 pub use folder::ImageFolder;
 pub use simulated::{SceneControl, SimulatedCamera, SIM_DEFAULT_FPS, SIM_DEFAULT_HEIGHT, SIM_DEFAULT_WIDTH};
 pub use v4l2::{list_cameras, CameraInfo, CameraSelector, PixelFormat, V4l2Camera, V4l2Options};

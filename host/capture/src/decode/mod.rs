@@ -13,7 +13,7 @@ mod yuyv;
 use image::RgbImage;
 use serde::{Deserialize, Serialize};
 
-pub use yuyv::yuyv_to_rgb;
+pub use yuyv::{rgb_to_yuyv, yuyv_to_rgb};
 
 use crate::FramePixels;
 

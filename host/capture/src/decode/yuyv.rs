@@ -1,5 +1,12 @@
 //! YUYV 4:2:2 (BT.601, limited range), converted only where it is used: each output pixel of the region is the
 //! mean of its `scale x scale` block of the frame, converted to RGB once.
+//!
+//! A pair's chroma is sited between its two pixels (V4L2's sample location for YUYV). At full size each pixel takes
+//! the chroma at its own position, interpolated between the two nearest pairs (3/4 of its own pair's, 1/4 of the
+//! neighbour's on its side), as libjpeg's "fancy" upsampling does: copying the pair's chroma to both pixels instead
+//! moves every chroma edge by half a pixel towards the even pixels, and the estimator, which reads every other pixel
+//! of a frame 2048 px wide, then finds the yellow-on-red lattice (its contrast lives in the chroma) 0.48 px left of
+//! where it is. The scaled paths average whole pairs over blocks of an even width, centred where the block is.
 
 use image::RgbImage;
 
@@ -39,11 +46,19 @@ pub(super) fn decode(
     let stride = width as usize * 2;
     let out = image.as_mut();
     if options.scale == Scale::Full {
+        let last_pair = width as usize / 2 - 1;
         for y in region.y as usize..(region.y + region.height) as usize {
             let line = &bytes[y * stride..][..stride];
+            let chroma = |pair: usize| (i32::from(line[pair * 4 + 1]), i32::from(line[pair * 4 + 3]));
             for x in region.x as usize..(region.x + region.width) as usize {
-                let pair = &line[(x & !1) * 2..][..4];
-                let rgb = to_rgb(i32::from(line[x * 2]), i32::from(pair[1]), i32::from(pair[3]));
+                let own = x / 2;
+                let neighbour = if x % 2 == 0 {
+                    own.saturating_sub(1)
+                } else {
+                    (own + 1).min(last_pair)
+                };
+                let ((u0, v0), (u1, v1)) = (chroma(own), chroma(neighbour));
+                let rgb = to_rgb(i32::from(line[x * 2]), (3 * u0 + u1 + 2) >> 2, (3 * v0 + v1 + 2) >> 2);
                 out[(y * out_width as usize + x) * 3..][..3].copy_from_slice(&rgb);
             }
         }
@@ -80,6 +95,28 @@ pub(super) fn decode(
     })
 }
 
+/// An RGB image as a YUYV camera would deliver it (BT.601, limited range, each pair of pixels sharing the mean of
+/// their chroma): the inverse of [`yuyv_to_rgb`] up to the chroma subsampling and rounding. Benchmarks and tests
+/// make YUYV frames of rendered or real images with it; `None` for an odd width.
+pub fn rgb_to_yuyv(image: &RgbImage) -> Option<Vec<u8>> {
+    if !image.width().is_multiple_of(2) {
+        return None;
+    }
+    let luma = |[r, g, b]: [i32; 3]| ((66 * r + 129 * g + 25 * b + 128) >> 8) + 16;
+    let mut bytes = Vec::with_capacity(image.as_raw().len() / 3 * 2);
+    for pair in image.as_raw().chunks_exact(6) {
+        let left = [i32::from(pair[0]), i32::from(pair[1]), i32::from(pair[2])];
+        let right = [i32::from(pair[3]), i32::from(pair[4]), i32::from(pair[5])];
+        let [r, g, b] = [0, 1, 2].map(|c| left[c] + right[c]);
+        // Sums of two pixels: the shift by 9 takes their mean.
+        let u = ((-38 * r - 74 * g + 112 * b + 256) >> 9) + 128;
+        let v = ((112 * r - 94 * g - 18 * b + 256) >> 9) + 128;
+        let byte = |x: i32| x.clamp(0, 255) as u8;
+        bytes.extend_from_slice(&[byte(luma(left)), byte(u), byte(luma(right)), byte(v)]);
+    }
+    Some(bytes)
+}
+
 /// The whole frame in RGB; `None` for an odd width or too few bytes.
 pub fn yuyv_to_rgb(bytes: &[u8], width: u32, height: u32) -> Option<RgbImage> {
     decode(bytes, width, height, &DecodeOptions::FULL).ok().map(|d| d.image)
@@ -92,13 +129,87 @@ mod tests {
 
     #[test]
     fn grey_and_saturated_red_convert_to_rgb() {
-        // Two pixels of mid grey (Y=126, no chroma) then two of saturated red (BT.601: Y=81 U=90 V=240).
-        let bytes = [126, 128, 126, 128, 81, 90, 81, 240];
-        let img = yuyv_to_rgb(&bytes, 4, 1).expect("whole frame");
-        let grey = img.get_pixel(0, 0).0;
-        assert!(grey.iter().all(|&c| (c as i32 - 128).abs() <= 2), "{grey:?}");
-        let red = img.get_pixel(2, 0).0;
-        assert!(red[0] > 240 && red[1] < 15 && red[2] < 15, "{red:?}");
+        // Four pixels of mid grey (Y=126, no chroma) then four of saturated red (BT.601: Y=81 U=90 V=240).
+        let bytes = [126, 128, 126, 128, 126, 128, 126, 128, 81, 90, 81, 240, 81, 90, 81, 240];
+        let img = yuyv_to_rgb(&bytes, 8, 1).expect("whole frame");
+        for x in 0..3 {
+            let grey = img.get_pixel(x, 0).0;
+            assert!(grey.iter().all(|&c| (c as i32 - 128).abs() <= 2), "{x}: {grey:?}");
+        }
+        for x in 5..8 {
+            let red = img.get_pixel(x, 0).0;
+            assert!(red[0] > 240 && red[1] < 15 && red[2] < 15, "{x}: {red:?}");
+        }
+    }
+
+    #[test]
+    fn a_chroma_edge_stays_where_it_is() {
+        // Red turning yellow along a ramp from x = 3 to x = 11, half-way at x = 7 (inside the pair (6, 7)), as a
+        // blurred edge of the pattern does. Where the green channel crosses half-way between the two colours,
+        // interpolated between the pixels one reads, is x = 7 to a tenth of a pixel, whichever pixels one reads.
+        let (red, yellow) = ([200.0, 30.0, 30.0], [230.0, 200.0, 40.0]);
+        let width = 16u32;
+        let fraction = |x: f64| ((x - 3.0) / 8.0).clamp(0.0, 1.0);
+        let mut image = RgbImage::new(width, 1);
+        for x in 0..width {
+            let f = fraction(f64::from(x));
+            let rgb = [0, 1, 2].map(|c| (red[c] + f * (yellow[c] - red[c])).round() as u8);
+            image.put_pixel(x, 0, image::Rgb(rgb));
+        }
+        let back = yuyv_to_rgb(&rgb_to_yuyv(&image).unwrap(), width, 1).unwrap();
+        let half_way = (red[1] + yellow[1]) / 2.0;
+        let crossing = |xs: Vec<u32>| {
+            xs.windows(2).find_map(|w| {
+                let (g0, g1) = (
+                    f64::from(back.get_pixel(w[0], 0)[1]),
+                    f64::from(back.get_pixel(w[1], 0)[1]),
+                );
+                (g0 < half_way && g1 >= half_way)
+                    .then(|| f64::from(w[0]) + f64::from(w[1] - w[0]) * (half_way - g0) / (g1 - g0))
+            })
+        };
+        for (name, xs) in [
+            ("every pixel", (0..width).collect::<Vec<_>>()),
+            ("even pixels", (0..width).step_by(2).collect()),
+            ("odd pixels", (1..width).step_by(2).collect()),
+        ] {
+            let found = crossing(xs).expect("the edge is in the frame");
+            assert!((found - 7.0).abs() <= 0.1, "{name}: edge at {found:.2}, truly at 7.00");
+        }
+    }
+
+    #[test]
+    fn rgb_through_yuyv_and_back_keeps_the_colours() {
+        // Runs of four equal pixels lose nothing to the chroma subsampling in their middle two pixels (the outer
+        // two take a quarter of the neighbouring run's chroma): only BT.601's 8-bit rounding remains.
+        let colours = [
+            [255, 0, 0],
+            [240, 200, 30],
+            [200, 40, 30],
+            [0, 0, 0],
+            [255, 255, 255],
+            [20, 90, 180],
+        ];
+        let image = RgbImage::from_fn(colours.len() as u32 * 4, 1, |x, _| image::Rgb(colours[x as usize / 4]));
+        let bytes = rgb_to_yuyv(&image).expect("even width");
+        assert_eq!(bytes.len(), colours.len() * 8);
+        let back = yuyv_to_rgb(&bytes, image.width(), 1).unwrap();
+        let middles = image
+            .pixels()
+            .zip(back.pixels())
+            .enumerate()
+            .filter(|(x, _)| x % 4 == 1 || x % 4 == 2);
+        for (x, (a, b)) in middles {
+            for c in 0..3 {
+                assert!(
+                    (i32::from(a[c]) - i32::from(b[c])).abs() <= 3,
+                    "pixel {x}: {:?} came back as {:?}",
+                    a.0,
+                    b.0
+                );
+            }
+        }
+        assert_eq!(rgb_to_yuyv(&RgbImage::new(3, 1)), None, "odd width");
     }
 
     #[test]
