@@ -1,7 +1,7 @@
-//! Camera bytes to reading: the time from the JPEG bytes a camera delivers to the estimator's reading, per decode
-//! scale and mode, with what each costs in accuracy against a plain full decode, and the floors measured in the
-//! same run (a memcpy of the frame; entropy-decoding the whole frame, which no JPEG path avoids; a plain full
-//! decode with `image`, and libjpeg-turbo's full decode).
+//! Camera bytes to reading: the time from the bytes a camera delivers (MJPEG or YUYV) to the estimator's reading,
+//! per decode scale and mode, with what each costs in accuracy against a plain full decode, and the floors
+//! measured in the same run (a memcpy of the frame; for JPEG, entropy-decoding the whole frame, which no JPEG path
+//! avoids, a plain full decode with `image` and libjpeg-turbo's full decode; for YUYV, converting the whole frame).
 //!
 //! Times are the thread's CPU time (`CLOCK_THREAD_CPUTIME_ID`): one core's work, which a shared machine's other
 //! load inflates far less than wall time. Wall medians are reported beside them.
@@ -11,7 +11,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use image::RgbImage;
-use nusense_capture::{DecodeOptions, Decoder, FramePixels, PixelRect, Scale};
+use nusense_capture::{rgb_to_yuyv, yuyv_to_rgb, DecodeOptions, Decoder, FramePixels, PixelRect, Scale};
 use nusense_estimator::{Estimator, Lattice, Mode, SensorConfig, PATTERN_REGION_MARGIN_CELLS};
 use nusense_sim::{sweep, GroundTruth, Renderer, Scene, SensorModel};
 use serde::Serialize;
@@ -154,14 +154,51 @@ pub struct DecodeReport {
     pub sets: Vec<FrameSetResult>,
 }
 
-/// JPEG frames with (for simulated sets) the truth of each press.
+/// Camera frames (JPEG or YUYV bytes) with (for simulated sets) the truth of each press.
 struct FrameSet {
     name: String,
     size: (u32, u32),
-    reference: Vec<u8>,
+    reference: FramePixels,
     /// The frame timed (a press).
-    touch: Vec<u8>,
-    presses: Vec<(Vec<u8>, GroundTruth)>,
+    touch: FramePixels,
+    presses: Vec<(FramePixels, GroundTruth)>,
+}
+
+/// How a camera delivers its frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum CameraFormat {
+    Mjpeg { quality: u8 },
+    Yuyv,
+}
+
+impl CameraFormat {
+    fn deliver(self, image: &RgbImage) -> FramePixels {
+        match self {
+            CameraFormat::Mjpeg { quality } => FramePixels::Jpeg(Arc::new(encode(image, quality))),
+            CameraFormat::Yuyv => FramePixels::Yuyv {
+                // Every frame here is an even number of pixels wide.
+                bytes: Arc::new(rgb_to_yuyv(image).unwrap_or_default()),
+                width: image.width(),
+                height: image.height(),
+            },
+        }
+    }
+
+    fn label(self) -> String {
+        match self {
+            CameraFormat::Mjpeg { quality } => format!("JPEG q{quality}"),
+            CameraFormat::Yuyv => "YUYV".into(),
+        }
+    }
+}
+
+/// The frame in RGB as a plain decoder gives it: the accuracy baseline.
+fn plain_rgb(pixels: &FramePixels) -> Option<RgbImage> {
+    match pixels {
+        FramePixels::Jpeg(bytes) => image::load_from_memory(bytes).ok().map(|i| i.to_rgb8()),
+        FramePixels::Yuyv { bytes, width, height } => yuyv_to_rgb(bytes, *width, *height),
+        FramePixels::Rgb(image) => Some(image.as_ref().clone()),
+    }
 }
 
 fn encode(image: &RgbImage, quality: u8) -> Vec<u8> {
@@ -171,7 +208,11 @@ fn encode(image: &RgbImage, quality: u8) -> Vec<u8> {
     bytes
 }
 
-fn simulated_set(size: (u32, u32), options: &DecodeBenchOptions) -> Result<FrameSet, crate::BenchError> {
+fn simulated_set(
+    size: (u32, u32),
+    format: CameraFormat,
+    options: &DecodeBenchOptions,
+) -> Result<FrameSet, crate::BenchError> {
     let renderer = Renderer::new(SensorModel::real(size.0, size.1))?;
     let leds = [nusense_sim::NOMINAL_LED_CURRENT_MA; 4];
     let (reference, _) = renderer.render(&Scene::rest(), leds, 1)?;
@@ -182,16 +223,16 @@ fn simulated_set(size: (u32, u32), options: &DecodeBenchOptions) -> Result<Frame
         .enumerate()
     {
         let (image, truth) = renderer.render(&frame.scene, leds, 100 + k as u64)?;
-        presses.push((encode(&image, options.camera_quality), truth));
+        presses.push((format.deliver(&image), truth));
     }
+    let reference = format.deliver(&reference);
     let touch = presses
         .get(presses.len() / 2)
-        .map(|(bytes, _)| bytes.clone())
-        .unwrap_or_default();
+        .map_or_else(|| reference.clone(), |(pixels, _)| pixels.clone());
     Ok(FrameSet {
-        name: format!("simulated, JPEG q{}", options.camera_quality),
+        name: format!("simulated, {}", format.label()),
         size,
-        reference: encode(&reference, options.camera_quality),
+        reference,
         touch,
         presses,
     })
@@ -207,10 +248,14 @@ fn real_sets(dir: &std::path::Path, quality: u8) -> Vec<FrameSet> {
     let Ok(size) = nusense_capture::jpeg_dimensions(&reference) else {
         return Vec::new();
     };
-    let decode = |bytes: &[u8]| image::load_from_memory(bytes).map(|i| i.to_rgb8());
-    let (Ok(reference_rgb), Ok(touch_rgb)) = (decode(&reference), decode(&touch)) else {
+    let (reference, touch) = (
+        FramePixels::Jpeg(Arc::new(reference)),
+        FramePixels::Jpeg(Arc::new(touch)),
+    );
+    let (Some(reference_rgb), Some(touch_rgb)) = (plain_rgb(&reference), plain_rgb(&touch)) else {
         return Vec::new();
     };
+    let camera = CameraFormat::Mjpeg { quality };
     let small = (640, 480);
     let resize =
         |image: &RgbImage| image::imageops::resize(image, small.0, small.1, image::imageops::FilterType::Triangle);
@@ -223,17 +268,24 @@ fn real_sets(dir: &std::path::Path, quality: u8) -> Vec<FrameSet> {
             presses: Vec::new(),
         },
         FrameSet {
-            name: format!("real pair, JPEG q{quality}"),
+            name: format!("real pair, {}", camera.label()),
             size,
-            reference: encode(&reference_rgb, quality),
-            touch: encode(&touch_rgb, quality),
+            reference: camera.deliver(&reference_rgb),
+            touch: camera.deliver(&touch_rgb),
             presses: Vec::new(),
         },
         FrameSet {
-            name: format!("real pair, JPEG q{quality}"),
+            name: format!("real pair, {}", camera.label()),
             size: small,
-            reference: encode(&resize(&reference_rgb), quality),
-            touch: encode(&resize(&touch_rgb), quality),
+            reference: camera.deliver(&resize(&reference_rgb)),
+            touch: camera.deliver(&resize(&touch_rgb)),
+            presses: Vec::new(),
+        },
+        FrameSet {
+            name: "real pair, YUYV".into(),
+            size: small,
+            reference: CameraFormat::Yuyv.deliver(&resize(&reference_rgb)),
+            touch: CameraFormat::Yuyv.deliver(&resize(&touch_rgb)),
             presses: Vec::new(),
         },
     ]
@@ -262,14 +314,43 @@ fn time<S>(repeats: usize, state: &mut S, mut prepare: impl FnMut(&mut S), mut w
     Timing::of(&cpu, &wall)
 }
 
-fn jpeg(bytes: &[u8]) -> FramePixels {
-    FramePixels::Jpeg(Arc::new(bytes.to_vec()))
-}
-
 fn floors(set: &FrameSet, repeats: usize) -> Vec<FloorResult> {
-    let touch = jpeg(&set.touch);
+    let touch = &set.touch;
     let mut decoder = Decoder::new();
     let mut copy = Vec::new();
+    let bytes: &[u8] = match touch {
+        FramePixels::Jpeg(bytes) | FramePixels::Yuyv { bytes, .. } => bytes,
+        FramePixels::Rgb(image) => image.as_raw(),
+    };
+    let memcpy = FloorResult {
+        name: "memcpy of the frame's bytes",
+        timing: time(
+            repeats,
+            &mut copy,
+            |_| {},
+            |copy| {
+                copy.clear();
+                copy.extend_from_slice(bytes);
+                std::hint::black_box(&copy);
+            },
+        ),
+    };
+    let FramePixels::Jpeg(jpeg_bytes) = touch else {
+        return vec![
+            memcpy,
+            FloorResult {
+                name: "whole frame to RGB",
+                timing: time(
+                    repeats,
+                    &mut decoder,
+                    |_| {},
+                    |decoder| {
+                        let _ = std::hint::black_box(decoder.decode(touch, &DecodeOptions::FULL));
+                    },
+                ),
+            },
+        ];
+    };
     // Entropy-decoding the whole frame is what decoding its last rows costs: everything above them is
     // Huffman-decoded and skipped without IDCT.
     let last_rows = DecodeOptions {
@@ -282,19 +363,7 @@ fn floors(set: &FrameSet, repeats: usize) -> Vec<FloorResult> {
         }),
     };
     vec![
-        FloorResult {
-            name: "memcpy of the frame's bytes",
-            timing: time(
-                repeats,
-                &mut copy,
-                |_| {},
-                |copy| {
-                    copy.clear();
-                    copy.extend_from_slice(&set.touch);
-                    std::hint::black_box(&copy);
-                },
-            ),
-        },
+        memcpy,
         FloorResult {
             name: "entropy decoding alone (libjpeg-turbo, whole frame)",
             timing: time(
@@ -302,7 +371,7 @@ fn floors(set: &FrameSet, repeats: usize) -> Vec<FloorResult> {
                 &mut decoder,
                 |_| {},
                 |decoder| {
-                    let _ = std::hint::black_box(decoder.decode(&touch, &last_rows));
+                    let _ = std::hint::black_box(decoder.decode(touch, &last_rows));
                 },
             ),
         },
@@ -313,7 +382,7 @@ fn floors(set: &FrameSet, repeats: usize) -> Vec<FloorResult> {
                 &mut (),
                 |_| {},
                 |_| {
-                    let _ = std::hint::black_box(image::load_from_memory(&set.touch));
+                    let _ = std::hint::black_box(image::load_from_memory(jpeg_bytes));
                 },
             ),
         },
@@ -324,7 +393,7 @@ fn floors(set: &FrameSet, repeats: usize) -> Vec<FloorResult> {
                 &mut decoder,
                 |_| {},
                 |decoder| {
-                    let _ = std::hint::black_box(decoder.decode(&touch, &DecodeOptions::FULL));
+                    let _ = std::hint::black_box(decoder.decode(touch, &DecodeOptions::FULL));
                 },
             ),
         },
@@ -338,24 +407,23 @@ struct Baseline {
 }
 
 fn baseline(set: &FrameSet) -> Baseline {
-    let decode = |bytes: &[u8]| image::load_from_memory(bytes).ok().map(|i| i.to_rgb8());
     let Some(mut estimator) =
-        decode(&set.reference).and_then(|r| Estimator::new(SensorConfig::default(), Mode::Fast, &r).ok())
+        plain_rgb(&set.reference).and_then(|r| Estimator::new(SensorConfig::default(), Mode::Fast, &r).ok())
     else {
         return Baseline {
             touch: None,
             locations: vec![None; set.presses.len()],
         };
     };
-    let touch = decode(&set.touch).and_then(|t| {
+    let touch = plain_rgb(&set.touch).and_then(|t| {
         let lattice = estimator.detect(&t).ok()?;
         Some((lattice, estimator.estimate(&t).ok()?.gamma.gamma))
     });
     let locations = set
         .presses
         .iter()
-        .map(|(bytes, _)| {
-            let reading = estimator.estimate(&decode(bytes)?).ok()?;
+        .map(|(pixels, _)| {
+            let reading = estimator.estimate(&plain_rgb(pixels)?).ok()?;
             reading.contact_mm()
         })
         .collect();
@@ -373,7 +441,7 @@ impl Pipeline {
     fn new(set: &FrameSet, pathway: Pathway) -> Result<Self, String> {
         let mut decoder = Decoder::new();
         let reference = decoder
-            .decode(&jpeg(&set.reference), &DecodeOptions::scaled(pathway.scale))
+            .decode(&set.reference, &DecodeOptions::scaled(pathway.scale))
             .map_err(|e| e.to_string())?;
         let estimator =
             Estimator::new(SensorConfig::default(), pathway.mode, &reference.image).map_err(|e| e.to_string())?;
@@ -420,8 +488,8 @@ fn measure_pathway(set: &FrameSet, pathway: Pathway, base: &Baseline, repeats: u
             return result;
         }
     };
-    let (reference, touch) = (jpeg(&set.reference), jpeg(&set.touch));
-    if let Ok(decoded) = pipeline.decoder.decode(&touch, &pipeline.options) {
+    let (reference, touch) = (&set.reference, &set.touch);
+    if let Ok(decoded) = pipeline.decoder.decode(touch, &pipeline.options) {
         let area = f64::from(decoded.decoded.width) * f64::from(decoded.decoded.height);
         result.decoded_fraction = Some(area / (f64::from(set.size.0) * f64::from(set.size.1)));
     }
@@ -430,7 +498,7 @@ fn measure_pathway(set: &FrameSet, pathway: Pathway, base: &Baseline, repeats: u
         &mut pipeline,
         |_| {},
         |pipeline| {
-            let _ = std::hint::black_box(pipeline.decode(&touch));
+            let _ = std::hint::black_box(pipeline.decode(touch));
         },
     );
     // Rest and touch alternate so that the tracker predicts as in live use; only the touch frame is timed.
@@ -439,11 +507,11 @@ fn measure_pathway(set: &FrameSet, pathway: Pathway, base: &Baseline, repeats: u
         repeats,
         &mut pipeline,
         |pipeline| {
-            if let Some(image) = pipeline.decode(&reference) {
+            if let Some(image) = pipeline.decode(reference) {
                 let _ = pipeline.estimator.estimate(&image);
             }
         },
-        |pipeline| match pipeline.decode(&touch).map(|image| pipeline.estimator.estimate(&image)) {
+        |pipeline| match pipeline.decode(touch).map(|image| pipeline.estimator.estimate(&image)) {
             Some(Ok(reading)) => {
                 std::hint::black_box(reading);
             }
@@ -453,7 +521,7 @@ fn measure_pathway(set: &FrameSet, pathway: Pathway, base: &Baseline, repeats: u
     );
     result.error = failed;
 
-    if let (Some((full_lattice, full_gamma)), Some(image)) = (&base.touch, pipeline.decode(&touch)) {
+    if let (Some((full_lattice, full_gamma)), Some(image)) = (&base.touch, pipeline.decode(touch)) {
         if let Ok(lattice) = pipeline.estimator.detect(&image) {
             let d = f64::from(pathway.scale.divisor());
             let distances: Vec<f64> = full_lattice
@@ -471,9 +539,9 @@ fn measure_pathway(set: &FrameSet, pathway: Pathway, base: &Baseline, repeats: u
     }
 
     let (mut to_truth, mut shifts) = (Vec::new(), Vec::new());
-    for ((bytes, truth), full) in set.presses.iter().zip(&base.locations) {
+    for ((pixels, truth), full) in set.presses.iter().zip(&base.locations) {
         let found = pipeline
-            .decode(&jpeg(bytes))
+            .decode(pixels)
             .and_then(|image| pipeline.estimator.estimate(&image).ok())
             .and_then(|r| r.contact_mm());
         if let (Some(at), Some(contact)) = (found, truth.contacts.first()) {
@@ -489,8 +557,8 @@ fn measure_pathway(set: &FrameSet, pathway: Pathway, base: &Baseline, repeats: u
     result
 }
 
-/// Runs every frame set (simulated at 2048x1536 and 640x480; the real pair as shipped, re-encoded, and at
-/// 640x480) through every pathway.
+/// Runs every frame set (simulated at 2048x1536 and 640x480 as MJPEG, and at 640x480 as YUYV; the real pair as
+/// shipped, re-encoded, and at 640x480 as MJPEG and YUYV) through every pathway.
 pub fn run_decode_bench(
     options: &DecodeBenchOptions,
     progress: &mut dyn FnMut(&str),
@@ -499,12 +567,22 @@ pub fn run_decode_bench(
     if let Some(dir) = &options.real_dir {
         sets.extend(real_sets(dir, options.camera_quality));
     }
-    for size in [crate::FULL_SIZE, (640, 480)] {
+    let mjpeg = CameraFormat::Mjpeg {
+        quality: options.camera_quality,
+    };
+    // A YUYV camera is a 640x480 one: USB 2's bandwidth carries 2048x1536 YUYV at about 5 fps.
+    for (size, format) in [
+        (crate::FULL_SIZE, mjpeg),
+        ((640, 480), mjpeg),
+        ((640, 480), CameraFormat::Yuyv),
+    ] {
         progress(&format!(
-            "rendering and encoding the position sweep at {}x{}",
-            size.0, size.1
+            "rendering the position sweep at {}x{} as {}",
+            size.0,
+            size.1,
+            format.label()
         ));
-        sets.push(simulated_set(size, options)?);
+        sets.push(simulated_set(size, format, options)?);
     }
     let mut results = Vec::new();
     for set in &sets {
@@ -528,7 +606,7 @@ pub fn run_decode_bench(
             name: set.name.clone(),
             width: set.size.0,
             height: set.size.1,
-            frame_bytes: set.touch.len(),
+            frame_bytes: set.touch.byte_len(),
             floors,
             pathways,
         });
@@ -551,9 +629,9 @@ pub fn markdown(report: &DecodeReport, machine: &Machine) -> String {
     );
     let _ = writeln!(
         out,
-        "From the JPEG bytes to the estimator's reading, one thread. Times are the thread's CPU time (median and \
+        "From the camera's bytes (JPEG or YUYV) to the estimator's reading, one thread. Times are the thread's CPU time (median and \
          p99 of {} runs; wall median beside it). Region: only the rest frame's pattern plus {} cells decoded. \
-         Accuracy against fast mode on a plain full decode (`image`): real pair, the touch frame's corners (RMS \
+         Accuracy against fast mode on a plain full decode (`image` for JPEG, the whole frame converted for YUYV): real pair, the touch frame's corners (RMS \
          and worst, full-size px) and gamma's ratio; simulated presses, the contact centre's RMSE against the truth \
          and its shift from the full decode's (RMS and worst, mm). Frames encoded here use quality {}.\n",
         report.repeats, PATTERN_REGION_MARGIN_CELLS, report.camera_quality
