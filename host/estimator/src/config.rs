@@ -248,12 +248,15 @@ pub struct InverseConfig {
     /// prior: lambda = (noise_mm / traction_prior_n)^2. The default is the load of an 8 N press (the top of the
     /// paper's range) spread over a 5 mm radius, per cell.
     pub traction_prior_n: f64,
-    /// The contact test never assumes less noise than this, mm (identical frames would otherwise have none).
+    /// The contact test never assumes less noise than this, mm: a guard for identical frames, which would otherwise
+    /// have none. The test's noise is measured on each frame (the corners' scatter about the motion-only fit, see
+    /// [`crate::inverse`]); simulated and real frames show 1-4 um, well above this.
     pub noise_floor_mm: f64,
-    /// ...nor less than this many px of the frame (converted to mm by the pad map at the pad's centre): the
-    /// detector's sub-pixel limit. Lighting changes and JPEG blocks shift neighbouring corners together (a corner
-    /// rests on the squares around it), a smooth error the per-corner residuals cannot see but the tractions can
-    /// explain; below this floor such a frame would read as a light press.
+    /// Stage 2 of the inverse never assumes less noise than this many px of the frame (converted to mm by the pad
+    /// map at the pad's centre), nor than `noise_floor_mm`, when it picks the loaded cells and lists contacts beside
+    /// the strongest: lighting changes and JPEG blocks shift neighbouring corners together (a corner rests on the
+    /// squares around it), a smooth error its residuals cannot see but the tractions can explain. The published
+    /// detector's (`paper` mode's) contact test keeps this floor as well.
     pub noise_floor_px: f64,
     /// Probability that the contact test calls a rest frame a contact.
     pub false_alarm_probability: f64,
@@ -264,7 +267,7 @@ impl Default for InverseConfig {
         Self {
             noise_mm: 0.01,
             traction_prior_n: 1.0,
-            noise_floor_mm: 0.002,
+            noise_floor_mm: 0.0002,
             noise_floor_px: 0.08,
             false_alarm_probability: 1e-6,
         }

@@ -101,8 +101,14 @@ struct Rest {
     /// Each corner in paper px (zero where missed; masked by validity).
     paper_px: Vec<Point2>,
     sampler: ShearSampler,
-    /// The least noise the contact test assumes, mm (`inverse.noise_floor_mm` and `noise_floor_px` on this map).
+    /// The least noise the contact test assumes, mm (`inverse.noise_floor_mm`).
     noise_floor_mm: f64,
+    /// The least noise stage 2 of the inverse assumes when it picks the loaded cells, mm (`inverse.support_floor_px`
+    /// on this map, and `noise_floor_mm`).
+    support_floor_mm: f64,
+    /// Per corner: moved by a change of light alone (see [`light_sensitive_corners`]); the contact test leaves these
+    /// corners out.
+    light_sensitive: Vec<bool>,
 }
 
 pub struct Estimator {
@@ -150,7 +156,7 @@ impl Estimator {
         let camera = camera_for(&config, width, height)?;
         let rest = Rest::new(&config, camera, squares, &corners)?;
         let model = InverseModel::shared(&config)?;
-        Ok(Self {
+        let mut estimator = Self {
             config,
             mode,
             detector,
@@ -158,7 +164,9 @@ impl Estimator {
             model,
             moved_frames: 0,
             retare_count: 0,
-        })
+        };
+        estimator.rest.light_sensitive = estimator.light_sensitive_corners(reference);
+        Ok(estimator)
     }
 
     pub fn reference_lattice(&self) -> &Lattice {
@@ -267,7 +275,7 @@ impl Estimator {
         let (mut reading, moved_mm) = self.measure(&lattice, &registration, &relit_corners)?;
         reading.recovered = recovered;
         reading.counts.squares_detected = squares_found;
-        reading.retared = self.follow_motion(&reading, moved_mm, &lattice)?;
+        reading.retared = self.follow_motion(&reading, moved_mm, &lattice, frame)?;
         reading.retare_count = self.retare_count;
         reading.elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
         Ok(reading)
@@ -283,21 +291,26 @@ impl Estimator {
     ) -> Result<(Reading, f64), EstimateError> {
         let valid: Vec<bool> = registration.corners.iter().map(|c| c.valid).collect();
         let motion = self.remove_motion(lattice, &valid)?;
-        let floor_mm = self.rest.noise_floor_mm;
-        let noise_mm = self.model.frame_noise_mm(&motion.stage, floor_mm).max(floor_mm);
-        // The contact test's statistic without the corners a change of light biased (none unless the camera moved):
-        // their bias is no traction, while a contact moves many corners besides them. The noise, the floor and
-        // everything measured once the test says contact use every corner.
-        let tested_valid: Vec<bool> = valid
-            .iter()
-            .zip(relit_corners)
-            .map(|(&v, &relit)| v && !relit)
+        // The contact test leaves out the corners a change of light biases (after a camera move, or under the LEDs'
+        // drift where the frame clips): their bias is no traction, while a contact moves many corners besides them.
+        // Its noise is what this frame's corners show about the motion-only fit; the floor and everything measured
+        // once it says contact use every corner.
+        let tested_valid: Vec<bool> = (0..valid.len())
+            .map(|i| valid[i] && !relit_corners[i] && !self.rest.light_sensitive.get(i).copied().unwrap_or(false))
             .collect();
-        let outcome = if tested_valid == valid {
-            self.model.test(&motion.stage, noise_mm)
-        } else {
-            self.model
-                .test(&self.model.stage1(&motion.data, &tested_valid), noise_mm)
+        // The published detector keeps the noise the fast tracker was first judged by (its residuals after stage 1,
+        // never below the configured floors): its corners' scatter on rest frames is not measured.
+        let outcome = match self.mode {
+            Mode::Paper => {
+                let floor_mm = self.rest.support_floor_mm;
+                let noise_mm = self.model.frame_noise_mm(&motion.stage, floor_mm).max(floor_mm);
+                self.model
+                    .test(&self.model.stage1(&motion.data, &tested_valid), noise_mm)
+            }
+            Mode::Fast | Mode::Inverse => {
+                self.model
+                    .measured_test(&motion.data, &tested_valid, self.rest.noise_floor_mm)
+            }
         };
 
         let uncompensated_paper_px: Vec<Point2> = lattice
@@ -494,18 +507,37 @@ impl Estimator {
         if !outcome.contact {
             return (None, Some(zero_map));
         }
+        // Stage 2 picks the loaded cells at the noise its own fit leaves (corners near the loads left out), never
+        // below its floor (`inverse.noise_floor_px`), as before the test measured its noise. Its regions are contacts
+        // above the floor at that noise; the strongest is one above the test's floor too (the test found a contact),
+        // which is lower for a light press and higher for a heavy one (whose far field the scatter about the motion
+        // takes for noise).
+        let floor_mm = self.rest.support_floor_mm;
+        let noise_mm = self.model.frame_noise_mm(&motion.stage, floor_mm).max(floor_mm);
+        let others_floor_n = self.model.test(&motion.stage, noise_mm).detection_floor_n;
         let Stage2 {
-            regions: kept,
-            tractions,
+            regions: mut kept,
+            mut tractions,
             edge_region,
             ..
         } = self.model.stage2(
             &motion.data,
             valid,
             &motion.stage,
-            outcome.noise_mm,
-            outcome.detection_floor_n,
+            noise_mm,
+            outcome.detection_floor_n.min(others_floor_n),
         );
+        let mut rank = 0;
+        kept.retain(|region| {
+            rank += 1;
+            let listed = rank == 1 || region.force_vector_n[2] >= others_floor_n;
+            if !listed {
+                for (j, _) in &region.cells {
+                    tractions[3 * j..3 * j + 3].fill(0.0);
+                }
+            }
+            listed
+        });
         if kept.is_empty() {
             return (None, Some(zero_map));
         }
@@ -674,9 +706,65 @@ impl Estimator {
         }
     }
 
+    /// The corners a change of light moves: the rest frame is tracked again with every pixel 10 % darker and 10 %
+    /// brighter. Chromaticity does not change with the light except where the frame clips (glare, highlights), so a
+    /// square there changes shape and its corners move, while the rest of the lattice stays put; the LEDs' drift does
+    /// the same to those squares in later frames, a bias that is no traction and that a light press cannot be told
+    /// from. Each corner's largest shift (pad mm) against the lattice's robust spread: beyond [`LIGHT_SIGMAS`] it is
+    /// left out of the contact test (a press moves many corners besides these).
+    fn light_sensitive_corners(&self, reference: &RgbImage) -> Vec<bool> {
+        let (config, rest) = (&self.config, &self.rest);
+        let count = rest.corners_mm.len();
+        let mut shift = vec![0.0f64; count];
+        for factor in LIGHT_PROBE {
+            let mut probe = reference.clone();
+            for p in probe.pixels_mut() {
+                for c in p.0.iter_mut() {
+                    *c = (f32::from(*c) * factor).round().clamp(0.0, 255.0) as u8;
+                }
+            }
+            let corners = match &self.detector {
+                Detector::Fast(_) => FastTracker::from_reference(reference, config.pad, config.thresholds)
+                    .and_then(|(mut tracker, _)| tracker.track(&probe))
+                    .map(|d| d.corners),
+                Detector::Paper(detector) => paper_points(detector, &probe, config).map(|p| p.1),
+            };
+            let Ok(corners) = corners else {
+                continue;
+            };
+            for (i, (c, r)) in corners.iter().zip(&rest.lattice.corners).enumerate() {
+                let moved = c.zip(r.mm).and_then(|(c, r)| {
+                    rest.mapping
+                        .undistort(c)
+                        .and_then(|u| rest.mapping.undistorted_to_mm(u))
+                        .map(|m| (m, r))
+                });
+                if let Some((m, r)) = moved {
+                    shift[i] = shift[i].max((m[0] - r[0]).hypot(m[1] - r[1]));
+                }
+            }
+        }
+        let mut sorted: Vec<f64> = shift.iter().copied().filter(|v| *v > 0.0).collect();
+        if sorted.len() < count / 2 {
+            return vec![false; count];
+        }
+        sorted.sort_unstable_by(f64::total_cmp);
+        let median = sorted[sorted.len() / 2];
+        let mut deviations: Vec<f64> = sorted.iter().map(|v| (v - median).abs()).collect();
+        deviations.sort_unstable_by(f64::total_cmp);
+        let limit = median + LIGHT_SIGMAS * 1.4826 * deviations[deviations.len() / 2];
+        shift.iter().map(|&v| v > limit).collect()
+    }
+
     /// Counts frames of persistent motion without contact and re-tares after `retare.frames` of them: the frame
     /// just measured becomes the rest frame. Returns whether it did.
-    fn follow_motion(&mut self, reading: &Reading, moved: f64, lattice: &Lattice) -> Result<bool, EstimateError> {
+    fn follow_motion(
+        &mut self,
+        reading: &Reading,
+        moved: f64,
+        lattice: &Lattice,
+        frame: &RgbImage,
+    ) -> Result<bool, EstimateError> {
         if reading.is_contact() || moved <= self.config.retare.motion_mm {
             self.moved_frames = 0;
             return Ok(false);
@@ -691,6 +779,7 @@ impl Estimator {
             tracker.adopt_last_frame_as_reference()?;
         }
         self.rest = Rest::new(&self.config, *self.rest.mapping.camera(), squares, &corners)?;
+        self.rest.light_sensitive = self.light_sensitive_corners(frame);
         self.moved_frames = 0;
         self.retare_count += 1;
         tracing::info!(
@@ -762,7 +851,9 @@ impl Rest {
         let floor_px_mm = mapping
             .mm_per_px_at_centre()
             .map_or(0.0, |scale| config.inverse.noise_floor_px * scale);
-        let noise_floor_mm = config.inverse.noise_floor_mm.max(floor_px_mm);
+        let noise_floor_mm = config.inverse.noise_floor_mm;
+        let support_floor_mm = noise_floor_mm.max(floor_px_mm);
+        let light_sensitive = vec![false; corners_mm.len()];
         Ok(Self {
             lattice,
             mapping,
@@ -772,9 +863,17 @@ impl Rest {
             paper_px,
             sampler,
             noise_floor_mm,
+            support_floor_mm,
+            light_sensitive,
         })
     }
 }
+
+/// The rest frame seen under this much more and less light, to find the corners a change of light moves.
+const LIGHT_PROBE: [f32; 2] = [0.9, 1.1];
+/// A corner moved by the probe more than this many robust standard deviations (over the lattice's corners) beyond
+/// the median corner is light-sensitive.
+const LIGHT_SIGMAS: f64 = 5.0;
 
 fn sub(a: Point2, b: Point2) -> Point2 {
     [a[0] - b[0], a[1] - b[1]]

@@ -17,10 +17,14 @@
 //! **The contact test.** "Rigid motion and noise only" (H0: t = 0) against "tractions present": the statistic is
 //! the fit's improvement E = RSS0 - RSS1 in units of the noise. Under H0, E / sigma^2 = eᵀ Q e / sigma^2 with Q
 //! known from the operator, a weighted sum of chi-squares, taken as g chi^2_h (Satterthwaite: matching mean and
-//! variance); contact when it exceeds that distribution's 1 - alpha quantile. sigma is this frame's own noise,
-//! estimated robustly from the corners' residuals (each divided by its expected share under H0), never below the
-//! configured floor. The detection floor in N follows from the same threshold: the force of a press at the pad's
-//! centre whose expected E equals it.
+//! variance); contact when it exceeds that distribution's 1 - alpha quantile (alpha:
+//! `inverse.false_alarm_probability`). sigma is this frame's own noise: the scatter of its corners about the
+//! motion-only fit, the median corner's ([`InverseModel::rigid_scatter_mm`]). That scatter holds every error the
+//! motion does not explain, the smooth ones from lighting and JPEG included, which the traction fit's own residuals
+//! cannot show (it explains them away); a contact moves a minority of the corners, so the median corner stays
+//! noise. The corners that a change of light alone moves (glare: found once per rest frame, see the estimator) are
+//! left out of the test. The detection floor in N follows from the same threshold: the force of a press at the
+//! pad's centre whose expected E equals it.
 //!
 //! **Stage 2, only when the test says contact.** Friction acts only where something touches, and pressure only
 //! pushes: the tractions are re-estimated on the cells where stage 1 finds pressure above its own noise (and a ring
@@ -52,6 +56,8 @@ const NOISE_TRIM: f64 = 0.05;
 /// ...which lowers the mean of the rest to this fraction of the full mean (for chi-square with 1 or 2 degrees of
 /// freedom: 0.81 and 0.84; a corner's 2-D residual lies between the two).
 const TRIMMED_MEAN_RATIO: f64 = 0.83;
+/// The contact test's noise leaves out the corners this many cells or less from a load stage 1 finds.
+const MEASURED_NOISE_REACH_CELLS: f64 = 3.0;
 /// Fewer corners than this do not make a noise estimate.
 const MIN_NOISE_CORNERS: usize = 10;
 /// Whether a contact is elongated is judged on its core, each cell weighted by its pressure above this fraction of
@@ -398,6 +404,11 @@ impl InverseModel {
 
     /// Residual sum of squares of the motion basis alone, over valid corners.
     fn rigid_rss(&self, d0: &[f64], valid: &[bool]) -> f64 {
+        self.rigid_residuals(d0, valid).iter().map(|v| v * v).sum()
+    }
+
+    /// Residuals of the motion basis alone (2 per corner, mm; zero on invalid corners). `d0` is zero where invalid.
+    fn rigid_residuals(&self, d0: &[f64], valid: &[bool]) -> Vec<f64> {
         let mut btb = self.gram_bb_nalgebra();
         for r in (0..self.observations).filter(|&r| !valid[r / 2]) {
             let row = self.b.row(r);
@@ -409,13 +420,14 @@ impl InverseModel {
         }
         let mut btd = vec![0.0; MOTION_PARAMETERS];
         self.b_t.mul_vec(d0, &mut btd);
-        let Some(m) = btb.cholesky().map(|c| c.solve(&DVector::from_column_slice(&btd))) else {
-            return d0.iter().map(|v| v * v).sum();
-        };
+        let m = btb.cholesky().map(|c| c.solve(&DVector::from_column_slice(&btd)));
         (0..self.observations)
-            .filter(|&r| valid[r / 2])
-            .map(|r| (d0[r] - dot(self.b.row(r), m.as_slice())).powi(2))
-            .sum()
+            .map(|r| match &m {
+                Some(m) if valid[r / 2] => d0[r] - dot(self.b.row(r), m.as_slice()),
+                Some(_) => 0.0,
+                None => d0[r],
+            })
+            .collect()
     }
 
     fn gram_bb_nalgebra(&self) -> DMatrix<f64> {
@@ -428,14 +440,23 @@ impl InverseModel {
     /// is least exact there).
     pub fn frame_noise_mm(&self, stage: &Stage1, floor_mm: f64) -> f64 {
         let first = self.trimmed_noise(stage, &[]);
-        let groups = self.loaded_groups(stage, first.max(floor_mm));
-        if groups.is_empty() {
+        let excluded = self.near_loads(stage, first.max(floor_mm), 1.5);
+        if excluded.is_empty() {
             return first;
         }
+        self.trimmed_noise(stage, &excluded)
+    }
+
+    /// The corners (ascending) within `reach_cells` of a cell where stage 1 finds pressure above its noise at
+    /// `noise_mm` (the loaded groups), none without such a cell.
+    fn near_loads(&self, stage: &Stage1, noise_mm: f64, reach_cells: f64) -> Vec<usize> {
+        let groups = self.loaded_groups(stage, noise_mm);
+        if groups.is_empty() {
+            return Vec::new();
+        }
         let near: Vec<Point2> = groups.iter().flatten().map(|&j| self.cells[j].centre_mm).collect();
-        let reach = 1.5 * self.pad.pitch_x_mm().max(self.pad.pitch_y_mm());
-        let excluded: Vec<usize> = self
-            .pad
+        let reach = reach_cells * self.pad.pitch_x_mm().max(self.pad.pitch_y_mm());
+        self.pad
             .corners()
             .enumerate()
             .filter(|(_, c)| {
@@ -443,8 +464,7 @@ impl InverseModel {
                 near.iter().any(|q| (p[0] - q[0]).hypot(p[1] - q[1]) <= reach)
             })
             .map(|(i, _)| i)
-            .collect();
-        self.trimmed_noise(stage, &excluded)
+            .collect()
     }
 
     fn trimmed_noise(&self, stage: &Stage1, excluded: &[usize]) -> f64 {
@@ -470,10 +490,60 @@ impl InverseModel {
         (sum / share / TRIMMED_MEAN_RATIO).sqrt()
     }
 
+    /// The contact test on a frame's displacements `d` (2 per corner, mm) over the corners `valid`, at the noise the
+    /// frame itself shows: the corners' scatter about the motion-only fit ([`Self::rigid_scatter_mm`]), never below
+    /// `floor_mm`.
+    pub fn measured_test(&self, d: &[f64], valid: &[bool], floor_mm: f64) -> TestOutcome {
+        let stage = self.stage1(d, valid);
+        let scatter = self.rigid_scatter_mm(d, valid).max(floor_mm);
+        // A heavy load moves more than half the corners: its far field is no noise. The scatter is measured again
+        // without the corners near the cells stage 1 finds loaded at that first estimate (with the motion fitted to
+        // the others).
+        let near = self.near_loads(&stage, scatter, MEASURED_NOISE_REACH_CELLS);
+        if near.is_empty() {
+            return self.test(&stage, scatter);
+        }
+        let far: Vec<bool> = (0..valid.len())
+            .map(|i| valid[i] && near.binary_search(&i).is_err())
+            .collect();
+        let noise = if far.iter().filter(|&&v| v).count() >= 2 * MIN_NOISE_CORNERS {
+            self.rigid_scatter_mm(d, &far).max(floor_mm)
+        } else {
+            scatter
+        };
+        self.test(&stage, noise)
+    }
+
+    /// The corners' scatter about the motion-only fit, mm per axis: the median corner's, so that a contact (a
+    /// minority of the corners) leaves it, while every error the motion does not explain (lighting, JPEG, the
+    /// tracker) counts, smooth ones included.
+    pub fn rigid_scatter_mm(&self, d: &[f64], valid: &[bool]) -> f64 {
+        let d0: Vec<f64> = (0..self.observations)
+            .map(|r| if valid[r / 2] { d[r] } else { 0.0 })
+            .collect();
+        let residuals = self.rigid_residuals(&d0, valid);
+        let mut squares: Vec<f64> = (0..self.observations / 2)
+            .filter(|&i| valid[i])
+            .map(|i| residuals[2 * i].powi(2) + residuals[2 * i + 1].powi(2))
+            .collect();
+        if squares.len() < MIN_NOISE_CORNERS {
+            return 0.0;
+        }
+        let middle = squares.len() / 2;
+        let (_, median, _) = squares.select_nth_unstable_by(middle, f64::total_cmp);
+        // |r|^2 / sigma^2 is chi-square with 2 degrees of freedom, whose median is 2 ln 2.
+        (*median / (2.0 * std::f64::consts::LN_2)).sqrt()
+    }
+
     /// The contact test for a stage 1 result, at noise `noise_mm`.
     pub fn test(&self, stage: &Stage1, noise_mm: f64) -> TestOutcome {
+        self.verdict(stage.rss_rigid - stage.rss_full, noise_mm)
+    }
+
+    /// The test's verdict on an explained residual `explained` (mm^2) at noise `noise_mm`.
+    fn verdict(&self, explained: f64, noise_mm: f64) -> TestOutcome {
         let sigma2 = (noise_mm * noise_mm).max(1e-24);
-        let explained = (stage.rss_rigid - stage.rss_full).max(0.0);
+        let explained = explained.max(0.0);
         let statistic = explained / sigma2;
         let z = normal_quantile(1.0 - self.false_alarm_probability);
         let threshold = self.test_scale * chi_square_quantile(self.test_dof, z);

@@ -106,8 +106,9 @@ pub struct ContactTest {
     pub threshold: f64,
     /// Probability of a statistic this large without contact.
     pub p_value: f64,
-    /// This frame's corner noise, mm (1 sigma per axis; never below the floor of `inverse.noise_floor_mm` and
-    /// `inverse.noise_floor_px`).
+    /// This frame's corner noise, mm (1 sigma per axis): the corners' scatter about the motion-only fit, never below
+    /// `inverse.noise_floor_mm` (paper mode: the residual noise of the traction fit, never below the floors of
+    /// `inverse.noise_floor_mm` and `inverse.noise_floor_px`).
     pub noise_mm: f64,
     /// Smallest normal force at the pad's centre the test detects at this noise, N.
     pub detection_floor_n: f64,
