@@ -102,8 +102,9 @@ fn a_round_press_has_no_direction() {
     }
 }
 
-#[test]
-fn two_presses_ten_mm_apart_are_two_contacts_with_their_own_forces() {
+/// Two 4 mm spheres 10 mm apart about `mid`, along `direction` (deg), pressing `fa` and `fb` N: both listed as
+/// contacts, each within 3 mm and 20 % of its force (the model's newtons scaled by one centre press's).
+fn assert_two_contacts_listed(pairs: &[([f64; 2], f64, f64, f64)]) {
     let mut bench = Bench::new();
     // The model's newtons on this sensor, from one press at the centre (the validation pad is softer than the
     // default config says).
@@ -114,11 +115,7 @@ fn two_presses_ten_mm_apart_are_two_contacts_with_their_own_forces() {
         300,
     );
     let scale = truth.frame.total_force_n / reading.touch.as_ref().expect("the calibration press").force_n;
-    // Not yet: 4 N beside 2.5 N about [6, -4], along 60 or 90 deg, read as one contact of 6.5 N between them, and
-    // 3.5 N beside 3.5 N about [2, 8] along 120 deg as one of 7.4 N (their pressures, blurred by the 2.8 mm cover
-    // and the node elements, make one peak, or two joined by a saddle at 60 % of them); issue 12 keeps that open.
-    let pairs = [([-12.0, 2.0], 0.0, 3.0, 4.5), ([6.0, -4.0], 90.0, 3.5, 3.0)];
-    for (k, (mid, direction, fa, fb)) in pairs.into_iter().enumerate() {
+    for (k, &(mid, direction, fa, fb)) in pairs.iter().enumerate() {
         let name = format!("two presses about {mid:?} at {direction} deg");
         let (c, s) = (
             f64::cos(f64::to_radians(direction)),
@@ -152,4 +149,23 @@ fn two_presses_ten_mm_apart_are_two_contacts_with_their_own_forces() {
             );
         }
     }
+}
+
+#[test]
+fn two_presses_ten_mm_apart_are_two_contacts_with_their_own_forces() {
+    assert_two_contacts_listed(&[([-12.0, 2.0], 0.0, 3.0, 4.5), ([6.0, -4.0], 90.0, 3.5, 3.0)]);
+}
+
+/// The pairs the inverse does not yet separate: 4 N beside 2.5 N about [6, -4] along 60 and 90 deg read as one
+/// contact of 6.5 N between them, and 3.5 N beside 3.5 N about [2, 8] along 120 deg as one of 7.4 N (their
+/// pressures, blurred by the 2.8 mm cover and the node elements, make one peak, or two joined by a saddle at 60 %
+/// of them). Run with `--ignored` to see where it stands.
+#[test]
+#[ignore = "issue 12: two contacts 10 mm apart are not yet separated in every direction and force ratio"]
+fn two_presses_ten_mm_apart_in_any_direction_and_force_ratio_are_two_contacts() {
+    assert_two_contacts_listed(&[
+        ([6.0, -4.0], 60.0, 4.0, 2.5),
+        ([6.0, -4.0], 90.0, 4.0, 2.5),
+        ([2.0, 8.0], 120.0, 3.5, 3.5),
+    ]);
 }
