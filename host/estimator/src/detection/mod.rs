@@ -190,6 +190,19 @@ impl FastTracker {
                 model.cell = cell;
             }
         }
+        // Measure the reference again with those cells, from where the first pass ended, as every later frame is
+        // measured: the reference is then where tracking the rest frame itself puts its squares, so that the same
+        // frame again has no displacement (with the coarse cells' reference, its corners sat up to a few tenths of
+        // a pixel off, which the contact test, judging by each frame's own noise, took for a load).
+        let measured = tracker.measure(frame, &squares_px, None)?;
+        squares_px.clear();
+        for (model, m) in tracker.squares.iter_mut().zip(&measured) {
+            if let Some((p, a)) = m {
+                model.reference = Some(*p);
+                model.reference_area = *a;
+            }
+            squares_px.push(model.reference);
+        }
         tracker.previous = squares_px.clone();
         tracker.previous_area = measured.iter().map(|m| m.map(|(_, a)| a)).collect();
         let corners = corners_from_squares(&pad, &squares_px);
