@@ -78,6 +78,48 @@ fn the_rest_frame_against_itself_is_no_contact() {
     assert_eq!(reading.edge_angle_deg(), None);
 }
 
+/// The rest frame again, in fast and inverse modes, and the same frame shifted 200 px (a tare after the camera was
+/// knocked): every corner is where the rest lattice has it, to a micrometre, so the contact test, which judges by
+/// each frame's own noise, has nothing to find.
+#[test]
+fn the_rest_frame_again_has_no_displacement_at_any_corner() {
+    let shifted = |rest: &RgbImage, dx: u32| {
+        let mut moved = RgbImage::new(rest.width(), rest.height());
+        for (x, y, p) in rest.enumerate_pixels() {
+            if x + dx < rest.width() {
+                moved.put_pixel(x + dx, y, *p);
+            }
+        }
+        moved
+    };
+    let half = image::imageops::resize(
+        reference(),
+        reference().width() / 2,
+        reference().height() / 2,
+        image::imageops::FilterType::Triangle,
+    );
+    let frames = [
+        ("rest frame", reference().clone()),
+        ("shifted rest frame", shifted(reference(), 300)),
+        ("rest frame at 1/2", half.clone()),
+        ("shifted rest frame at 1/2", shifted(&half, 150)),
+    ];
+    for mode in [Mode::Fast, Mode::Inverse] {
+        for (what, frame) in &frames {
+            let mut estimator = Estimator::new(SensorConfig::default(), mode, frame).unwrap();
+            let reading = estimator.estimate(frame).unwrap();
+            let worst_um = reading
+                .shear_field
+                .iter()
+                .filter_map(|v| v.displacement_mm)
+                .map(|[dx, dy]| dx.hypot(dy) * 1e3)
+                .fold(0.0, f64::max);
+            assert!(worst_um <= 1.0, "{mode} {what}: a corner moved {worst_um:.2} um");
+            assert!(!reading.is_contact(), "{mode} {what}: {:?}", reading.test);
+        }
+    }
+}
+
 #[test]
 fn paper_mode_finds_the_same_contact_with_the_published_pipeline() {
     let mut estimator = Estimator::new(SensorConfig::default(), Mode::Paper, reference()).unwrap();
