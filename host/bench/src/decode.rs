@@ -316,8 +316,19 @@ fn time<S>(repeats: usize, state: &mut S, mut prepare: impl FnMut(&mut S), mut w
 
 fn floors(set: &FrameSet, repeats: usize) -> Vec<FloorResult> {
     let touch = &set.touch;
-    let mut decoder = Decoder::new();
     let mut copy = Vec::new();
+    // Decoding the touch frame with `options`, through the decoder the pipelines use.
+    let decoding = |name, options: &DecodeOptions| FloorResult {
+        name,
+        timing: time(
+            repeats,
+            &mut Decoder::new(),
+            |_| {},
+            |decoder| {
+                let _ = std::hint::black_box(decoder.decode(touch, options));
+            },
+        ),
+    };
     let bytes: &[u8] = match touch {
         FramePixels::Jpeg(bytes) | FramePixels::Yuyv { bytes, .. } => bytes,
         FramePixels::Rgb(image) => image.as_raw(),
@@ -336,20 +347,7 @@ fn floors(set: &FrameSet, repeats: usize) -> Vec<FloorResult> {
         ),
     };
     let FramePixels::Jpeg(jpeg_bytes) = touch else {
-        return vec![
-            memcpy,
-            FloorResult {
-                name: "whole frame to RGB",
-                timing: time(
-                    repeats,
-                    &mut decoder,
-                    |_| {},
-                    |decoder| {
-                        let _ = std::hint::black_box(decoder.decode(touch, &DecodeOptions::FULL));
-                    },
-                ),
-            },
-        ];
+        return vec![memcpy, decoding("whole frame to RGB", &DecodeOptions::FULL)];
     };
     // Entropy-decoding the whole frame is what decoding its last rows costs: everything above them is
     // Huffman-decoded and skipped without IDCT.
@@ -364,17 +362,7 @@ fn floors(set: &FrameSet, repeats: usize) -> Vec<FloorResult> {
     };
     vec![
         memcpy,
-        FloorResult {
-            name: "entropy decoding alone (libjpeg-turbo, whole frame)",
-            timing: time(
-                repeats,
-                &mut decoder,
-                |_| {},
-                |decoder| {
-                    let _ = std::hint::black_box(decoder.decode(touch, &last_rows));
-                },
-            ),
-        },
+        decoding("entropy decoding alone (libjpeg-turbo, whole frame)", &last_rows),
         FloorResult {
             name: "plain full decode to RGB (`image`, zune-jpeg)",
             timing: time(
@@ -386,17 +374,7 @@ fn floors(set: &FrameSet, repeats: usize) -> Vec<FloorResult> {
                 },
             ),
         },
-        FloorResult {
-            name: "full decode to RGB (libjpeg-turbo)",
-            timing: time(
-                repeats,
-                &mut decoder,
-                |_| {},
-                |decoder| {
-                    let _ = std::hint::black_box(decoder.decode(touch, &DecodeOptions::FULL));
-                },
-            ),
-        },
+        decoding("full decode to RGB (libjpeg-turbo)", &DecodeOptions::FULL),
     ]
 }
 
