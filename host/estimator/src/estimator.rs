@@ -723,10 +723,10 @@ impl Estimator {
                     *c = (f32::from(*c) * factor).round().clamp(0.0, 255.0) as u8;
                 }
             }
+            // A copy of the tracker as it stands on this rest frame (just built, or just re-tared onto it): the
+            // probe is measured as the next frame would be, with no second full-frame search.
             let corners = match &self.detector {
-                Detector::Fast(_) => FastTracker::from_reference(reference, config.pad, config.thresholds)
-                    .and_then(|(mut tracker, _)| tracker.track(&probe))
-                    .map(|d| d.corners),
+                Detector::Fast(tracker) => tracker.clone().track(&probe).map(|d| d.corners),
                 Detector::Paper(detector) => paper_points(detector, &probe, config).map(|p| p.1),
             };
             let Ok(corners) = corners else {
