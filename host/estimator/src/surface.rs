@@ -343,8 +343,6 @@ impl BSplineSurface {
 pub struct SampleBasis {
     u_values: Vec<f64>,
     v_values: Vec<f64>,
-    u: Vec<BasisSpan>,
-    v: Vec<BasisSpan>,
     /// Every sample's terms (u-major samples; within a sample the order of [`BSplineSurface::combine`]), with the
     /// negligible ones left out: a sample costs a few multiply-adds, not a pass over both spans.
     terms: Vec<SampleTerm>,
@@ -386,8 +384,6 @@ impl SampleBasis {
         Self {
             u_values: u_values.to_vec(),
             v_values: v_values.to_vec(),
-            u,
-            v,
             terms,
             term_ends,
         }
@@ -408,7 +404,7 @@ impl SampleBasis {
     }
 
     pub fn len(&self) -> usize {
-        self.u.len() * self.v.len()
+        self.term_ends.len()
     }
 
     pub fn is_empty(&self) -> bool {
