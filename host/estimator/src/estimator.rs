@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::SensorConfig;
 use crate::contact::{divergence_centre, fit_affine_motion, norm, AffineMotion, FieldPoint};
-use crate::detection::{corners_from_squares, FastTracker};
+use crate::detection::{corners_from_squares, median, FastTracker, MAD_TO_SIGMA};
 use crate::edge::{edge_direction, EdgeEstimate};
 use crate::error::EstimateError;
 use crate::force::force;
@@ -744,15 +744,13 @@ impl Estimator {
                 }
             }
         }
-        let mut sorted: Vec<f64> = shift.iter().copied().filter(|v| *v > 0.0).collect();
-        if sorted.len() < count / 2 {
+        let mut moved: Vec<f64> = shift.iter().copied().filter(|v| *v > 0.0).collect();
+        if moved.len() < count / 2 {
             return vec![false; count];
         }
-        sorted.sort_unstable_by(f64::total_cmp);
-        let median = sorted[sorted.len() / 2];
-        let mut deviations: Vec<f64> = sorted.iter().map(|v| (v - median).abs()).collect();
-        deviations.sort_unstable_by(f64::total_cmp);
-        let limit = median + LIGHT_SIGMAS * 1.4826 * deviations[deviations.len() / 2];
+        let centre = median(&mut moved);
+        let mut deviations: Vec<f64> = moved.iter().map(|v| (v - centre).abs()).collect();
+        let limit = centre + LIGHT_SIGMAS * MAD_TO_SIGMA * median(&mut deviations);
         shift.iter().map(|&v| v > limit).collect()
     }
 

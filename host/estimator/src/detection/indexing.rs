@@ -7,6 +7,8 @@ use std::collections::VecDeque;
 
 use nusense_geometry::Point2;
 
+use super::median;
+
 /// Relative index of a square: `row` and `col` steps from the seed square (row + col is always even).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RelativeIndex {
@@ -26,11 +28,6 @@ pub struct Indexed {
 
 fn dist2(a: Point2, b: Point2) -> f64 {
     (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
-}
-
-fn median(values: &mut [f64]) -> f64 {
-    values.sort_unstable_by(f64::total_cmp);
-    values[values.len() / 2]
 }
 
 /// `None` when the points do not form a diagonal lattice (fewer than 5 points or no two step directions).

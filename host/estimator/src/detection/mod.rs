@@ -49,7 +49,7 @@ const JUMP_CELLS: f64 = 0.1;
 /// `FastTracker::relit_squares`.
 const RELIT_SIGMAS: f64 = 5.0;
 /// MAD to standard deviation for a normal distribution.
-const MAD_TO_SIGMA: f64 = 1.4826;
+pub(crate) const MAD_TO_SIGMA: f64 = 1.4826;
 /// Samples across a cell the centroid needs; more pixels than this add time, not precision.
 const SAMPLES_PER_CELL: f64 = 36.0;
 /// A found centroid must sit on yellow: the mean membership within CENTRE_HALF cells of it at least this. The
@@ -686,7 +686,7 @@ enum SquareOutcome {
 }
 
 /// The element a sort would put in the middle (the upper one of an even count); reorders `values`.
-fn median(values: &mut [f64]) -> f64 {
+pub(crate) fn median(values: &mut [f64]) -> f64 {
     *values.select_nth_unstable_by(values.len() / 2, f64::total_cmp).1
 }
 
