@@ -7,6 +7,7 @@
 
 use std::time::Instant;
 
+use image::RgbImage;
 use nusense_estimator::calibration::{fit_force_line, CalibrationSample, FitOptions};
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use nusense_sim::validation::{CaseKind, CaseTruth, Profile, ValidationRenderer, ValidationSet, FLOOR_FORCES_N};
@@ -161,6 +162,8 @@ pub fn run_validation(
 ) -> Result<ValidationReport, BenchError> {
     let set = ValidationSet::new(profile, seed);
     let sizes = set.sizes();
+    let (configs, calibration_frames) = sensor_configs(&set, seed, modes, progress)?;
+    let mut calibration_frames = calibration_frames.into_iter().peekable();
     let mut scored: Vec<Vec<Scored>> = modes.iter().map(|_| Vec::new()).collect();
     let mut errors: Vec<Option<String>> = vec![None; modes.len()];
     for (size_index, &size) in sizes.iter().enumerate() {
@@ -174,7 +177,7 @@ pub fn run_validation(
             .iter()
             .enumerate()
             .map(
-                |(m, &mode)| match Estimator::new(SensorConfig::default(), mode, &reference) {
+                |(m, &mode)| match Estimator::new(configs[m].clone(), mode, &reference) {
                     Ok(e) => Some(e),
                     Err(error) => {
                         errors[m].get_or_insert_with(|| format!("{}x{} rest frame: {error}", size.0, size.1));
@@ -193,7 +196,11 @@ pub fn run_validation(
                 k + 1,
                 cases.len()
             ));
-            let (frame, truth) = renderer.render(case)?;
+            // The calibration presses come first at the main size; they were rendered to fit the lines.
+            let (frame, truth) = match calibration_frames.next_if(|(name, _)| *name == case.name) {
+                Some((_, rendered)) => rendered,
+                None => renderer.render(case)?,
+            };
             for (m, estimator) in estimators.iter_mut().enumerate() {
                 let (observed, elapsed_ms) = match estimator {
                     Some(estimator) => {
@@ -242,6 +249,64 @@ pub fn run_validation(
         modes: figures,
         machine: crate::report::Machine::this(),
     })
+}
+
+/// Each mode's sensor config, as `nusense calibrate` would leave it for the validation sensor: the gamma modes'
+/// estimators carry the line F = a gamma + b fitted on the calibration presses (the real sensor's default line reads
+/// this sensor's light presses below zero, and the gamma modes' detection floor is stated in the line's newtons);
+/// the modes that report newtons keep the pad model's defaults and are scaled afterwards (see [`ForceCalibration`]).
+/// Also returns the calibration presses' frames (case name, frame, truth), in the set's order, to measure again.
+#[allow(clippy::type_complexity)]
+fn sensor_configs(
+    set: &ValidationSet,
+    seed: u64,
+    modes: &[Mode],
+    progress: &mut dyn FnMut(&str),
+) -> Result<(Vec<SensorConfig>, Vec<(String, (RgbImage, CaseTruth))>), BenchError> {
+    let cases: Vec<_> = set.cases.iter().filter(|c| c.kind == CaseKind::Calibration).collect();
+    let Some(size) = cases.first().map(|c| c.size) else {
+        return Ok((vec![SensorConfig::default(); modes.len()], Vec::new()));
+    };
+    progress(&format!(
+        "validation: fitting the gamma line on {} calibration presses at {}x{}",
+        cases.len(),
+        size.0,
+        size.1
+    ));
+    let renderer = ValidationRenderer::new(size)?;
+    let reference = renderer.reference(seed)?;
+    let frames = cases
+        .iter()
+        .map(|case| Ok((case.name.clone(), renderer.render(case)?)))
+        .collect::<Result<Vec<_>, BenchError>>()?;
+    let configs = modes
+        .iter()
+        .map(|&mode| {
+            let mut config = SensorConfig::default();
+            if mode == Mode::Inverse {
+                return config;
+            }
+            let Ok(mut estimator) = Estimator::new(config.clone(), mode, &reference) else {
+                return config;
+            };
+            // gamma does not depend on the line, so the default one measures it as well as any.
+            let samples: Vec<CalibrationSample> = frames
+                .iter()
+                .filter_map(|(_, (frame, truth))| {
+                    Some(CalibrationSample {
+                        gamma: estimator.estimate(frame).ok()?.gamma.gamma,
+                        force_n: truth.frame.force_vector_n[2],
+                    })
+                })
+                .collect();
+            if let Ok(fit) = fit_force_line(&samples, &FitOptions::default()) {
+                config.calibration.a = fit.a;
+                config.calibration.b = fit.b;
+            }
+            config
+        })
+        .collect();
+    Ok((configs, frames))
 }
 
 /// The strongest true contact's centre.
