@@ -106,6 +106,10 @@ struct Rest {
     /// The least noise stage 2 of the inverse assumes when it picks the loaded cells, mm (`inverse.support_floor_px`
     /// on this map, and `noise_floor_mm`).
     support_floor_mm: f64,
+    /// The gamma (camera motion removed) of a 1 N press at the pad's centre as the pad model sees it, noise-free: the
+    /// press the contact test's detection floor is stated for, so the floor press's gamma is the floor times this (see
+    /// [`Estimator::line_touch`]).
+    gamma_per_n: f64,
     /// Per corner: moved by a change of light alone (see [`light_sensitive_corners`]); the contact test leaves these
     /// corners out.
     light_sensitive: Vec<bool>,
@@ -154,8 +158,8 @@ impl Estimator {
             }
         };
         let camera = camera_for(&config, width, height)?;
-        let rest = Rest::new(&config, camera, squares, &corners)?;
         let model = InverseModel::shared(&config)?;
+        let rest = Rest::new(&config, &model, camera, squares, &corners)?;
         let mut estimator = Self {
             config,
             mode,
@@ -609,8 +613,8 @@ impl Estimator {
     }
 
     /// Contact from the paper's gamma line (modes `fast` and `paper`): the force is the line's value, located where
-    /// the shear field diverges from. Below the detection floor (which the line's offset b reaches for light
-    /// presses) there is no contact, never a negative force.
+    /// the shear field diverges from. A force below the detection floor, in the line's own newtons, is no contact,
+    /// never a negative or zero force.
     fn line_touch(
         &self,
         field: &PaperField,
@@ -619,13 +623,25 @@ impl Estimator {
         line_n: f64,
         registration: &Registration,
     ) -> Option<Touch> {
-        // Contact is the noise test's decision alone: the line's force depends on a calibration (the paper's by
-        // default, wrong for another pad or the simulator), and gating on it hid a 4 N press on the simulator.
-        if !outcome.contact {
+        // The noise test decides whether anything departs from rigid motion; the line says how much force that is.
+        // The test's floor is a force at the pad's centre in the pad model's newtons, which are not the line's (the
+        // model's modulus and the line are calibrated apart, or not at all), so it is not compared with the line's
+        // force as it stands: it is carried over as the gamma the floor press gives (the model's central press,
+        // noise-free, through this rest frame's sampler: its displacement is fixed by the noise and the test alone,
+        // whatever the modulus), and the line's force at that gamma is the floor in the line's newtons. A reading
+        // the line puts below it, or at or below zero (an offset b the line reaches before the floor), is lighter
+        // than the lightest press the sensor can tell from noise by the line's own reckoning: no contact, not a
+        // clamped or negative force. gamma and the displacements are still reported (`force_model_n` keeps the
+        // line's value as it is). With a line fitted to this sensor the floor sits near the test's; with another
+        // sensor's line (the real sensor's default on a simulated pad) light presses read no contact, which is why
+        // every estimator of a sensor whose line is known is built with it.
+        let floor_gamma = outcome.detection_floor_n * self.rest.gamma_per_n;
+        let floor_line_n = force(&self.config.calibration, floor_gamma).model_n;
+        // Written so that a NaN on either side is below, not above.
+        let above_floor = line_n > 0.0 && line_n >= floor_line_n;
+        if !outcome.contact || !above_floor {
             return None;
         }
-        // An uncalibrated line can go below zero for a real contact; a force is never negative.
-        let line_n = line_n.max(0.0);
         let points: Vec<FieldPoint> = (0..valid.len())
             .filter(|&i| valid[i])
             .map(|i| FieldPoint {
@@ -776,7 +792,13 @@ impl Estimator {
         if let Detector::Fast(tracker) = &mut self.detector {
             tracker.adopt_last_frame_as_reference()?;
         }
-        self.rest = Rest::new(&self.config, *self.rest.mapping.camera(), squares, &corners)?;
+        self.rest = Rest::new(
+            &self.config,
+            &self.model,
+            *self.rest.mapping.camera(),
+            squares,
+            &corners,
+        )?;
         self.rest.light_sensitive = self.light_sensitive_corners(frame);
         self.moved_frames = 0;
         self.retare_count += 1;
@@ -811,6 +833,7 @@ struct PaperField<'a> {
 impl Rest {
     fn new(
         config: &SensorConfig,
+        model: &InverseModel,
         camera: nusense_geometry::FisheyeCamera,
         squares: Vec<Option<Point2>>,
         corners: &[Option<Point2>],
@@ -846,6 +869,7 @@ impl Rest {
             &paper_px,
             &valid,
         )?;
+        let gamma_per_n = central_press_gamma(config, model, &mapping, &corners_mm, &sampler, &valid)?;
         let floor_px_mm = mapping
             .mm_per_px_at_centre()
             .map_or(0.0, |scale| config.inverse.noise_floor_px * scale);
@@ -862,6 +886,7 @@ impl Rest {
             sampler,
             noise_floor_mm,
             support_floor_mm,
+            gamma_per_n,
             light_sensitive,
         })
     }
@@ -872,6 +897,32 @@ const LIGHT_PROBE: [f32; 2] = [0.9, 1.1];
 /// A corner moved by the probe more than this many robust standard deviations (over the lattice's corners) beyond
 /// the median corner is light-sensitive.
 const LIGHT_SIGMAS: f64 = 5.0;
+
+/// The gamma of the pad model's 1 N central press ([`InverseModel::central_press_mm`]) on this rest frame, with the
+/// motion stage 1 fits to it removed as [`Estimator::measure`] removes it from a frame.
+fn central_press_gamma(
+    config: &SensorConfig,
+    model: &InverseModel,
+    mapping: &PadMapping,
+    corners_mm: &[Point2],
+    sampler: &ShearSampler,
+    valid: &[bool],
+) -> Result<f64, EstimateError> {
+    let press = model.central_press_mm();
+    let stage = model.stage1(&press, valid);
+    let pressed: Vec<Point2> = corners_mm
+        .iter()
+        .enumerate()
+        .map(|(i, &r)| {
+            let m = model.motion_field(&stage.motion, r);
+            let at = [r[0] + press[2 * i] - m[0], r[1] + press[2 * i + 1] - m[1]];
+            let p = if valid[i] { mapping.mm_to_undistorted(at) } else { None };
+            p.map(|p| mapping.to_paper(p)).unwrap_or([0.0, 0.0])
+        })
+        .collect();
+    let samples = sampler.sample(&pressed, valid)?;
+    Ok(gamma(&samples, config.calibration.alpha))
+}
 
 fn sub(a: Point2, b: Point2) -> Point2 {
     [a[0] - b[0], a[1] - b[1]]

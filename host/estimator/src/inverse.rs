@@ -312,14 +312,7 @@ impl InverseModel {
             motion_length_mm,
             false_alarm_probability: config.inverse.false_alarm_probability,
         };
-        // A 1 N press spread over the cells nearest the centre, noise-free.
-        let central = model.central_cells();
-        let mut press = vec![0.0; 3 * model.cells.len()];
-        for &j in &central {
-            press[3 * j + 2] = 1.0 / central.len() as f64;
-        }
-        let mut d = vec![0.0; observations];
-        model.a.mul_vec(&press, &mut d);
+        let d = model.central_press_mm();
         let stage = model.stage1(&d, &vec![true; observations / 2]);
         model.reference_explained = stage.rss_rigid - stage.rss_full;
         if !(model.reference_explained > 0.0) {
@@ -343,6 +336,19 @@ impl InverseModel {
         (0..self.cells.len())
             .filter(|&j| distance(&self.cells[j]) <= nearest + 1e-9)
             .collect()
+    }
+
+    /// The displacements (mm, 2 per corner, noise-free) of a 1 N press spread over the cells nearest the pad's
+    /// centre: the press the detection floor is stated for.
+    pub fn central_press_mm(&self) -> Vec<f64> {
+        let central = self.central_cells();
+        let mut press = vec![0.0; 3 * self.cells.len()];
+        for &j in &central {
+            press[3 * j + 2] = 1.0 / central.len() as f64;
+        }
+        let mut d = vec![0.0; self.observations];
+        self.a.mul_vec(&press, &mut d);
+        d
     }
 
     /// Displacement (mm) that motion parameters `m` give the pad point `p` (mm).
