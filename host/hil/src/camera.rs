@@ -19,6 +19,8 @@ pub enum CameraProbeError {
     EmptyFrame,
     #[error("the simulated camera has no light reading yet (the emulator's light channel is silent)")]
     NoLight,
+    #[error("the simulated camera got no light reading for board time {0} us (the emulator's light channel stopped)")]
+    NoLightSince(u64),
     #[error("the camera's frame does not decode: {0}")]
     Decode(#[from] nusense_capture::DecodeError),
 }
@@ -29,6 +31,13 @@ pub trait BrightnessProbe {
     fn describe(&self) -> String;
     /// Mean luma (0..=255) of what the camera sees now.
     fn brightness(&mut self) -> Result<f64, CameraProbeError>;
+    /// Mean luma of the light at board time `uptime_us` or later (the time of the telemetry frame that showed the
+    /// state to look at): what a camera fed from the board's side sees lags, and must not be read before that
+    /// moment has reached it. A camera that looks at the pad itself sees the present, which is later.
+    fn brightness_since(&mut self, uptime_us: u64) -> Result<f64, CameraProbeError> {
+        let _ = uptime_us;
+        self.brightness()
+    }
     /// The string current that gives `luma` with only `side` lit, when this camera is calibrated in milliamps
     /// (the simulated one is: it knows its renderer); `None` for an uncalibrated camera, which can only compare
     /// the sides with each other.
@@ -36,8 +45,9 @@ pub trait BrightnessProbe {
 }
 
 /// Where the simulated camera's light comes from: the strings' true currents (Top, Right, Bottom, Left), from
-/// the simulated plant itself, not from the board's telemetry; `None` until known.
-pub type LightSource = Box<dyn Fn() -> Option<[f32; 4]> + Send>;
+/// the simulated plant itself, not from the board's telemetry; `None` until known. Given a board time, the light
+/// at that time or later (a source that is always current may ignore it); `None` if it never came.
+pub type LightSource = Box<dyn Fn(Option<u64>) -> Option<[f32; 4]> + Send>;
 
 /// Currents at which the simulated camera calibrates each side (piecewise linear between them).
 const CALIBRATION_MA: [f32; 6] = [0.0, 25.0, 50.0, 75.0, 100.0, 130.0];
@@ -106,7 +116,12 @@ impl BrightnessProbe for SimulatedCameraProbe {
     }
 
     fn brightness(&mut self) -> Result<f64, CameraProbeError> {
-        let currents = (self.light)().ok_or(CameraProbeError::NoLight)?;
+        let currents = (self.light)(None).ok_or(CameraProbeError::NoLight)?;
+        self.render_luma(currents)
+    }
+
+    fn brightness_since(&mut self, uptime_us: u64) -> Result<f64, CameraProbeError> {
+        let currents = (self.light)(Some(uptime_us)).ok_or(CameraProbeError::NoLightSince(uptime_us))?;
         self.render_luma(currents)
     }
 
@@ -187,7 +202,7 @@ mod tests {
     fn the_simulated_camera_sees_the_true_light_and_reads_it_back_in_milliamps() {
         let light = std::sync::Arc::new(std::sync::Mutex::new([20.0f32; 4]));
         let source = light.clone();
-        let mut probe = SimulatedCameraProbe::new(80, 60, Box::new(move || Some(*source.lock().unwrap()))).unwrap();
+        let mut probe = SimulatedCameraProbe::new(80, 60, Box::new(move |_| Some(*source.lock().unwrap()))).unwrap();
         let dim = probe.brightness().unwrap();
         *light.lock().unwrap() = [100.0; 4];
         let bright = probe.brightness().unwrap();

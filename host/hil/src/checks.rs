@@ -17,6 +17,53 @@ const SETTLED_RUN: usize = 5;
 const TELEMETRY_POLL: Duration = Duration::from_millis(100);
 /// The nominal LED current, restored after the clamp check when the board's own state is unknown.
 const NOMINAL_MA: u16 = nusense_firmware_core::limits::NOMINAL_CURRENT_MA;
+/// Under emulation, how many times a wait's length in board time the wall clock may run before the wait ends
+/// anyway: only a board whose telemetry has stopped gets there (a starved emulator runs at a fraction of wall
+/// time, well above this).
+const EMULATED_WALL_GUARD: u32 = 20;
+
+/// How long a wait on the board lasts: on the wall clock for a board on a crystal (its clock and the host's agree),
+/// on the board's own clock under emulation, measured by the telemetry it sends, because a starved emulator runs
+/// slower than wall time and would otherwise be given less time to do the same work than a real board.
+struct Deadline {
+    clock: BoardClock,
+    length: Duration,
+    started: Instant,
+    first_uptime_us: Option<u64>,
+    last_uptime_us: u64,
+}
+
+impl Deadline {
+    fn new(clock: BoardClock, length: Duration) -> Self {
+        Self {
+            clock,
+            length,
+            started: Instant::now(),
+            first_uptime_us: None,
+            last_uptime_us: 0,
+        }
+    }
+
+    /// A telemetry frame arrived: board time has moved on. The first frame's time is the start: frames still in
+    /// flight from before the request make it earlier, never later, than the request.
+    fn saw(&mut self, telemetry: &Telemetry) {
+        self.first_uptime_us.get_or_insert(telemetry.uptime_us);
+        self.last_uptime_us = telemetry.uptime_us;
+    }
+
+    fn passed(&self) -> bool {
+        match self.clock {
+            BoardClock::WallClock => self.started.elapsed() >= self.length,
+            BoardClock::Emulated => {
+                let board = self
+                    .first_uptime_us
+                    .map(|first| Duration::from_micros(self.last_uptime_us.saturating_sub(first)));
+                board.is_some_and(|board| board >= self.length)
+                    || self.started.elapsed() >= self.length * EMULATED_WALL_GUARD
+            }
+        }
+    }
+}
 
 type Outcome = Result<(Verdict, String, Value), CheckError>;
 
@@ -251,6 +298,8 @@ struct Settled {
     mean_ma: [f64; CHANNEL_COUNT],
     reported_setpoint_ma: [u16; CHANNEL_COUNT],
     over_current: bool,
+    /// Board time of the last frame averaged: the camera looks at the light of this moment or later.
+    uptime_us: u64,
 }
 
 impl Settled {
@@ -277,6 +326,7 @@ impl Settled {
 /// should regulate to (`target_ma`, the request clamped), then averages the next frames.
 fn set_and_settle(session: &mut Session, request_ma: u16, target_ma: u16) -> Result<Settled, CheckError> {
     let options = session.options;
+    let clock = session.clock;
     let deadline_after = Duration::from_millis(session.ramp_ms()) + options.settle_timeout;
     let link = session.link()?;
     link.stream_telemetry(options.telemetry_period_ms)?;
@@ -293,10 +343,12 @@ fn set_and_settle(session: &mut Session, request_ma: u16, target_ma: u16) -> Res
     let mut settled_after_ms = None;
     let mut recent: Vec<Telemetry> = Vec::new();
     let mut any = false;
-    while requested_at.elapsed() < deadline_after {
+    let mut deadline = Deadline::new(clock, deadline_after);
+    while !deadline.passed() {
         let Some(telemetry) = link.next_telemetry(TELEMETRY_POLL)? else {
             continue;
         };
+        deadline.saw(&telemetry);
         any = true;
         run = if within(&telemetry) { run + 1 } else { 0 };
         recent.push(telemetry);
@@ -310,11 +362,14 @@ fn set_and_settle(session: &mut Session, request_ma: u16, target_ma: u16) -> Res
     }
     if settled_after_ms.is_some() {
         recent.clear();
-        let averaging_deadline = Instant::now()
-            + Duration::from_millis(u64::from(options.telemetry_period_ms) * options.settled_frames as u64 * 3)
-            + TELEMETRY_POLL;
-        while recent.len() < options.settled_frames && Instant::now() < averaging_deadline {
+        let mut averaging = Deadline::new(
+            clock,
+            Duration::from_millis(u64::from(options.telemetry_period_ms) * options.settled_frames as u64 * 3)
+                + TELEMETRY_POLL,
+        );
+        while recent.len() < options.settled_frames && !averaging.passed() {
             if let Some(telemetry) = link.next_telemetry(TELEMETRY_POLL)? {
+                averaging.saw(&telemetry);
                 recent.push(telemetry);
             }
         }
@@ -331,6 +386,7 @@ fn set_and_settle(session: &mut Session, request_ma: u16, target_ma: u16) -> Res
         mean_ma,
         reported_setpoint_ma: last.channels.map(|c| c.setpoint_ma),
         over_current: window.iter().any(|t| t.channels.iter().any(|c| c.faults.over_current)),
+        uptime_us: last.uptime_us,
     })
 }
 
@@ -385,7 +441,7 @@ fn brightness_follows_current(session: &mut Session, camera: &mut dyn Brightness
     let mut steps = Vec::new();
     for &setpoint in &session.options.setpoints_ma.clone() {
         let settled = set_and_settle(session, setpoint, setpoint)?;
-        let level = camera.brightness()?;
+        let level = camera.brightness_since(settled.uptime_us)?;
         let mean_current = settled.mean_ma.iter().sum::<f64>() / CHANNEL_COUNT as f64;
         currents.push(mean_current);
         brightness.push(level);
@@ -415,9 +471,11 @@ fn brightness_follows_current(session: &mut Session, camera: &mut dyn Brightness
 /// side's brightness per reported mA from the others' (an uncalibrated one).
 const CAMERA_CURRENT_TOLERANCE: f64 = 0.10;
 
-/// Lights one string alone at `ma` and returns the current the board reports for it once settled.
-fn light_one_side(session: &mut Session, side: Side, ma: u16) -> Result<f64, CheckError> {
+/// Lights one string alone at `ma` and returns the current the board reports for it once settled, and the board
+/// time of the last frame averaged.
+fn light_one_side(session: &mut Session, side: Side, ma: u16) -> Result<(f64, u64), CheckError> {
     let options = session.options;
+    let clock = session.clock;
     let deadline_after = Duration::from_millis(session.ramp_ms()) + options.settle_timeout;
     let link = session.link()?;
     for other in Side::ALL {
@@ -425,13 +483,16 @@ fn light_one_side(session: &mut Session, side: Side, ma: u16) -> Result<f64, Che
     }
     link.stream_telemetry(options.telemetry_period_ms)?;
     link.drain_telemetry().for_each(drop);
-    let requested_at = Instant::now();
     let mut settled: Vec<f64> = Vec::new();
     let mut run = 0;
-    while requested_at.elapsed() < deadline_after && settled.len() < options.settled_frames {
+    let mut uptime_us = 0;
+    let mut deadline = Deadline::new(clock, deadline_after);
+    while !deadline.passed() && settled.len() < options.settled_frames {
         let Some(telemetry) = link.next_telemetry(TELEMETRY_POLL)? else {
             continue;
         };
+        deadline.saw(&telemetry);
+        uptime_us = telemetry.uptime_us;
         let reported = f64::from(telemetry.channels[side.index()].measured_ma);
         let others_dark = Side::ALL
             .iter()
@@ -445,7 +506,8 @@ fn light_one_side(session: &mut Session, side: Side, ma: u16) -> Result<f64, Che
             run = 0;
         }
     }
-    mean(&settled).ok_or(CheckError::NoTelemetry(deadline_after))
+    let reported = mean(&settled).ok_or(CheckError::NoTelemetry(deadline_after))?;
+    Ok((reported, uptime_us))
 }
 
 /// Each string alone, measured from outside the board: the camera's brightness turned into milliamps by its
@@ -454,16 +516,19 @@ fn light_one_side(session: &mut Session, side: Side, ma: u16) -> Result<f64, Che
 /// here it fails.
 fn camera_confirms_each_current(session: &mut Session, camera: &mut dyn BrightnessProbe) -> Outcome {
     let setpoint = NOMINAL_MA;
+    let dark_after = Duration::from_millis(session.ramp_ms().max(50));
     let link = session.link()?;
     link.set_led(Channel::All, setpoint, false)?;
-    std::thread::sleep(Duration::from_millis(session.ramp_ms().max(50)));
-    let dark = camera.brightness()?;
+    // The board turned the strings off before this status: the light of `dark_after` later in its time is dark.
+    let off_at_us = link.status()?.uptime_us;
+    std::thread::sleep(dark_after);
+    let dark = camera.brightness_since(off_at_us + dark_after.as_micros() as u64)?;
     let mut steps = Vec::new();
     let mut problems = Vec::new();
     let mut per_ma = Vec::new();
     for side in Side::ALL {
-        let reported = light_one_side(session, side, setpoint)?;
-        let luma = camera.brightness()?;
+        let (reported, uptime_us) = light_one_side(session, side, setpoint)?;
+        let luma = camera.brightness_since(uptime_us)?;
         let seen = camera.current_ma(side, luma)?;
         if let Some(seen) = seen {
             if (seen - reported).abs() > CAMERA_CURRENT_TOLERANCE * reported.max(1.0) {

@@ -128,7 +128,7 @@ fn start_virtual(options: VirtualBoardOptions) -> Result<RunningTarget, TargetEr
     Ok(RunningTarget {
         description: format!("virtual board (firmware core behind a pty) on {}", board.path()),
         port: board.path().to_owned(),
-        camera: Some(simulated_camera(Box::new(move || Some(currents.get())))?),
+        camera: Some(simulated_camera(Box::new(move |_| Some(currents.get())))?),
         clock: BoardClock::WallClock,
         _virtual_board: Some(board),
         _qemu: None,

@@ -12,7 +12,9 @@
 //!   written as soon as its request is handled, never queued behind telemetry, so telemetry cannot crowd it out;
 //! - the regulator runs at 1 kHz (the real board: 2 kHz) on the simulated plant, from SysTick time;
 //! - the plant's true string currents go out on USART2 every 20 ms: what a camera looking at the pad would see,
-//!   independent of what the firmware measures and reports (the host's hil check compares the two).
+//!   independent of what the firmware measures and reports (the host's hil check compares the two). Each line
+//!   carries the board time it describes, the clock telemetry is stamped with, so the host can look at the light
+//!   of the moment a telemetry frame describes rather than at whatever line its reader took last.
 #![no_std]
 #![no_main]
 
@@ -84,7 +86,7 @@ async fn main(_spawner: Spawner) {
                 controller.poll_telemetry(now_us, tx);
                 step = step.wrapping_add(1);
                 if step.is_multiple_of(LIGHT_REPORT_EVERY_STEPS) {
-                    usart::light::report(plant.true_current_ma());
+                    usart::light::report(now_us, plant.true_current_ma());
                 }
             }
             Either::Second(n) => {

@@ -99,10 +99,11 @@ pub mod light {
         });
     }
 
-    /// One line: `L` and the four currents in microamps, Top Right Bottom Left.
-    pub fn report(currents_ma: [f32; 4]) {
-        let mut line: heapless::String<64> = heapless::String::new();
-        let _ = line.push('L');
+    /// One line: `L`, the board time in microseconds (the clock telemetry's `uptime_us` is on), and the four
+    /// currents in microamps, Top Right Bottom Left.
+    pub fn report(uptime_us: u64, currents_ma: [f32; 4]) {
+        let mut line: heapless::String<80> = heapless::String::new();
+        let _ = core::fmt::Write::write_fmt(&mut line, format_args!("L {uptime_us}"));
         for current in currents_ma {
             let _ = core::fmt::Write::write_fmt(&mut line, format_args!(" {}", (current.max(0.0) * 1000.0) as u32));
         }
