@@ -44,7 +44,7 @@ pub enum EmulatorError {
         #[source]
         source: std::io::Error,
     },
-    #[error("QEMU did not report the ptys of both serial ports (board link, true currents) within {waited:?}; it said:\n{output}")]
+    #[error("QEMU did not report the ptys of both serial ports (board link, true currents); gave up after {waited:?} (it exited, or hung); it said:\n{output}")]
     NoPty { waited: Duration, output: String },
 }
 
@@ -143,7 +143,9 @@ impl QemuImage {
 pub struct QemuOptions {
     /// The emulator binary.
     pub program: PathBuf,
-    /// How long to wait for QEMU to announce its pty.
+    /// How long to wait for QEMU to announce its ptys. QEMU that fails to start exits, and that is reported as soon
+    /// as its output closes; only a QEMU that hangs without a word waits this long. On a loaded machine a healthy
+    /// start took over 10 s (three emulators starting at nice 19 beside four busy loops).
     pub start_timeout: Duration,
 }
 
@@ -151,7 +153,7 @@ impl Default for QemuOptions {
     fn default() -> Self {
         Self {
             program: PathBuf::from("qemu-system-arm"),
-            start_timeout: Duration::from_secs(10),
+            start_timeout: Duration::from_secs(120),
         }
     }
 }
@@ -211,7 +213,8 @@ impl QemuBoard {
             light_pty_path: String::new(),
             output,
         };
-        let deadline = std::time::Instant::now() + options.start_timeout;
+        let started = std::time::Instant::now();
+        let deadline = started + options.start_timeout;
         while board.pty_path.is_empty() || board.light_pty_path.is_empty() {
             let left = deadline.saturating_duration_since(std::time::Instant::now());
             match found_rx.recv_timeout(left) {
@@ -230,7 +233,7 @@ impl QemuBoard {
                 std::thread::sleep(Duration::from_millis(50));
                 let output = board_output.lock().unwrap_or_else(|p| p.into_inner()).join("\n");
                 Err(EmulatorError::NoPty {
-                    waited: options.start_timeout,
+                    waited: started.elapsed(),
                     output,
                 })
             }

@@ -4,7 +4,6 @@
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Duration;
 
 use anyhow::Context;
 use nusense_hil::emulator::QemuOptions;
@@ -83,7 +82,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             build: !args.no_build,
             qemu: QemuOptions {
                 program: args.qemu,
-                start_timeout: Duration::from_secs(10),
+                ..QemuOptions::default()
             },
         }
     } else {
