@@ -1,17 +1,18 @@
 //! Issue 16's ROS 2 evidence: `nusense serve --sim --ros2`, the real binary, publishes to a DDS subscriber in a
 //! process of its own that shares no code with it: Eclipse Cyclone DDS from Python (`ros2_subscriber.py`, run by
 //! the project's .venv), with the ROS 2 types declared there as rosidl maps them to DDS. The wrenches it receives
-//! must be the readings the daemon's HTTP API reports for the same frames, matched by their capture time.
+//! must be the readings the daemon's WebSocket stream sends for the same frames, matched by their capture time.
 
 use std::collections::HashMap;
 use std::path::Path;
 use std::process::{Command, Stdio};
-use std::time::Duration;
+use std::sync::{Arc, Mutex};
 
 use base64::Engine;
+use futures_util::StreamExt;
 use serde_json::Value;
 
-use crate::daemon::{jpeg_dimensions, press_at, rest, venv_python, Daemon, Options};
+use crate::daemon::{jpeg_dimensions, press_at, rest, venv_python, Daemon, Options, PATIENCE};
 
 /// Wrenches each of the subscriber's two readers (reliable, best effort) must take.
 const WRENCHES: usize = 8;
@@ -58,6 +59,33 @@ async fn a_dds_subscriber_in_another_process_receives_each_frames_wrench_and_ima
     daemon.settle(&rest(), true).await;
     daemon.settle(&press_at(4.0, [6.0, -5.0]), false).await;
 
+    // Every reading the daemon publishes, by capture time, as its WebSocket stream sends them. The stream is
+    // subscribed before the DDS subscriber starts, so each frame that subscriber can be sent is among them; it
+    // misses none while the client reads (it keeps 64 readings for a slow one, and counts any it skips). Polling
+    // GET /api/v1/reading instead saw only the readings that were current when a poll landed: on a loaded machine
+    // a poll came late now and then, and the frame the image came from was not among those seen.
+    let (stream, _) = tokio_tungstenite::connect_async(daemon.ws_url("/api/v1/stream"))
+        .await
+        .expect("open the reading stream");
+    let readings: Arc<Mutex<HashMap<u64, Value>>> = Arc::default();
+    let (latest_tx, mut latest) = tokio::sync::watch::channel(0u64);
+    let collector = {
+        let readings = readings.clone();
+        tokio::spawn(async move {
+            let (_, mut incoming) = stream.split();
+            while let Some(Ok(message)) = incoming.next().await {
+                if !message.is_text() {
+                    continue;
+                }
+                let text = message.to_text().expect("a text message");
+                let reading: Value = serde_json::from_str(text).expect("a reading");
+                let capture_time_us = reading["capture_time_us"].as_u64().expect("capture_time_us");
+                readings.lock().unwrap().insert(capture_time_us, reading);
+                latest_tx.send_modify(|latest| *latest = (*latest).max(capture_time_us));
+            }
+        })
+    };
+
     let subscriber = Command::new(venv_python("Cyclone DDS for the ROS 2 test"))
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/serve/ros2_subscriber.py"))
         .args(["--domain", &domain.to_string(), "--topic", &wrench_topic])
@@ -68,18 +96,10 @@ async fn a_dds_subscriber_in_another_process_receives_each_frames_wrench_and_ima
         .stderr(Stdio::piped())
         .spawn()
         .expect("start the Cyclone DDS subscriber");
-    let subscriber = tokio::task::spawn_blocking(move || subscriber.wait_with_output());
-
-    // Meanwhile every reading the HTTP API shows, by capture time (the daemon runs at 8 fps; polled far faster).
-    let mut readings: HashMap<u64, Value> = HashMap::new();
-    while !subscriber.is_finished() {
-        let (code, reading) = daemon.get("/api/v1/reading").await;
-        if code == 200 {
-            readings.insert(reading["capture_time_us"].as_u64().unwrap(), reading);
-        }
-        tokio::time::sleep(Duration::from_millis(15)).await;
-    }
-    let output = subscriber.await.unwrap().expect("subscriber output");
+    let output = tokio::task::spawn_blocking(move || subscriber.wait_with_output())
+        .await
+        .unwrap()
+        .expect("subscriber output");
     assert!(
         output.status.success(),
         "the subscriber received too little: {}\ndaemon:\n{}",
@@ -92,11 +112,33 @@ async fn a_dds_subscriber_in_another_process_receives_each_frames_wrench_and_ima
         .lines()
         .map(|line| serde_json::from_str(line).unwrap())
         .collect();
+    let stamp =
+        |sample: &Value| sample["sec"].as_u64().unwrap() * 1_000_000 + sample["nanosec"].as_u64().unwrap() / 1000;
+    // The stream may deliver a reading a moment after DDS did: wait until it has passed the newest stamp received.
+    let newest = samples.iter().map(stamp).max().expect("samples");
+    tokio::time::timeout(PATIENCE, latest.wait_for(|&latest| latest >= newest))
+        .await
+        .unwrap_or_else(|_| {
+            panic!(
+                "the stream never reached the frame captured at {newest} us\n{}",
+                daemon.log()
+            )
+        })
+        .expect("the stream stays open");
+    collector.abort();
+    let websocket = daemon.status().await["websocket"].clone();
+    assert_eq!(
+        websocket["dropped"],
+        serde_json::json!(0),
+        "the stream skipped readings, so the frames cannot all be checked: {websocket}"
+    );
+    let readings = readings.lock().unwrap().clone();
+
     let mut matched: HashMap<&str, usize> = HashMap::new();
     for sample in &samples {
         let reader = sample["reader"].as_str().unwrap();
         assert_eq!(sample["frame_id"], frame.as_str(), "{sample}");
-        let capture_time_us = sample["sec"].as_u64().unwrap() * 1_000_000 + sample["nanosec"].as_u64().unwrap() / 1000;
+        let capture_time_us = stamp(sample);
         if reader == "image" {
             assert_eq!(sample["format"], "jpeg");
             let jpeg = base64::engine::general_purpose::STANDARD
@@ -114,10 +156,9 @@ async fn a_dds_subscriber_in_another_process_receives_each_frames_wrench_and_ima
             *matched.entry(reader).or_default() += 1;
             continue;
         }
-        // The HTTP poll may miss a frame now and then; those with a reading must agree with it exactly.
-        let Some(reading) = readings.get(&capture_time_us) else {
-            continue;
-        };
+        let reading = readings
+            .get(&capture_time_us)
+            .unwrap_or_else(|| panic!("the wrench's stamp is a frame's capture time: {sample}"));
         let estimate = &reading["estimate"];
         assert_eq!(estimate["contact"], Value::Bool(true), "{reading}");
         let http_force: Vec<f64> = estimate["force_vector_n"]
@@ -162,8 +203,8 @@ async fn a_dds_subscriber_in_another_process_receives_each_frames_wrench_and_ima
     }
     for reader in ["reliable", "best_effort"] {
         assert!(
-            matched.get(reader).copied().unwrap_or(0) >= WRENCHES / 2,
-            "{reader}: {matched:?} of {} samples matched a reading ({} readings polled)",
+            matched.get(reader).copied().unwrap_or(0) >= WRENCHES,
+            "{reader}: {matched:?} of {} samples ({} readings streamed)",
             samples.len(),
             readings.len()
         );
