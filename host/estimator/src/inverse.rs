@@ -29,8 +29,9 @@
 //! **Stage 2, only when the test says contact.** Friction acts only where something touches, and pressure only
 //! pushes: the tractions are re-estimated on the cells where stage 1 finds pressure above its own noise (and a ring
 //! around them), with normal pressure >= 0 (an active-set solve of the small problem, from precomputed Gram
-//! blocks). Contacts are the watershed regions of that pressure; force vectors, torque, centres and areas come from
-//! it. The edge direction (second moments of the pressure) comes from a second solve with the pressure's unknowns on
+//! blocks). Contacts are the watershed regions of that pressure, each above the detection floor where it is (the
+//! floor at the centre scaled by how much less a press of its shape there moves the corners, see
+//! [`InverseModel::floor_scale`]); force vectors, torque, centres and areas come from it. The edge direction (second moments of the pressure) comes from a second solve with the pressure's unknowns on
 //! the grid's nodes instead of its cells, which has no checkerboard noise (see [`PressureBasis`]).
 
 use std::sync::{Arc, Mutex};
@@ -57,7 +58,7 @@ const NOISE_TRIM: f64 = 0.05;
 /// freedom: 0.81 and 0.84; a corner's 2-D residual lies between the two).
 const TRIMMED_MEAN_RATIO: f64 = 0.83;
 /// The contact test's noise leaves out the corners this many cells or less from a load stage 1 finds.
-const MEASURED_NOISE_REACH_CELLS: f64 = 3.0;
+pub const MEASURED_NOISE_REACH_CELLS: f64 = 3.0;
 /// Fewer corners than this do not make a noise estimate.
 const MIN_NOISE_CORNERS: usize = 10;
 /// Whether a contact is elongated is judged on its core, each cell weighted by its pressure above this fraction of
@@ -98,6 +99,9 @@ pub struct InverseModel {
     test_dof: f64,
     /// E per sigma^2 of a 1 N press on the central cells (E scales with the force squared).
     reference_explained: f64,
+    /// E per sigma^2 of unit pressures on any two cells, cells x cells: Gᵀ Q G with G the pressure columns of A
+    /// (E of a 1 N press of any shape w is wᵀ this w).
+    pressure_explained: Dense,
     /// Normalisation length of the motion basis, mm.
     motion_length_mm: f64,
     false_alarm_probability: f64,
@@ -143,6 +147,9 @@ pub struct Region {
     pub area_mm2: f64,
     /// Cells and their (fx, fy, fz).
     pub cells: Vec<(usize, [f64; 3])>,
+    /// The detection floor where this region is, in units of the floor at the pad's centre (see
+    /// [`InverseModel::floor_scale`]).
+    pub floor_scale: f64,
 }
 
 /// Stage 2's result.
@@ -290,6 +297,8 @@ impl InverseModel {
         let residual_share = (0..observations / 2)
             .map(|i| lambda * lambda * (s11_sq[(2 * i, 2 * i)] + s11_sq[(2 * i + 1, 2 * i + 1)]))
             .collect();
+        let pressure_columns = DMatrix::from_fn(observations, cells.len(), |r, j| a[(r, 3 * j + 2)]);
+        let pressure_explained = pressure_columns.transpose() * &q * &pressure_columns;
         let operator = a.transpose() * &s11;
         let pressure_noise = (0..cells.len()).map(|j| operator.row(3 * j + 2).norm()).collect();
 
@@ -309,6 +318,7 @@ impl InverseModel {
             test_scale: trace_sq / trace,
             test_dof: trace * trace / trace_sq,
             reference_explained: 0.0,
+            pressure_explained: Dense::from_nalgebra(&pressure_explained),
             motion_length_mm,
             false_alarm_probability: config.inverse.false_alarm_probability,
         };
@@ -455,7 +465,7 @@ impl InverseModel {
 
     /// The corners (ascending) within `reach_cells` of a cell where stage 1 finds pressure above its noise at
     /// `noise_mm` (the loaded groups), none without such a cell.
-    fn near_loads(&self, stage: &Stage1, noise_mm: f64, reach_cells: f64) -> Vec<usize> {
+    pub fn near_loads(&self, stage: &Stage1, noise_mm: f64, reach_cells: f64) -> Vec<usize> {
         let groups = self.loaded_groups(stage, noise_mm);
         if groups.is_empty() {
             return Vec::new();
@@ -587,7 +597,7 @@ impl InverseModel {
         let regions: Vec<Region> = self
             .regions(&tractions, &support)
             .into_iter()
-            .filter(|r| r.force_vector_n[2] >= min_force_n)
+            .filter(|r| r.force_vector_n[2] >= min_force_n * r.floor_scale)
             .collect();
         // The strongest contact's shape, from the node solve: its region there that holds the contact's peak cell.
         let edge_region = regions.first().and_then(|first| {
@@ -607,6 +617,34 @@ impl InverseModel {
             motion,
             regions,
             edge_region,
+        }
+    }
+
+    /// How much more force a press of this shape (cells and their (fx, fy, fz); the pressure's shape counts) needs
+    /// than the same force at the pad's centre for the contact test to see it, i.e. the detection floor where the
+    /// press is in units of the floor at the centre: sqrt(E of 1 N at the centre / E of 1 N here), E the test's
+    /// statistic per sigma^2. Near the bonded border the layer barely moves under a load, so a small displacement
+    /// error there reads as a large force; a region is a contact only above the floor where it is.
+    pub fn floor_scale(&self, cells: &[(usize, [f64; 3])]) -> f64 {
+        let total: f64 = cells.iter().map(|(_, f)| f[2].max(0.0)).sum();
+        if !(total > 0.0) {
+            return 1.0;
+        }
+        let mut explained = 0.0;
+        for (j, fj) in cells {
+            let wj = fj[2].max(0.0) / total;
+            if wj == 0.0 {
+                continue;
+            }
+            let row = self.pressure_explained.row(*j);
+            for (k, fk) in cells {
+                explained += wj * row[*k] * fk[2].max(0.0) / total;
+            }
+        }
+        if explained > 0.0 {
+            (self.reference_explained / explained).sqrt()
+        } else {
+            f64::INFINITY
         }
     }
 
@@ -912,6 +950,7 @@ impl InverseModel {
                     force_vector_n: force,
                     torque_nmm: torque,
                     area_mm2,
+                    floor_scale: self.floor_scale(&cells),
                     cells,
                 }
             })
