@@ -304,16 +304,16 @@ impl Estimator {
             .collect();
         // The published detector keeps the noise the fast tracker was first judged by (its residuals after stage 1,
         // never below the configured floors): its corners' scatter on rest frames is not measured.
-        let outcome = match self.mode {
+        let (outcome, near_loads) = match self.mode {
             Mode::Paper => {
                 let floor_mm = self.rest.support_floor_mm;
                 let noise_mm = self.model.frame_noise_mm(&motion.stage, floor_mm).max(floor_mm);
-                self.model
-                    .test(&self.model.stage1(&motion.data, &tested_valid), noise_mm)
+                let stage = self.model.stage1(&motion.data, &tested_valid);
+                (self.model.test(&stage, noise_mm), Vec::new())
             }
             Mode::Fast | Mode::Inverse => {
                 self.model
-                    .measured_test(&motion.data, &tested_valid, self.rest.noise_floor_mm)
+                    .measured_test_and_loads(&motion.data, &tested_valid, self.rest.noise_floor_mm)
             }
         };
 
@@ -361,7 +361,7 @@ impl Estimator {
             let steady: Vec<bool> = (0..valid.len())
                 .map(|i| valid[i] && !self.rest.light_sensitive.get(i).copied().unwrap_or(false))
                 .collect();
-            self.inverse_touch(&motion, &valid, &steady, &outcome)
+            self.inverse_touch(&motion, &valid, &steady, &near_loads, &outcome)
         } else {
             let field = PaperField {
                 compensated_paper_px: &compensated_paper_px,
@@ -508,6 +508,7 @@ impl Estimator {
         motion: &Compensated,
         all_valid: &[bool],
         steady: &[bool],
+        near_loads: &[usize],
         outcome: &TestOutcome,
     ) -> (Option<Touch>, Option<PressureMap>) {
         let cells = self.model.cells();
@@ -518,15 +519,12 @@ impl Estimator {
         // The squares the rest frame's light probe found under the glare change their yellow area, and so move their
         // corners, whenever the light on them changes: under the LEDs' drift, and above all once the camera has moved
         // (the glare is fixed in the image, the pattern moves under it). Their displacement is no traction far from a
-        // load: the tractions are solved for without them, but for those within reach of a load the other corners show
-        // (on the validation sensor they made phantom contacts at the pad's corners, which put a press's force 38-62 %
-        // over once the camera had moved: tests/camera_moved_force.rs).
-        let clean = self.model.stage1(&motion.data, steady);
-        let near = self
-            .model
-            .near_loads(&clean, outcome.noise_mm, crate::inverse::MEASURED_NOISE_REACH_CELLS);
+        // load: the tractions are solved for without them, but for those within reach of a load the contact test's
+        // corners show (`near_loads`; its stage 1 leaves them out too). On the validation sensor they made phantom
+        // contacts at the pad's corners, which put a press's force 38-62 % over once the camera had moved
+        // (tests/camera_moved_force.rs).
         let valid: Vec<bool> = (0..all_valid.len())
-            .map(|i| all_valid[i] && (steady[i] || near.binary_search(&i).is_ok()))
+            .map(|i| all_valid[i] && (steady[i] || near_loads.binary_search(&i).is_ok()))
             .collect();
         let valid = &valid[..];
         // Stage 2 picks the loaded cells at the noise its own fit leaves (corners near the loads left out), never

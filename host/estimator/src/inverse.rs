@@ -58,7 +58,7 @@ const NOISE_TRIM: f64 = 0.05;
 /// freedom: 0.81 and 0.84; a corner's 2-D residual lies between the two).
 const TRIMMED_MEAN_RATIO: f64 = 0.83;
 /// The contact test's noise leaves out the corners this many cells or less from a load stage 1 finds.
-pub const MEASURED_NOISE_REACH_CELLS: f64 = 3.0;
+const MEASURED_NOISE_REACH_CELLS: f64 = 3.0;
 /// Fewer corners than this do not make a noise estimate.
 const MIN_NOISE_CORNERS: usize = 10;
 /// Whether a contact is elongated is judged on its core, each cell weighted by its pressure above this fraction of
@@ -465,7 +465,7 @@ impl InverseModel {
 
     /// The corners (ascending) within `reach_cells` of a cell where stage 1 finds pressure above its noise at
     /// `noise_mm` (the loaded groups), none without such a cell.
-    pub fn near_loads(&self, stage: &Stage1, noise_mm: f64, reach_cells: f64) -> Vec<usize> {
+    fn near_loads(&self, stage: &Stage1, noise_mm: f64, reach_cells: f64) -> Vec<usize> {
         let groups = self.loaded_groups(stage, noise_mm);
         if groups.is_empty() {
             return Vec::new();
@@ -510,6 +510,12 @@ impl InverseModel {
     /// frame itself shows: the corners' scatter about the motion-only fit ([`Self::rigid_scatter_mm`]), never below
     /// `floor_mm`.
     pub fn measured_test(&self, d: &[f64], valid: &[bool], floor_mm: f64) -> TestOutcome {
+        self.measured_test_and_loads(d, valid, floor_mm).0
+    }
+
+    /// [`Self::measured_test`], and the corners (ascending) within [`MEASURED_NOISE_REACH_CELLS`] of a load that its
+    /// stage 1 on `valid` finds (the corners its noise leaves out).
+    pub fn measured_test_and_loads(&self, d: &[f64], valid: &[bool], floor_mm: f64) -> (TestOutcome, Vec<usize>) {
         let stage = self.stage1(d, valid);
         let scatter = self.rigid_scatter_mm(d, valid).max(floor_mm);
         // A heavy load moves more than half the corners: its far field is no noise. The scatter is measured again
@@ -517,7 +523,7 @@ impl InverseModel {
         // the others).
         let near = self.near_loads(&stage, scatter, MEASURED_NOISE_REACH_CELLS);
         if near.is_empty() {
-            return self.test(&stage, scatter);
+            return (self.test(&stage, scatter), near);
         }
         let far: Vec<bool> = (0..valid.len())
             .map(|i| valid[i] && near.binary_search(&i).is_err())
@@ -527,7 +533,7 @@ impl InverseModel {
         } else {
             scatter
         };
-        self.test(&stage, noise)
+        (self.test(&stage, noise), near)
     }
 
     /// The corners' scatter about the motion-only fit, mm per axis: the median corner's, so that a contact (a
