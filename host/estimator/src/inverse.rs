@@ -31,8 +31,9 @@
 //! around them), with normal pressure >= 0 (an active-set solve of the small problem, from precomputed Gram
 //! blocks). Contacts are the watershed regions of that pressure, each above the detection floor where it is (the
 //! floor at the centre scaled by how much less a press of its shape there moves the corners, see
-//! [`InverseModel::floor_scale`]); force vectors, torque, centres and areas come from it. The edge direction (second moments of the pressure) comes from a second solve with the pressure's unknowns on
-//! the grid's nodes instead of its cells, which has no checkerboard noise (see [`PressureBasis`]).
+//! [`InverseModel::floor_scale`]); force vectors, torque, centres and areas come from it. The edge direction (second
+//! moments of the pressure) comes from a second solve with the pressure's unknowns on the grid's nodes instead of its
+//! cells, which has no checkerboard noise (see [`PressureBasis`]).
 
 use std::sync::{Arc, Mutex};
 
