@@ -7,7 +7,10 @@
 //! - no USB: the port counts as configured from boot (a UART has no configuration to wait for);
 //! - no DTR on a UART: the host counts as present while it has sent something within [`HOST_SILENCE_LIMIT_US`]
 //!   (the host's link sends a lone 0x00 at least every second while it has the port open), so telemetry stops
-//!   when the host goes away, as it does on USB when DTR drops;
+//!   when the host goes away, as it does on USB when DTR drops. Silence only pauses telemetry: it does not end the
+//!   session (handshake, stream period), because a UART cannot tell a closed port from a host that was starved of
+//!   CPU for a few seconds, and a USB board keeps the session of a stalled host whose port stays open. A new host
+//!   starts its session with a Hello, as every host does;
 //! - replies and telemetry both leave through blocking writes to USART1 (which QEMU makes immediate): a reply is
 //!   written as soon as its request is handled, never queued behind telemetry, so telemetry cannot crowd it out;
 //! - the regulator runs at 1 kHz (the real board: 2 kHz) on the simulated plant, from SysTick time;
@@ -36,7 +39,7 @@ const CORE_CLOCK_HZ: u32 = 4_000_000;
 const BAUD: u32 = 115_200;
 /// The regulator's rate under emulation: half the real board's 2 kHz, ample for the simulated plant.
 const CONTROL_PERIOD: Duration = Duration::from_micros(1_000);
-/// Host silence after which the port counts as closed (the host's keepalive comes every second).
+/// Host silence after which telemetry pauses until the host is heard again (its keepalive comes every second).
 const HOST_SILENCE_LIMIT_US: u64 = 3_000_000;
 /// How often the true string currents go out on USART2 (the "camera's view", see `usart::light`).
 const LIGHT_REPORT_EVERY_STEPS: u32 = 20;
@@ -78,12 +81,11 @@ async fn main(_spawner: Spawner) {
                 let now_us = now.as_micros();
                 let dt_us = (now - last_step).as_micros() as u32;
                 last_step = now;
-                if !lease.is_present(now_us) {
-                    controller.set_host_present(false);
-                }
                 let measurements = plant.step(controller.duty(), dt_us);
                 controller.control_step(now_us, &measurements);
-                controller.poll_telemetry(now_us, tx);
+                if lease.is_present(now_us) {
+                    controller.poll_telemetry(now_us, tx);
+                }
                 step = step.wrapping_add(1);
                 if step.is_multiple_of(LIGHT_REPORT_EVERY_STEPS) {
                     usart::light::report(now_us, plant.true_current_ma());
@@ -92,6 +94,7 @@ async fn main(_spawner: Spawner) {
             Either::Second(n) => {
                 let now_us = Instant::now().as_micros();
                 lease.heard_from(now_us);
+                // The first bytes after boot open the session; later ones change nothing here.
                 controller.set_host_present(true);
                 controller.on_rx(&rx[..n], now_us, tx);
                 match controller.take_action() {
