@@ -14,7 +14,7 @@ use nusense_daemon::pipeline::PublishedReading;
 use nusense_daemon::reading::SCHEMA_VERSION;
 use nusense_daemon::record::{encode_jpeg, FramePixels, RecordError, RecordItem, Recorder, RecorderOptions};
 use nusense_daemon::ReadingMessage;
-use nusense_estimator::{EstimateError, Estimator, Mode, SensorConfig};
+use nusense_estimator::{ConfigError, EstimateError, Estimator, Mode, SensorConfig};
 use nusense_geometry::SquareIndex;
 use nusense_sim::{Contact, Damage, ModelError, RenderError, Renderer, Scene, SensorModel};
 use rand::SeedableRng;
@@ -115,6 +115,8 @@ pub enum SessionError {
     Render { frame: usize, source: RenderError },
     #[error("the rest frame: {0}")]
     Reference(EstimateError),
+    #[error("the simulated sensor's built-in configuration: {0}")]
+    Config(#[from] ConfigError),
     #[error(transparent)]
     Record(#[from] RecordError),
     #[error("cannot write {path}: {source}")]
@@ -539,6 +541,9 @@ fn record(
     on_frame: &mut dyn FnMut(usize),
 ) -> Result<(), SessionError> {
     let recorder = Recorder::create(path, RecorderOptions::default())?;
+    // The simulated sensor's own calibration, as `serve --sim` measures it: the real sensor's default line read a
+    // 6 N touch as 1.4 N and put light presses below the detection floor.
+    let config = SensorConfig::from_toml_str(nusense_sim::SENSOR_CONFIG_TOML)?;
     let mut estimator: Option<Estimator> = None;
     for (index, frame) in frames.iter().enumerate() {
         let mut scene = match frame.position_mm {
@@ -563,9 +568,8 @@ fn record(
         let started = Instant::now();
         let (estimate, error) = match estimator.as_mut() {
             None => {
-                estimator = Some(
-                    Estimator::new(SensorConfig::default(), Mode::Fast, &decoded).map_err(SessionError::Reference)?,
-                );
+                estimator =
+                    Some(Estimator::new(config.clone(), Mode::Fast, &decoded).map_err(SessionError::Reference)?);
                 (None, Some("the rest frame".to_string()))
             }
             Some(estimator) => match estimator.estimate(&decoded) {
