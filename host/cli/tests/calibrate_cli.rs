@@ -105,3 +105,45 @@ fn degenerate_or_missing_input_fails_with_a_reason() {
         .unwrap();
     assert!(!out.status.success());
 }
+
+#[test]
+fn a_line_that_falls_with_gamma_is_not_written_into_the_config() {
+    let dir = tempfile::tempdir().unwrap();
+    let pairs = dir.path().join("falling.csv");
+    let mut csv = String::from("gamma,force_n\n");
+    for i in 0..20 {
+        let gamma = 0.2 + 0.1 * f64::from(i);
+        csv += &format!("{gamma},{}\n", 6.0 - 1.5 * gamma);
+    }
+    std::fs::write(&pairs, csv).unwrap();
+    let config = dir.path().join("sensor.toml");
+    let original = "# bench sensor\n[calibration]\na = 7.5\nb = -0.2\n";
+    std::fs::write(&config, original).unwrap();
+    let out = nusense()
+        .args(["calibrate", "--pairs"])
+        .arg(&pairs)
+        .arg("--config")
+        .arg(&config)
+        .output()
+        .unwrap();
+    assert!(!out.status.success(), "a falling line was accepted");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("does not rise with gamma"), "{stderr}");
+    assert_eq!(
+        std::fs::read_to_string(&config).unwrap(),
+        original,
+        "the config was changed"
+    );
+    // --dry-run still shows the fit, and writes nothing.
+    let out = nusense()
+        .args(["calibrate", "--json", "--dry-run", "--pairs"])
+        .arg(&pairs)
+        .arg("--config")
+        .arg(&config)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!((report["a"].as_f64().unwrap() + 1.5).abs() < 0.01, "{report}");
+    assert_eq!(std::fs::read_to_string(&config).unwrap(), original);
+}

@@ -21,7 +21,9 @@
 //!
 //! With `--config FILE`, what was fitted is written into that TOML (created if missing; other keys and comments are
 //! kept) unless `--dry-run`; the modulus is the config's own times the fitted scale. `--json` prints the fits as
-//! one JSON object. Exit code: 0 on a fit, 1 when the data cannot be fitted or the config cannot be written.
+//! one JSON object. A line that does not rise with gamma is refused and nothing is written (`--dry-run` still shows
+//! it). Exit code: 0 on a fit, 1 when the data cannot be fitted, the line does not rise or the config cannot be
+//! written.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -170,6 +172,20 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         _ => SensorConfig::default(),
     };
     let fits = fit_all(&args, &config)?;
+    if let (Some(line), Some(path), false) = (&fits.line, &args.config, args.dry_run) {
+        // A force that falls (or stays) as the pad deforms more is no sensor's line: it comes from a log that does not
+        // belong to these readings (another column, another clock). Written, it would put every reading below the
+        // detection floor, and the sensor would report no contact ever after.
+        if !(line.a > 0.0) {
+            bail!(
+                "the fitted line F = {:.4} gamma {:+.4} N does not rise with gamma; {} was not changed (check the force \
+                 column and the clock offset, or see the fit with --dry-run)",
+                line.a,
+                line.b,
+                path.display()
+            );
+        }
+    }
 
     let config_written = match (&args.config, args.dry_run) {
         (Some(path), false) => {
