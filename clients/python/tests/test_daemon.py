@@ -69,15 +69,28 @@ class Daemon:
 def start_daemon(sensors: int, tmp: Path) -> Daemon:
     assert NUSENSE_BIN is not None
     endpoint = free_endpoint()
-    http_port = free_endpoint().rsplit(":", 1)[1]
     log = tmp / "serve.log"
+    # The HTTP port is the daemon's own pick (port 0), read from the address it prints: a port found free here and
+    # passed on can be taken in between by any other process's connection (CI saw "Address already in use").
     process = subprocess.Popen(
         [NUSENSE_BIN, "serve", *SIM, "--sensors", str(sensors), "--zenoh", endpoint]
-        + ["--listen", f"127.0.0.1:{http_port}", "--recordings", str(tmp / "recordings")],
+        + ["--listen", "127.0.0.1:0", "--recordings", str(tmp / "recordings")],
         stdout=log.open("wb"),
         stderr=subprocess.STDOUT,
     )
-    return Daemon(process, endpoint, f"http://127.0.0.1:{http_port}", log)
+    deadline = time.monotonic() + STARTUP_S
+    while time.monotonic() < deadline:
+        text = log.read_text(errors="replace")
+        rest = text.split("dashboard at http://", 1)[1] if "dashboard at http://" in text else ""
+        if "/" in rest:  # the address is whole once the slash after it is written
+            return Daemon(process, endpoint, f"http://{rest.split('/', 1)[0]}", log)
+        if process.poll() is not None:
+            break
+        time.sleep(0.05)
+    if process.poll() is None:
+        process.kill()
+        process.wait(timeout=30)
+    raise AssertionError(f"the daemon never said where its dashboard is; its log:\n{log.read_text(errors='replace')}")
 
 
 def connect(daemon: Daemon) -> nusense.Client:
