@@ -7,7 +7,7 @@
 use nusense_estimator::homography::Homography;
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use nusense_sim::validation::{CameraMotion, Case, CaseKind, Profile, ValidationRenderer, ValidationSet};
-use nusense_sim::{PadPose, Scene};
+use nusense_sim::Scene;
 
 type Error = Box<dyn std::error::Error>;
 /// A part of a case's camera motion (or none of it).
@@ -118,16 +118,7 @@ fn truth_check(
     name: &str,
 ) -> Result<(), Error> {
     let r = renderer.renderer();
-    let pose = r.model().pose;
-    let moved_pose = PadPose {
-        distance_mm: pose.distance_mm,
-        shift_mm: [
-            pose.shift_mm[0] + motion.shift_mm[0],
-            pose.shift_mm[1] + motion.shift_mm[1],
-        ],
-        rotation_deg: std::array::from_fn(|k| pose.rotation_deg[k] + motion.rotation_deg[k]),
-    };
-    let moved = r.with_pose(moved_pose)?;
+    let moved = r.with_pose(motion.applied_to(r.model().pose))?;
     let rest = Scene::rest();
     let before = r.ground_truth(&rest, case.led_currents_ma, case.seed)?;
     let after = moved.ground_truth(&rest, case.led_currents_ma, case.seed)?;

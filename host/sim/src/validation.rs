@@ -81,6 +81,17 @@ pub struct CameraMotion {
     pub shift_mm: [f64; 2],
 }
 
+impl CameraMotion {
+    /// The pad's pose as the moved camera sees it.
+    pub fn applied_to(&self, pose: PadPose) -> PadPose {
+        PadPose {
+            distance_mm: pose.distance_mm,
+            shift_mm: [pose.shift_mm[0] + self.shift_mm[0], pose.shift_mm[1] + self.shift_mm[1]],
+            rotation_deg: std::array::from_fn(|k| pose.rotation_deg[k] + self.rotation_deg[k]),
+        }
+    }
+}
+
 /// The camera's motion as the image shows it: the similarity transform that best maps the rest lattice's raw px
 /// before the motion onto the same material points after it (least squares over the interior corners). The shift
 /// is that of the lattice's centroid; the rotation and scale are about it.
@@ -405,16 +416,7 @@ impl ValidationRenderer {
                 ))
             }
             Some(motion) => {
-                let pose = self.renderer.model().pose;
-                let moved_pose = PadPose {
-                    distance_mm: pose.distance_mm,
-                    shift_mm: [
-                        pose.shift_mm[0] + motion.shift_mm[0],
-                        pose.shift_mm[1] + motion.shift_mm[1],
-                    ],
-                    rotation_deg: std::array::from_fn(|k| pose.rotation_deg[k] + motion.rotation_deg[k]),
-                };
-                let moved = self.renderer.with_pose(moved_pose)?;
+                let moved = self.renderer.with_pose(motion.applied_to(self.renderer.model().pose))?;
                 let (image, frame) = moved.render(&case.scene, case.led_currents_ma, case.seed)?;
                 let before = self
                     .renderer
