@@ -42,7 +42,7 @@ use nusense_geometry::{PadGeometry, Point2};
 
 use crate::config::{ElasticModel, SensorConfig};
 use crate::elastic::{Cell, ElasticError, PadResponse, PointKernel};
-use crate::linalg::{dot, Dense};
+use crate::linalg::{dot, gram, tr_mul_vec, Dense};
 
 /// Columns of the motion basis: translation (2), linear (4), perspective (2).
 pub const MOTION_PARAMETERS: usize = 8;
@@ -800,11 +800,11 @@ impl InverseModel {
             design.row_mut(r).fill(0.0);
             data[r] = 0.0;
         }
-        let mut h = design.tr_mul(&design);
+        let mut h = gram(&design);
         for (k, scale) in prior_scale.iter().enumerate() {
             h[(k, k)] += (1.0 / (prior * scale)).powi(2) * 1.0;
         }
-        let g = design.tr_mul(&data);
+        let g = tr_mul_vec(&design, data.as_slice());
         let constrained: Vec<bool> = (0..n).map(|i| i < pressures).collect();
         let x = active_set(&h, &g, &constrained)?;
         let mut tractions = vec![0.0; 3 * cells];

@@ -99,6 +99,56 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     sum
 }
 
+/// Dot product summed in exactly the order of nalgebra's `Matrix::dot` on a column (eight accumulators over the
+/// chunks of eight, combined as (0 + 4), (1 + 5), (2 + 6), (3 + 7) into a running sum, then the tail one by one),
+/// on plain slices: products rewritten with it give bit for bit what nalgebra gave, without its generic indexing.
+#[inline]
+pub fn dot_nalgebra_order(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len(), "dot of slices of different lengths");
+    let mut acc = [0.0f64; 8];
+    let (a8, b8) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (a_tail, b_tail) = (a8.remainder(), b8.remainder());
+    for (ca, cb) in a8.zip(b8) {
+        for k in 0..8 {
+            acc[k] += ca[k] * cb[k];
+        }
+    }
+    let mut res = 0.0;
+    res += acc[0] + acc[4];
+    res += acc[1] + acc[5];
+    res += acc[2] + acc[6];
+    res += acc[3] + acc[7];
+    for (x, y) in a_tail.iter().zip(b_tail) {
+        res += x * y;
+    }
+    res
+}
+
+/// `mᵀ m` bit for bit as nalgebra's `m.tr_mul(&m)` computes it, in half the work: each entry is the same
+/// [`dot_nalgebra_order`] of two columns, and a product of two columns is symmetric in them (x * y == y * x in
+/// floating point), so only the upper triangle is summed and mirrored.
+pub fn gram(m: &nalgebra::DMatrix<f64>) -> nalgebra::DMatrix<f64> {
+    let (rows, n) = m.shape();
+    let data = m.as_slice();
+    let column = |k: usize| &data[k * rows..(k + 1) * rows];
+    let mut out = nalgebra::DMatrix::zeros(n, n);
+    for i in 0..n {
+        for j in i..n {
+            let v = dot_nalgebra_order(column(i), column(j));
+            out[(i, j)] = v;
+            out[(j, i)] = v;
+        }
+    }
+    out
+}
+
+/// `mᵀ v` bit for bit as nalgebra's `m.tr_mul(&v)` computes it.
+pub fn tr_mul_vec(m: &nalgebra::DMatrix<f64>, v: &[f64]) -> nalgebra::DVector<f64> {
+    let (rows, n) = m.shape();
+    let data = m.as_slice();
+    nalgebra::DVector::from_fn(n, |k, _| dot_nalgebra_order(&data[k * rows..(k + 1) * rows], v))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -120,5 +170,28 @@ mod tests {
         let expected = m.transpose() * nalgebra::DVector::from_column_slice(&y);
         assert!(out.iter().zip(expected.iter()).all(|(a, b)| (a - b).abs() < 1e-12));
         assert!(solve_small([[0.0, 0.0], [0.0, 0.0]], [1.0, 1.0]).is_none());
+    }
+
+    #[test]
+    fn gram_and_transposed_products_are_nalgebras_bit_for_bit() {
+        // Lengths around the unrolling (8) and values whose sums round differently in another order.
+        for rows in [1usize, 7, 8, 9, 23, 330] {
+            let m = nalgebra::DMatrix::from_fn(rows, 6, |r, c| {
+                ((r * 7 + c * 13) as f64 * 0.618_033_988).sin() * 10f64.powi((r % 5) as i32 - 2)
+            });
+            let v: Vec<f64> = (0..rows).map(|r| (r as f64 * 1.3).cos() / 3.0).collect();
+            let expected = m.tr_mul(&m);
+            let found = gram(&m);
+            assert!(expected
+                .iter()
+                .zip(found.iter())
+                .all(|(a, b)| a.to_bits() == b.to_bits()));
+            let expected = m.tr_mul(&nalgebra::DVector::from_column_slice(&v));
+            let found = tr_mul_vec(&m, &v);
+            assert!(expected
+                .iter()
+                .zip(found.iter())
+                .all(|(a, b)| a.to_bits() == b.to_bits()));
+        }
     }
 }
