@@ -5,7 +5,6 @@ tare and frame queries on the keys of docs/integrations/zenoh.md, recording what
 from __future__ import annotations
 
 import json
-import socket
 import threading
 from dataclasses import dataclass, field
 from typing import Any
@@ -15,10 +14,16 @@ import zenoh
 import nusense
 
 
-def free_endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+def bound_endpoint(session: zenoh.Session) -> str:
+    """The endpoint a session listening on ``tcp/127.0.0.1:0`` was given, from its own admin space (the Python API
+    has no call for a session's locators): a port chosen free beforehand and passed on could be taken in between by
+    another process, and the fake would fail to start."""
+    key = f"@/{session.info.zid()}/peer"
+    for reply in session.get(key, timeout=10.0):
+        if reply.ok is not None:
+            locators: list[str] = json.loads(reply.ok.payload.to_bytes())["locators"]
+            return next(locator for locator in locators if locator.startswith("tcp/127.0.0.1:"))
+    raise AssertionError(f"no answer from the session's admin space at {key}")
 
 
 @dataclass
@@ -39,8 +44,10 @@ class FakeSensor:
 
 class FakeDaemon:
     def __init__(self) -> None:
-        self.endpoint = free_endpoint()
-        self.session = zenoh.open(nusense.config(listen=[self.endpoint], scouting=False))
+        config = nusense.config(listen=["tcp/127.0.0.1:0"], scouting=False)
+        config.insert_json5("adminspace/enabled", "true")
+        self.session = zenoh.open(config)
+        self.endpoint = bound_endpoint(self.session)
         self.sensors: dict[str, FakeSensor] = {}
         self._lock = threading.Lock()
 

@@ -21,7 +21,6 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import eventually
-from fake_daemon import free_endpoint
 
 import nusense
 
@@ -68,12 +67,12 @@ class Daemon:
 
 def start_daemon(sensors: int, tmp: Path) -> Daemon:
     assert NUSENSE_BIN is not None
-    endpoint = free_endpoint()
     log = tmp / "serve.log"
-    # The HTTP port is the daemon's own pick (port 0), read from the address it prints: a port found free here and
-    # passed on can be taken in between by any other process's connection (CI saw "Address already in use").
+    # The HTTP and Zenoh ports are the daemon's own picks (port 0), read from the addresses it prints: a port found
+    # free here and passed on can be taken in between by any other process's connection (CI saw "Address already in
+    # use"). It prints the Zenoh line before the dashboard's.
     process = subprocess.Popen(
-        [NUSENSE_BIN, "serve", *SIM, "--sensors", str(sensors), "--zenoh", endpoint]
+        [NUSENSE_BIN, "serve", *SIM, "--sensors", str(sensors), "--zenoh", "tcp/127.0.0.1:0"]
         + ["--listen", "127.0.0.1:0", "--recordings", str(tmp / "recordings")],
         stdout=log.open("wb"),
         stderr=subprocess.STDOUT,
@@ -83,14 +82,19 @@ def start_daemon(sensors: int, tmp: Path) -> Daemon:
         text = log.read_text(errors="replace")
         rest = text.split("dashboard at http://", 1)[1] if "dashboard at http://" in text else ""
         if "/" in rest:  # the address is whole once the slash after it is written
-            return Daemon(process, endpoint, f"http://{rest.split('/', 1)[0]}", log)
+            if "Zenoh listening on " not in text:
+                break
+            zenoh_endpoints = text.split("Zenoh listening on ", 1)[1].split("\n", 1)[0].split()
+            return Daemon(process, zenoh_endpoints[0], f"http://{rest.split('/', 1)[0]}", log)
         if process.poll() is not None:
             break
         time.sleep(0.05)
     if process.poll() is None:
         process.kill()
         process.wait(timeout=30)
-    raise AssertionError(f"the daemon never said where its dashboard is; its log:\n{log.read_text(errors='replace')}")
+    raise AssertionError(
+        f"the daemon never said where its dashboard and Zenoh endpoint are; its log:\n{log.read_text(errors='replace')}"
+    )
 
 
 def connect(daemon: Daemon) -> nusense.Client:

@@ -17,7 +17,7 @@ use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use daemon::{free_port, zenoh_client, Daemon, Options};
+use daemon::{zenoh_client, Daemon, Options};
 use nusense_capture::unix_time_us;
 use nusense_daemon::pipeline::summarise;
 use serde_json::{json, Value};
@@ -140,15 +140,14 @@ fn settings() -> Settings {
 }
 
 async fn measure(settings: &Settings, sensors: u16) -> Value {
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let daemon = Daemon::start(
         Options::sim(settings.width, settings.height, settings.fps)
             .arg("--sensors")
             .arg(sensors.to_string())
             .arg("--zenoh")
-            .arg(endpoint.clone()),
+            .arg("tcp/127.0.0.1:0"),
     );
-    let session = zenoh_client(&endpoint).await;
+    let session = zenoh_client(daemon.zenoh_endpoint()).await;
     let arrivals: Arc<Mutex<Vec<Arrival>>> = Arc::default();
     let sink = arrivals.clone();
     let subscriber = session

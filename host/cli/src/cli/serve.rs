@@ -64,7 +64,8 @@ pub struct Args {
           conflicts_with_all = ["camera", "replay", "board", "sim", "sensors"])]
     pub paired: Vec<SensorSpec>,
     /// Publish every sensor on Zenoh under nusense/<serial>/ (docs/integrations/zenoh.md): a peer listening on
-    /// ENDPOINT, tcp/127.0.0.1:7447 when given alone, loopback only, no multicast scouting.
+    /// ENDPOINT, tcp/127.0.0.1:7447 when given alone, loopback only, no multicast scouting. Port 0 takes a free
+    /// port; the daemon prints the endpoint it listens on ("Zenoh listening on ...").
     #[arg(long, value_name = "ENDPOINT", num_args = 0..=1, default_missing_value = zenoh_out::DEFAULT_ENDPOINT)]
     pub zenoh: Option<String>,
     /// Publish on Zenoh with this Zenoh configuration (JSON5) instead, e.g. to connect to a router or to listen
@@ -168,6 +169,12 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
                 let serials: Vec<String> = served.iter().map(|s| s.serial.clone()).collect();
                 let zenoh = ZenohOut::start(zenoh_config, served).await?;
                 eprintln!("nusense serve: on Zenoh as nusense/{{{}}}/", serials.join(","));
+                // Its own line, endpoints separated by spaces, before the dashboard's: clients (and the tests, which
+                // pass port 0) read the port the system gave from it.
+                match zenoh.listening_on().await {
+                    endpoints if endpoints.is_empty() => eprintln!("nusense serve: Zenoh listens nowhere"),
+                    endpoints => eprintln!("nusense serve: Zenoh listening on {}", endpoints.join(" ")),
+                }
                 Some(zenoh)
             }
             None => None,

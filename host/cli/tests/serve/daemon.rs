@@ -1,5 +1,5 @@
-//! The real `nusense serve`, started as a user starts it (the binary cargo built for these tests), on a free
-//! loopback port, with its own XDG data folder; and the HTTP helpers the tests share.
+//! The real `nusense serve`, started as a user starts it (the binary cargo built for these tests), on a loopback
+//! port of its own choosing, with its own XDG data folder; and the HTTP helpers the tests share.
 #![allow(dead_code)]
 
 use std::io::{BufRead, BufReader};
@@ -18,6 +18,8 @@ pub const PATIENCE: Duration = Duration::from_secs(120);
 pub struct Daemon {
     child: Option<Child>,
     pub addr: SocketAddr,
+    /// The Zenoh endpoints it said it listens on ("Zenoh listening on ..."), when started with `--zenoh`.
+    pub zenoh: Vec<String>,
     log: Arc<Mutex<String>>,
     /// Holds the daemon's XDG_DATA_HOME (its default recordings folder lives there).
     pub data_home: tempfile::TempDir,
@@ -119,18 +121,23 @@ impl Daemon {
         let (address_tx, address_rx) = std::sync::mpsc::channel();
         let thread_log = log.clone();
         std::thread::spawn(move || {
+            // The daemon says where it listens on Zenoh before where its dashboard is.
+            let mut zenoh = Vec::new();
             for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                if let Some(rest) = line.split("Zenoh listening on ").nth(1) {
+                    zenoh = rest.split_whitespace().map(str::to_owned).collect();
+                }
                 if let Some(rest) = line.split("dashboard at http://").nth(1) {
                     let addr = rest.split('/').next().unwrap_or_default().to_string();
-                    let _ = address_tx.send(addr);
+                    let _ = address_tx.send((addr, std::mem::take(&mut zenoh)));
                 }
                 let mut log = thread_log.lock().unwrap();
                 log.push_str(&line);
                 log.push('\n');
             }
         });
-        let addr = match address_rx.recv_timeout(PATIENCE) {
-            Ok(addr) => addr.parse().expect("listen address"),
+        let (addr, zenoh) = match address_rx.recv_timeout(PATIENCE) {
+            Ok((addr, zenoh)) => (addr.parse().expect("listen address"), zenoh),
             Err(_) => {
                 let _ = child.kill();
                 panic!("nusense serve {args:?} did not start:\n{}", log.lock().unwrap());
@@ -139,6 +146,7 @@ impl Daemon {
         Self {
             child: Some(child),
             addr,
+            zenoh,
             log,
             data_home,
             http: reqwest::Client::builder()
@@ -160,6 +168,14 @@ impl Daemon {
     /// The daemon's own origin, as its dashboard's requests carry it.
     pub fn origin(&self) -> String {
         format!("http://{}", self.addr)
+    }
+
+    /// The Zenoh endpoint to connect to: the first it listens on (panics when it listens on none).
+    pub fn zenoh_endpoint(&self) -> &str {
+        match self.zenoh.first() {
+            Some(endpoint) => endpoint,
+            None => panic!("the daemon said no Zenoh endpoint it listens on:\n{}", self.log()),
+        }
     }
 
     pub fn pid(&self) -> u32 {
@@ -359,27 +375,6 @@ pub fn contact_px(width: u32, height: u32, scene: &Scene) -> [f64; 2] {
     let renderer = nusense_sim::Renderer::new(nusense_sim::SensorModel::real(width, height)).expect("renderer");
     let truth = renderer.ground_truth(scene, [NOMINAL_MA; 4], 0).expect("ground truth");
     truth.contacts[0].centre_px
-}
-
-/// A loopback port nobody listens on now (the daemon's Zenoh endpoint must be known to the consumer), below the
-/// kernel's ephemeral range: a port the kernel hands out (to another test's `:0` listener or outgoing connection)
-/// could be taken between this check and the daemon's bind, and the daemon would then fail to start.
-pub fn free_port() -> u16 {
-    let range = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range").unwrap_or_default();
-    let ephemeral_from: u16 = range
-        .split_whitespace()
-        .next()
-        .and_then(|p| p.parse().ok())
-        .unwrap_or(32768);
-    let below = ephemeral_from.saturating_sub(10_000).max(1024)..ephemeral_from;
-    let start = rand::Rng::gen_range(&mut rand::thread_rng(), below.clone());
-    below
-        .clone()
-        .cycle()
-        .skip((start - below.start).into())
-        .take(below.len())
-        .find(|&port| std::net::TcpListener::bind(("127.0.0.1", port)).is_ok())
-        .expect("a free loopback port below the ephemeral range")
 }
 
 /// A Zenoh session of this process that reaches the daemon's loopback endpoint only (no listening, no multicast

@@ -10,7 +10,7 @@ use std::time::Duration;
 use nusense_board::virtual_board::VirtualBoard;
 use serde_json::{json, Value};
 
-use crate::daemon::{free_port, press, render_folder, rest, zenoh_client, Daemon, Options};
+use crate::daemon::{press, render_folder, rest, zenoh_client, Daemon, Options};
 
 const PATIENCE: Duration = Duration::from_secs(120);
 
@@ -39,8 +39,7 @@ async fn two_replays_paired_with_two_boards_are_two_sensors_named_and_commanded_
     let folders = [tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap()];
     render_folder(folders[0].path(), 160, 120, &[rest(), press(3.0)]);
     render_folder(folders[1].path(), 160, 120, &[rest(), rest()]);
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let mut options = Options::new(&["--fps", "10", "--loop", "--zenoh", &endpoint]);
+    let mut options = Options::new(&["--fps", "10", "--loop", "--zenoh", "tcp/127.0.0.1:0"]);
     for (folder, board) in folders.iter().zip(&boards) {
         options = options
             .arg("--sensor")
@@ -55,7 +54,7 @@ async fn two_replays_paired_with_two_boards_are_two_sensors_named_and_commanded_
         daemon.log()
     );
 
-    let session = zenoh_client(&endpoint).await;
+    let session = zenoh_client(daemon.zenoh_endpoint()).await;
     let subscriber = session
         .declare_subscriber("nusense/*/reading")
         .await

@@ -9,7 +9,7 @@ use std::process::{Command, Stdio};
 
 use serde_json::{json, Value};
 
-use crate::daemon::{free_port, venv_python, Daemon, Options};
+use crate::daemon::{venv_python, zenoh_client, Daemon, Options, PATIENCE};
 
 /// A serial as a ROS name token: a ROS 2 name must not start with a digit, hence `sn_` before a serial that does
 /// (serials are hex, so nothing else changes).
@@ -22,7 +22,6 @@ fn ros2_token(serial: &str) -> String {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_separate_zenoh_process_sees_two_sensors_commands_them_and_sees_them_go() {
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     // ROS 2 on as well (in a DDS domain of this test's own): both ways out at once, naming the sensor alike.
     let domain = 100 + std::process::id() % 100;
     let daemon = Daemon::start(
@@ -30,7 +29,7 @@ async fn a_separate_zenoh_process_sees_two_sensors_commands_them_and_sees_them_g
             .arg("--sensors")
             .arg("2")
             .arg("--zenoh")
-            .arg(endpoint.clone())
+            .arg("tcp/127.0.0.1:0")
             .arg("--ros2")
             .env("ROS_DOMAIN_ID", &domain.to_string()),
     );
@@ -66,7 +65,7 @@ async fn a_separate_zenoh_process_sees_two_sensors_commands_them_and_sees_them_g
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/serve/zenoh_consumer.py");
     let mut consumer = Command::new(venv_python("eclipse-zenoh for this test"))
         .arg(script)
-        .args(["--connect", &endpoint, "--sensors", "2", "--schema"])
+        .args(["--connect", daemon.zenoh_endpoint(), "--sensors", "2", "--schema"])
         .arg(schema)
         .arg("--http-errors")
         .arg(Value::Array(http_errors.clone()).to_string())
@@ -129,4 +128,45 @@ async fn a_separate_zenoh_process_sees_two_sensors_commands_them_and_sees_them_g
         "consumer: {}",
         String::from_utf8_lossy(&output.stderr)
     );
+}
+
+/// `--zenoh tcp/127.0.0.1:0`: the system gives the port, and the daemon says which one, so a client (and every test
+/// here) connects to a port nobody could take first, rather than to one found free and passed on.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_zenoh_endpoint_on_port_0_is_reported_as_the_port_bound_and_reaches_the_sensor() {
+    let daemon = Daemon::start(Options::sim(160, 120, 10.0).arg("--zenoh").arg("tcp/127.0.0.1:0"));
+    assert_eq!(daemon.zenoh.len(), 1, "one endpoint asked for:\n{}", daemon.log());
+    let endpoint = daemon.zenoh_endpoint();
+    let port: u16 = endpoint
+        .strip_prefix("tcp/127.0.0.1:")
+        .and_then(|port| port.parse().ok())
+        .unwrap_or_else(|| panic!("a loopback TCP endpoint with its port: {endpoint}"));
+    assert_ne!(port, 0, "the port the system gave, not the 0 asked for");
+
+    let serial = daemon
+        .wait_status("with the board's serial", |s| s["serial_number"].is_string())
+        .await["serial_number"]
+        .as_str()
+        .unwrap()
+        .to_owned();
+    let session = zenoh_client(endpoint).await;
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    // The first query may leave before the connection is up (no reply then): ask again until one comes.
+    let status: Value = loop {
+        let replies = session
+            .get(format!("nusense/{serial}/status"))
+            .await
+            .expect("query the status");
+        if let Ok(Ok(reply)) = tokio::time::timeout_at(deadline, replies.recv_async()).await {
+            let sample = reply.result().expect("a status, not an error");
+            break serde_json::from_slice(&sample.payload().to_bytes()).expect("a JSON status");
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no status over Zenoh at {endpoint}:\n{}",
+            daemon.log()
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    };
+    assert_eq!(status["serial_number"], json!(serial), "{status}");
 }

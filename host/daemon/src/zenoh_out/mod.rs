@@ -219,6 +219,13 @@ impl ZenohOut {
         Ok(())
     }
 
+    /// The endpoints the session listens on, as bound: a port 0 in `--zenoh` (or the configuration) is here the port
+    /// the system gave, so a client connects to a port nobody could take first. Empty when it listens nowhere.
+    pub async fn listening_on(&self) -> Vec<String> {
+        let locators = self.session.info().locators().await;
+        locators.iter().map(ToString::to_string).collect()
+    }
+
     /// Withdraws every sensor (liveliness tokens undeclared, clients told at once) and closes the session.
     pub async fn close(mut self) {
         self.stop_tasks();
