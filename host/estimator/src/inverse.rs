@@ -60,6 +60,9 @@ const NOISE_TRIM: f64 = 0.05;
 const TRIMMED_MEAN_RATIO: f64 = 0.83;
 /// The contact test's noise leaves out the corners this many cells or less from a load stage 1 finds.
 const MEASURED_NOISE_REACH_CELLS: f64 = 3.0;
+/// [`InverseModel::near_loads`] looks its distances up in a table for reaches up to this many cells (the largest
+/// it is asked for), and computes them beyond.
+const NEAR_TABLE_REACH_CELLS: f64 = MEASURED_NOISE_REACH_CELLS;
 /// Fewer corners than this do not make a noise estimate.
 const MIN_NOISE_CORNERS: usize = 10;
 /// Whether a contact is elongated is judged on its core, each cell weighted by its pressure above this fraction of
@@ -106,6 +109,10 @@ pub struct InverseModel {
     /// Normalisation length of the motion basis, mm.
     motion_length_mm: f64,
     false_alarm_probability: f64,
+    /// Per cell: the corners (index, distance from the cell's centre in mm) within [`NEAR_TABLE_REACH_CELLS`] of
+    /// it, for [`InverseModel::near_loads`] (the same distances it would compute, once per sensor rather than
+    /// thousands per frame).
+    corners_near_cell: Vec<Vec<(usize, f64)>>,
 }
 
 /// Stage 1's result for one frame.
@@ -322,7 +329,21 @@ impl InverseModel {
             pressure_explained: Dense::from_nalgebra(&pressure_explained),
             motion_length_mm,
             false_alarm_probability: config.inverse.false_alarm_probability,
+            corners_near_cell: Vec::new(),
         };
+        let table_reach = NEAR_TABLE_REACH_CELLS * pad.pitch_x_mm().max(pad.pitch_y_mm());
+        model.corners_near_cell = model
+            .cells
+            .iter()
+            .map(|cell| {
+                corners
+                    .iter()
+                    .map(|&p| corner_to_cell_mm(p, cell.centre_mm))
+                    .enumerate()
+                    .filter(|&(_, distance)| distance <= table_reach)
+                    .collect()
+            })
+            .collect();
         let d = model.central_press_mm();
         let stage = model.stage1(&d, &vec![true; observations / 2]);
         model.reference_explained = stage.rss_rigid - stage.rss_full;
@@ -471,17 +492,28 @@ impl InverseModel {
         if groups.is_empty() {
             return Vec::new();
         }
-        let near: Vec<Point2> = groups.iter().flatten().map(|&j| self.cells[j].centre_mm).collect();
         let reach = reach_cells * self.pad.pitch_x_mm().max(self.pad.pitch_y_mm());
-        self.pad
-            .corners()
-            .enumerate()
-            .filter(|(_, c)| {
-                let p = self.pad.corner_mm(*c);
-                near.iter().any(|q| (p[0] - q[0]).hypot(p[1] - q[1]) <= reach)
-            })
-            .map(|(i, _)| i)
-            .collect()
+        if reach_cells > NEAR_TABLE_REACH_CELLS {
+            let near: Vec<Point2> = groups.iter().flatten().map(|&j| self.cells[j].centre_mm).collect();
+            return self
+                .pad
+                .corners()
+                .enumerate()
+                .filter(|(_, c)| {
+                    let p = self.pad.corner_mm(*c);
+                    near.iter().any(|q| corner_to_cell_mm(p, *q) <= reach)
+                })
+                .map(|(i, _)| i)
+                .collect();
+        }
+        // The same distances, looked up: every corner within the table's reach of each loaded cell.
+        let mut is_near = vec![false; self.observations / 2];
+        for &j in groups.iter().flatten() {
+            for &(i, distance) in &self.corners_near_cell[j] {
+                is_near[i] |= distance <= reach;
+            }
+        }
+        (0..is_near.len()).filter(|&i| is_near[i]).collect()
     }
 
     fn trimmed_noise(&self, stage: &Stage1, excluded: &[usize]) -> f64 {
@@ -1037,6 +1069,11 @@ impl InverseModel {
             .map(|j| tractions[3 * j + 2] / area * 1e3)
             .collect()
     }
+}
+
+/// Distance (mm) from a corner to a cell's centre, as [`InverseModel::near_loads`] compares it with its reach.
+fn corner_to_cell_mm(corner: Point2, centre: Point2) -> f64 {
+    (corner[0] - centre[0]).hypot(corner[1] - centre[1])
 }
 
 /// The 3 x 3 block around (r, c) inside the grid, the cell itself included.
