@@ -76,13 +76,13 @@ pub struct Pixels<'a> {
 
 /// Visits the pixels of the window (every `stride`-th row and column of the frame's global grid).
 #[inline(always)]
-fn for_each_row(
-    px: &Pixels,
+fn for_each_row<'a>(
+    px: &Pixels<'a>,
     centre: Point2,
     cell: &CellFrame,
     half: f64,
     stride: usize,
-    mut row: impl FnMut(usize, &[u8], usize, usize),
+    mut row: impl FnMut(usize, &'a [u8], usize, usize),
 ) {
     let reach = half * (cell.col_step[1].abs() + cell.row_step[1].abs());
     let y_lo = (centre[1] - reach - 0.5).ceil().max(0.0) as usize;
@@ -173,6 +173,12 @@ pub struct WindowCentroid {
 
 /// Weighted centroid and area of the yellow inside the window, and how much of the window is clipped; `None`
 /// when the window holds no yellow.
+///
+/// The sums are those of the plain loop: each row's membership and membership times x in f32 from the left, pixel
+/// by pixel, and the rows' totals in f64 from the top. A row's f32 sums are two chains of dependent additions,
+/// which would bound this loop's speed, so [`ROWS_AT_ONCE`] rows are summed together, as the lanes of one vector:
+/// their memberships are first looked up into a buffer (pixel-major, a row per lane, zeros past a row's end, which
+/// add nothing), then added lane by lane. Each row's own order is kept, and with it every bit of the result.
 pub fn centroid(
     px: &Pixels,
     centre: Point2,
@@ -181,24 +187,27 @@ pub fn centroid(
     stride: usize,
     membership: &MembershipTable,
 ) -> Option<WindowCentroid> {
-    let (mut sum_w, mut sum_x, mut sum_y) = (0f64, 0f64, 0f64);
-    let (mut visited, mut clipped) = (0usize, 0usize);
+    let mut totals = WindowTotals::default();
+    let mut pending: [RowSpan; ROWS_AT_ONCE] = [RowSpan::EMPTY; ROWS_AT_ONCE];
+    let mut held = 0;
     for_each_row(px, centre, cell, half, stride, |y, line, x0, x1| {
-        let (mut w_row, mut x_row) = (0f32, 0f32);
-        // x stays an exact integer in f32 (frames are far narrower than 2^24 px).
-        let mut x = x0 as f32;
-        for_each_pixel(line, x0, x1, stride, |p| {
-            clipped += usize::from(p[0].min(p[1]).min(p[2]) >= CLIPPED_LEVEL);
-            visited += 1;
-            let w = member(membership, p);
-            w_row += w;
-            x_row += w * x;
-            x += stride as f32;
-        });
-        sum_w += f64::from(w_row);
-        sum_x += f64::from(x_row);
-        sum_y += f64::from(w_row) * y as f64;
+        pending[held] = RowSpan::new(y, line, x0, x1, stride);
+        held += 1;
+        if held == ROWS_AT_ONCE {
+            totals.add_rows(&pending, stride, membership);
+            held = 0;
+        }
     });
+    if held > 0 {
+        totals.add_rows(&pending[..held], stride, membership);
+    }
+    let WindowTotals {
+        sum_w,
+        sum_x,
+        sum_y,
+        visited,
+        clipped,
+    } = totals;
     if sum_w <= 0.0 {
         return None;
     }
@@ -207,6 +216,126 @@ pub fn centroid(
         area: sum_w * (stride * stride) as f64,
         clipped_fraction: clipped as f64 / visited.max(1) as f64,
     })
+}
+
+/// Rows [`centroid`] sums together (the lanes of its sums).
+const ROWS_AT_ONCE: usize = 8;
+/// Pixels per row [`centroid`] looks up before summing them (a longer row is summed in several such pieces).
+const PIXELS_AT_ONCE: usize = 64;
+
+/// Bytes per cache line (x86-64 and most ARM cores).
+const CACHE_LINE: usize = 64;
+
+/// One row of a window: its pixels `x0, x0 + stride, ...` (`count` of them), from `pixels`, which starts at `x0`
+/// and ends with the last one.
+#[derive(Clone, Copy)]
+struct RowSpan<'a> {
+    y: usize,
+    x0: usize,
+    count: usize,
+    pixels: &'a [u8],
+}
+
+impl<'a> RowSpan<'a> {
+    const EMPTY: Self = Self {
+        y: 0,
+        x0: 0,
+        count: 0,
+        pixels: &[],
+    };
+
+    #[inline(always)]
+    fn new(y: usize, line: &'a [u8], x0: usize, x1: usize, stride: usize) -> Self {
+        let count = (x1 - x0) / stride + 1;
+        Self {
+            y,
+            x0,
+            count,
+            pixels: &line[x0 * 3..(x0 + (count - 1) * stride) * 3 + 3],
+        }
+    }
+}
+
+/// The window's sums, rows added from the top.
+#[derive(Default)]
+struct WindowTotals {
+    sum_w: f64,
+    sum_x: f64,
+    sum_y: f64,
+    visited: usize,
+    clipped: usize,
+}
+
+impl WindowTotals {
+    /// Sums up to [`ROWS_AT_ONCE`] rows together and adds them in order.
+    #[inline(always)]
+    fn add_rows(&mut self, spans: &[RowSpan], stride: usize, membership: &MembershipTable) {
+        // The common strides get their own copies of the loops, with the stride a constant.
+        match stride {
+            1 => self.add_rows_at(spans, 1, membership),
+            2 => self.add_rows_at(spans, 2, membership),
+            _ => self.add_rows_at(spans, stride, membership),
+        }
+    }
+
+    #[inline(always)]
+    fn add_rows_at(&mut self, spans: &[RowSpan], stride: usize, membership: &MembershipTable) {
+        let longest = spans.iter().map(|s| s.count).max().unwrap_or(0);
+        let mut w = [0f32; ROWS_AT_ONCE];
+        let mut wx = [0f32; ROWS_AT_ONCE];
+        // x of the lanes' current pixels: exact integers in f32 (frames are far narrower than 2^24 px), so adding
+        // the stride keeps them exact.
+        let mut x = [0f32; ROWS_AT_ONCE];
+        for (xk, span) in x.iter_mut().zip(spans) {
+            *xk = span.x0 as f32;
+        }
+        let step = stride as f32;
+        // The rows lie a frame's width apart, and at large sizes most of them are not in the cache: read one byte
+        // per cache line of every row first, so that the memory fetches them all at once (the independent loads
+        // overlap) rather than one line at a time as the lookups below reach them.
+        let mut touched = 0u8;
+        for span in spans {
+            for byte in span.pixels.iter().step_by(CACHE_LINE) {
+                touched ^= byte;
+            }
+            touched ^= span.pixels.last().copied().unwrap_or(0);
+        }
+        std::hint::black_box(touched);
+        let mut looked_up = [[0f32; ROWS_AT_ONCE]; PIXELS_AT_ONCE];
+        let mut start = 0;
+        while start < longest {
+            let piece = (longest - start).min(PIXELS_AT_ONCE);
+            for (k, span) in spans.iter().enumerate() {
+                let from = (start * stride * 3).min(span.pixels.len());
+                let pixels = span.pixels[from..].chunks(stride * 3);
+                let mut filled = 0;
+                for (slot, p) in looked_up[..piece].iter_mut().zip(pixels) {
+                    if let Some(&[r, g, b]) = p.first_chunk::<3>() {
+                        slot[k] = member(membership, [r, g, b]);
+                        self.clipped += usize::from(r.min(g).min(b) >= CLIPPED_LEVEL);
+                    }
+                    filled += 1;
+                }
+                for slot in &mut looked_up[filled..piece] {
+                    slot[k] = 0.0;
+                }
+            }
+            for m in &looked_up[..piece] {
+                for k in 0..ROWS_AT_ONCE {
+                    w[k] += m[k];
+                    wx[k] += m[k] * x[k];
+                    x[k] += step;
+                }
+            }
+            start += piece;
+        }
+        for (k, span) in spans.iter().enumerate() {
+            self.sum_w += f64::from(w[k]);
+            self.sum_x += f64::from(wx[k]);
+            self.sum_y += f64::from(w[k]) * span.y as f64;
+            self.visited += span.count;
+        }
+    }
 }
 
 /// Mean membership over the window of half-size `half` (cell units) around `centre`; 0 for an empty window. A
