@@ -89,8 +89,12 @@ pub struct InverseModel {
     /// B (obs x P) and its transpose.
     b: Dense,
     b_t: Dense,
-    /// The first `observations` columns of the kriging system's inverse, (obs + P) x obs.
+    /// The first `observations` columns of the kriging system's inverse, (obs + P) x obs, and its transpose (stage
+    /// 1's correction for missing corners reads its columns).
     s: Dense,
+    s_t: Dense,
+    /// The pressure rows of `a_t` (cells x obs): all stage 1 computes of the tractions.
+    a_t_pressure: Dense,
     lambda: f64,
     /// BᵀB over all observations (stage 2 subtracts missing rows).
     gram_bb: Dense,
@@ -118,7 +122,8 @@ pub struct InverseModel {
 /// Stage 1's result for one frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Stage1 {
-    /// (fx, fy, fz) per cell, N.
+    /// (fx, fy, fz) per cell, N, of which only fz is computed (fx and fy are 0): stage 1's pressure is all that is
+    /// used of it (to pick the loaded cells and weigh stage 2's shear), and the tangential rows would double its cost.
     pub tractions: Vec<f64>,
     /// Motion parameters (see [`InverseModel::motion_field`]).
     pub motion: [f64; MOTION_PARAMETERS],
@@ -318,6 +323,8 @@ impl InverseModel {
             a: Dense::from_nalgebra(&a),
             b: Dense::from_nalgebra(&b),
             s: Dense::from_nalgebra(&s),
+            s_t: Dense::from_nalgebra(&s.transpose()),
+            a_t_pressure: Dense::from_nalgebra(&DMatrix::from_fn(cells.len(), observations, |j, r| a[(r, 3 * j + 2)])),
             cells,
             observations,
             lambda,
@@ -414,8 +421,8 @@ impl InverseModel {
             let rhs = DVector::from_fn(k, |i, _| -x[missing[i]]);
             if let Some(z) = s_mm.lu().solve(&rhs) {
                 for (j, &col) in missing.iter().enumerate() {
-                    for (row, xr) in x.iter_mut().enumerate() {
-                        *xr += self.s.at(row, col) * z[j];
+                    for (xr, s) in x.iter_mut().zip(self.s_t.row(col)) {
+                        *xr += s * z[j];
                     }
                 }
             }
@@ -424,8 +431,12 @@ impl InverseModel {
             }
         }
         let (y, m) = x.split_at(n);
+        let mut pressure = vec![0.0; self.cells.len()];
+        self.a_t_pressure.mul_vec(y, &mut pressure);
         let mut tractions = vec![0.0; self.a_t.rows];
-        self.a_t.mul_vec(y, &mut tractions);
+        for (j, p) in pressure.into_iter().enumerate() {
+            tractions[3 * j + 2] = p;
+        }
         let motion: [f64; MOTION_PARAMETERS] = std::array::from_fn(|i| m[i]);
         let residuals: Vec<Option<Point2>> = (0..n / 2)
             .map(|i| valid[i].then(|| [self.lambda * y[2 * i], self.lambda * y[2 * i + 1]]))
