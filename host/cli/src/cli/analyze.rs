@@ -30,8 +30,8 @@ pub struct Args {
     /// Sensor config (TOML); every value defaults to the real sensor.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
-    /// Estimator variant (fast or paper).
-    #[arg(long, default_value = "fast")]
+    /// Estimator variant: inverse (the traction inverse), fast or paper (the paper's gamma line).
+    #[arg(long, default_value_t = Mode::default())]
     mode: Mode,
     /// One JSON object per frame per line.
     #[arg(long)]
