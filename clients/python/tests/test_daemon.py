@@ -154,7 +154,7 @@ def test_lists_both_sensors_by_their_boards_serial_numbers(client: nusense.Clien
     for serial in serials:
         status = client.status(serial)
         assert status.serial == serial
-        assert status.simulator and status.mode == "fast" and status.board_connected
+        assert status.simulator and status.mode == "inverse" and status.board_connected
         # The serial names the sensor's LED board: its MCU's unique id in upper-case hex.
         uid = status.raw["board"]["link"]["info"]["mcu_uid"]
         assert serial == "".join(f"{byte:02X}" for byte in uid)
@@ -285,7 +285,7 @@ def test_the_example_script_runs_as_a_researcher_runs_it(daemon: Daemon, serials
     assert run.returncode == 0, run.stderr
     lines = run.stdout.splitlines()
     for serial in serials:
-        assert any(line.startswith(f"{serial}: nusense ") and "simulated, fast mode" in line for line in lines), lines
+        assert any(line.startswith(f"{serial}: nusense ") and "simulated, inverse mode" in line for line in lines), lines
         assert f"{serial}: tare: the next frame becomes the rest frame" in lines
         assert sum(line.startswith(f"{serial} frame ") for line in lines) >= 5, lines
         summary = next(line for line in lines if line.startswith(f"{serial}: ") and " readings in " in line)
