@@ -60,8 +60,8 @@ const NOISE_TRIM: f64 = 0.05;
 const TRIMMED_MEAN_RATIO: f64 = 0.83;
 /// The contact test's noise leaves out the corners this many cells or less from a load stage 1 finds.
 const MEASURED_NOISE_REACH_CELLS: f64 = 3.0;
-/// [`InverseModel::near_loads`] looks its distances up in a table for reaches up to this many cells (the largest
-/// it is asked for), and computes them beyond.
+/// [`InverseModel::near_loads`] looks its distances up in a table built for reaches up to this many cells, the
+/// largest it is asked for.
 const NEAR_TABLE_REACH_CELLS: f64 = MEASURED_NOISE_REACH_CELLS;
 /// Fewer corners than this do not make a noise estimate.
 const MIN_NOISE_CORNERS: usize = 10;
@@ -504,20 +504,12 @@ impl InverseModel {
             return Vec::new();
         }
         let reach = reach_cells * self.pad.pitch_x_mm().max(self.pad.pitch_y_mm());
-        if reach_cells > NEAR_TABLE_REACH_CELLS {
-            let near: Vec<Point2> = groups.iter().flatten().map(|&j| self.cells[j].centre_mm).collect();
-            return self
-                .pad
-                .corners()
-                .enumerate()
-                .filter(|(_, c)| {
-                    let p = self.pad.corner_mm(*c);
-                    near.iter().any(|q| corner_to_cell_mm(p, *q) <= reach)
-                })
-                .map(|(i, _)| i)
-                .collect();
-        }
-        // The same distances, looked up: every corner within the table's reach of each loaded cell.
+        // Every caller asks for at most the table's reach; a larger one would silently miss corners.
+        assert!(
+            reach_cells <= NEAR_TABLE_REACH_CELLS,
+            "near_loads asked for {reach_cells} cells, its table holds {NEAR_TABLE_REACH_CELLS}"
+        );
+        // Every corner within the reach of a loaded cell, from the distances the table holds.
         let mut is_near = vec![false; self.observations / 2];
         for &j in groups.iter().flatten() {
             for &(i, distance) in &self.corners_near_cell[j] {
