@@ -42,7 +42,7 @@ pub enum Mode {
     Paper,
     /// Fast detection and the traction inverse: force vector, torque, every contact, pressure map. The default:
     /// on the validation set (docs/benchmarks/validation-*.md) it is ahead of `fast` on every accuracy figure and
-    /// detects as light a press.
+    /// detects as light a round or flat press (a light long edge not yet: docs/benchmarks/validation-quick.md).
     #[default]
     Inverse,
 }
@@ -816,10 +816,10 @@ impl Estimator {
         // The new rest frame is found as `Estimator::new` finds one: a full search and a tracker built on it. Adopting
         // the tracked frame's positions instead (as before) kept a bias, most likely because they were measured
         // through the old rest frame's windows, carried by the camera's motion, and later frames through windows of
-        // the new one, and a centroid's dependence on its window then does not cancel. After a 2 deg roll (hard_cases) the contact test's statistic on the rest frames
-        // that followed was 544-684 against a threshold of 457, with corners at the pattern's top-left moved 6-15 µm;
-        // an estimator built on the same rest frame reads 309-377 on them, as this one now does. Only if that search
-        // fails is the tracked frame adopted.
+        // the new one, and a centroid's dependence on its window then does not cancel. After a 2 deg roll
+        // (hard_cases) the contact test's statistic on the rest frames that followed was 544-684 against a threshold
+        // of 457, with corners at the pattern's top-left moved 6-15 µm; an estimator built on the same rest frame
+        // reads 309-377 on them, as this one now does. Only if that search fails is the tracked frame adopted.
         let mut squares: Vec<Option<Point2>> = lattice.squares.iter().map(|s| s.raw_px).collect();
         let mut corners: Vec<Option<Point2>> = lattice.corners.iter().map(|c| c.raw_px).collect();
         if let Detector::Fast(tracker) = &mut self.detector {
