@@ -392,6 +392,19 @@ pub async fn zenoh_client(endpoint: &str) -> zenoh::Session {
     zenoh::open(config).await.expect("open a Zenoh session")
 }
 
+/// One query's first reply, as JSON; `None` when none came within 30 s (a session whose connection is not up yet
+/// gets none). Panics on an error reply.
+pub async fn zenoh_query(session: &zenoh::Session, key: &str, payload: Option<&str>) -> Option<Value> {
+    let mut get = session.get(key).timeout(Duration::from_secs(30));
+    if let Some(payload) = payload {
+        get = get.payload(payload.to_owned());
+    }
+    let replies = get.await.expect("send the query");
+    let reply = replies.recv_async().await.ok()?;
+    let sample = reply.result().unwrap_or_else(|e| panic!("{key}: {e:?}"));
+    Some(serde_json::from_slice(&sample.payload().to_bytes()).expect("a JSON reply"))
+}
+
 /// The project's .venv interpreter (`scripts/setup test` creates it); `needed_for` says what the test needs from it.
 pub fn venv_python(needed_for: &str) -> PathBuf {
     let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../.venv/bin/python");

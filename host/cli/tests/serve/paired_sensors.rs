@@ -10,22 +10,13 @@ use std::time::Duration;
 use nusense_board::virtual_board::VirtualBoard;
 use serde_json::{json, Value};
 
-use crate::daemon::{press, render_folder, rest, zenoh_client, Daemon, Options};
+use crate::daemon::{press, render_folder, rest, zenoh_client, zenoh_query, Daemon, Options, PATIENCE};
 
-const PATIENCE: Duration = Duration::from_secs(120);
-
+/// The reply to a query the daemon must answer (the session already receives its readings).
 async fn query(session: &zenoh::Session, key: &str, payload: Option<&str>) -> Value {
-    let mut get = session.get(key).timeout(Duration::from_secs(30));
-    if let Some(payload) = payload {
-        get = get.payload(payload.to_owned());
-    }
-    let replies = get.await.expect("send the query");
-    let reply = replies
-        .recv_async()
+    zenoh_query(session, key, payload)
         .await
-        .unwrap_or_else(|_| panic!("no reply on {key}"));
-    let sample = reply.result().unwrap_or_else(|e| panic!("{key}: {e:?}"));
-    serde_json::from_slice(&sample.payload().to_bytes()).expect("a JSON reply")
+        .unwrap_or_else(|| panic!("no reply on {key}"))
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

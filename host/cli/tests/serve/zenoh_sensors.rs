@@ -9,7 +9,7 @@ use std::process::{Command, Stdio};
 
 use serde_json::{json, Value};
 
-use crate::daemon::{venv_python, zenoh_client, Daemon, Options, PATIENCE};
+use crate::daemon::{venv_python, zenoh_client, zenoh_query, Daemon, Options, PATIENCE};
 
 /// A serial as a ROS name token: a ROS 2 name must not start with a digit, hence `sn_` before a serial that does
 /// (serials are hex, so nothing else changes).
@@ -153,13 +153,8 @@ async fn a_zenoh_endpoint_on_port_0_is_reported_as_the_port_bound_and_reaches_th
     let deadline = tokio::time::Instant::now() + PATIENCE;
     // The first query may leave before the connection is up (no reply then): ask again until one comes.
     let status: Value = loop {
-        let replies = session
-            .get(format!("nusense/{serial}/status"))
-            .await
-            .expect("query the status");
-        if let Ok(Ok(reply)) = tokio::time::timeout_at(deadline, replies.recv_async()).await {
-            let sample = reply.result().expect("a status, not an error");
-            break serde_json::from_slice(&sample.payload().to_bytes()).expect("a JSON status");
+        if let Some(status) = zenoh_query(&session, &format!("nusense/{serial}/status"), None).await {
+            break status;
         }
         assert!(
             tokio::time::Instant::now() < deadline,
