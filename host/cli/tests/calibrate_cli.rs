@@ -6,19 +6,29 @@ fn nusense() -> Command {
     Command::new(env!("CARGO_BIN_EXE_nusense"))
 }
 
+/// A `--pairs` file of (gamma, force) rows, as a user exports it.
+fn pairs_file(path: &std::path::Path, pairs: impl IntoIterator<Item = (f64, f64)>) {
+    let mut csv = String::from("gamma,force_n\n");
+    for (gamma, force) in pairs {
+        csv += &format!("{gamma},{force}\n");
+    }
+    std::fs::write(path, csv).unwrap();
+}
+
 #[test]
 fn fits_pairs_and_writes_the_config_keeping_other_keys() {
     let dir = tempfile::tempdir().unwrap();
     let pairs = dir.path().join("pairs.csv");
     // F = 2.5 gamma - 0.4 with small deterministic wiggle, and one slipped measurement.
-    let mut csv = String::from("gamma,force_n\n");
-    for i in 0..30 {
-        let gamma = 0.3 + 0.1 * f64::from(i);
-        let wiggle = 0.02 * ((f64::from(i) * 2.399).sin());
-        let force = if i == 17 { 9.0 } else { 2.5 * gamma - 0.4 + wiggle };
-        csv += &format!("{gamma},{force}\n");
-    }
-    std::fs::write(&pairs, csv).unwrap();
+    pairs_file(
+        &pairs,
+        (0..30).map(|i| {
+            let gamma = 0.3 + 0.1 * f64::from(i);
+            let wiggle = 0.02 * ((f64::from(i) * 2.399).sin());
+            let force = if i == 17 { 9.0 } else { 2.5 * gamma - 0.4 + wiggle };
+            (gamma, force)
+        }),
+    );
     let config = dir.path().join("sensor.toml");
     std::fs::write(&config, "# bench sensor\n[surface]\ndegree_u = 2\n").unwrap();
 
@@ -110,12 +120,13 @@ fn degenerate_or_missing_input_fails_with_a_reason() {
 fn a_line_that_falls_with_gamma_is_not_written_into_the_config() {
     let dir = tempfile::tempdir().unwrap();
     let pairs = dir.path().join("falling.csv");
-    let mut csv = String::from("gamma,force_n\n");
-    for i in 0..20 {
-        let gamma = 0.2 + 0.1 * f64::from(i);
-        csv += &format!("{gamma},{}\n", 6.0 - 1.5 * gamma);
-    }
-    std::fs::write(&pairs, csv).unwrap();
+    pairs_file(
+        &pairs,
+        (0..20).map(|i| {
+            let gamma = 0.2 + 0.1 * f64::from(i);
+            (gamma, 6.0 - 1.5 * gamma)
+        }),
+    );
     let config = dir.path().join("sensor.toml");
     let original = "# bench sensor\n[calibration]\na = 7.5\nb = -0.2\n";
     std::fs::write(&config, original).unwrap();
