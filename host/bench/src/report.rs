@@ -381,6 +381,9 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
     row("detection floor, N".into(), "<= 0.5", &|m| {
         (opt(m.detection_floor_n, 2), within(m.detection_floor_n, 0.5))
     });
+    row("detection floor, 20 x 1 mm edges, N".into(), "<= 0.5", &|m| {
+        (opt(m.edge_detection_floor_n, 2), within(m.edge_detection_floor_n, 0.5))
+    });
     row("false contacts on rest frames".into(), "0", &|m| {
         (
             format!("{}/{}", m.false_contacts, m.rest_frames),
@@ -460,22 +463,28 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
     if !notes.is_empty() {
         let _ = writeln!(out, "\nNotes:\n{}", notes.join("\n"));
     }
-    let _ = writeln!(
-        out,
-        "\nDetection rate by force: {}",
+    let rates = |of: &dyn Fn(&ModeFigures) -> &[(f64, f64)]| {
         v.modes
             .iter()
-            .map(|m| format!(
-                "{}: {}",
-                m.mode,
-                m.detection_rates
-                    .iter()
-                    .map(|(f, r)| format!("{f} N {:.0} %", 100.0 * r))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
+            .map(|m| {
+                format!(
+                    "{}: {}",
+                    m.mode,
+                    of(m)
+                        .iter()
+                        .map(|(f, r)| format!("{f} N {:.0} %", 100.0 * r))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            })
             .collect::<Vec<_>>()
             .join("; ")
+    };
+    let _ = writeln!(out, "\nDetection rate by force: {}", rates(&|m| &m.detection_rates));
+    let _ = writeln!(
+        out,
+        "\nDetection rate by force, 20 x 1 mm edges: {}",
+        rates(&|m| &m.edge_detection_rates)
     );
     out
 }
@@ -543,6 +552,7 @@ mod tests {
         good.camera_rotation_rms_deg = Some(0.1);
         good.camera_rotation_max_deg = Some(0.15);
         good.detection_floor_n = Some(0.5);
+        good.edge_detection_floor_n = Some(0.5);
         good.rest_frames = 4;
         good.edge_mae_deg = Some(1.0);
         good.edge_max_deg = Some(1.9);

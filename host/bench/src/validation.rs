@@ -114,6 +114,9 @@ pub struct ModeFigures {
     pub detection_floor_n: Option<f64>,
     /// Detection rate per floor force (FLOOR_FORCES_N).
     pub detection_rates: Vec<(f64, f64)>,
+    /// The same for long contacts: 20 x 1 mm edges at 0, 45, 90 and 135 degrees (the `edge_floor` cases).
+    pub edge_detection_floor_n: Option<f64>,
+    pub edge_detection_rates: Vec<(f64, f64)>,
     pub false_contacts: usize,
     pub rest_frames: usize,
     pub edge_mae_deg: Option<f64>,
@@ -390,6 +393,30 @@ fn angle_between_deg(a: [f64; 2], b: [f64; 2]) -> f64 {
     cross.atan2(dot).abs().to_degrees()
 }
 
+/// The detection rate per floor force (FLOOR_FORCES_N) on the cases of `kind`, and the floor: the smallest force
+/// from which it and every heavier level is detected at least RELIABLE_DETECTION of the time.
+#[allow(clippy::type_complexity)]
+fn detection_floor(scored: &[Scored], kind: CaseKind) -> (Vec<(f64, f64)>, Option<f64>) {
+    let rates: Vec<(f64, f64)> = FLOOR_FORCES_N
+        .iter()
+        .map(|&force| {
+            let at: Vec<&Scored> = scored
+                .iter()
+                .filter(|s| s.kind == kind && (s.truth.frame.force_vector_n[2] - force).abs() < 1e-9)
+                .collect();
+            let found = at
+                .iter()
+                .filter(|s| s.observed.as_ref().is_some_and(|o| o.contact))
+                .count();
+            (force, found as f64 / at.len().max(1) as f64)
+        })
+        .collect();
+    let floor = (0..rates.len())
+        .find(|&i| rates[i..].iter().all(|(_, rate)| *rate >= RELIABLE_DETECTION))
+        .map(|i| rates[i].0);
+    (rates, floor)
+}
+
 pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
     let of = |kind: CaseKind| scored.iter().filter(move |s| s.kind == kind);
     let times: Vec<f64> = scored.iter().filter_map(|s| s.elapsed_ms).collect();
@@ -421,22 +448,8 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
         rms(&errors)
     };
 
-    let detection_rates: Vec<(f64, f64)> = FLOOR_FORCES_N
-        .iter()
-        .map(|&force| {
-            let at: Vec<&Scored> = of(CaseKind::Floor)
-                .filter(|s| (s.truth.frame.force_vector_n[2] - force).abs() < 1e-9)
-                .collect();
-            let found = at
-                .iter()
-                .filter(|s| s.observed.as_ref().is_some_and(|o| o.contact))
-                .count();
-            (force, found as f64 / at.len().max(1) as f64)
-        })
-        .collect();
-    let detection_floor_n = (0..detection_rates.len())
-        .find(|&i| detection_rates[i..].iter().all(|(_, rate)| *rate >= RELIABLE_DETECTION))
-        .map(|i| detection_rates[i].0);
+    let (detection_rates, detection_floor_n) = detection_floor(scored, CaseKind::Floor);
+    let (edge_detection_rates, edge_detection_floor_n) = detection_floor(scored, CaseKind::EdgeFloor);
     let rests: Vec<&Scored> = of(CaseKind::Rest).collect();
     let false_contacts = rests
         .iter()
@@ -545,6 +558,8 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
         force_rms_with_motion_n: force_errors(&[CaseKind::Press, CaseKind::CameraMotion]),
         detection_floor_n,
         detection_rates,
+        edge_detection_floor_n,
+        edge_detection_rates,
         false_contacts,
         rest_frames: rests.len(),
         edge_mae_deg: nusense_estimator::stats::mean(&edge_errors),

@@ -40,6 +40,9 @@ pub enum CaseKind {
     Floor,
     /// An edge (20 mm x 1 mm) at many angles.
     Edge,
+    /// Light edges (20 mm x 1 mm, 0.2-2 N) at 0, 45, 90 and 135 degrees and several positions: the detection floor
+    /// of a long contact, whose load spreads over a line of cells rather than a round patch.
+    EdgeFloor,
     /// Two spheres 10 mm apart.
     TwoContacts,
     /// A press with a tangential push in a random direction.
@@ -57,11 +60,12 @@ pub enum CaseKind {
 }
 
 impl CaseKind {
-    pub const ALL: [CaseKind; 11] = [
+    pub const ALL: [CaseKind; 12] = [
         CaseKind::Calibration,
         CaseKind::Press,
         CaseKind::Floor,
         CaseKind::Edge,
+        CaseKind::EdgeFloor,
         CaseKind::TwoContacts,
         CaseKind::Tangential,
         CaseKind::Twist,
@@ -148,6 +152,10 @@ const SMALL_SPHERE_MAX_N: f64 = 3.0;
 const SMALL_FLAT_MAX_N: f64 = 2.0;
 /// Forces of the detection-floor cases, N.
 pub const FLOOR_FORCES_N: [f64; 7] = [0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0];
+/// Angles of the edge detection-floor cases, degrees.
+pub const EDGE_FLOOR_ANGLES_DEG: [f64; 4] = [0.0, 45.0, 90.0, 135.0];
+/// Largest |x| and |y| of an edge's centre, mm: its 20 mm stays on the pattern at any angle.
+const EDGE_REACH_MM: [f64; 2] = [12.0, 8.0];
 
 impl ValidationSet {
     pub fn new(profile: Profile, seed: u64) -> Self {
@@ -214,7 +222,10 @@ impl ValidationSet {
         let edges = many(8, 24);
         for k in 0..edges {
             let angle = 180.0 * k as f64 / edges as f64 + rng.gen_range(0.0..180.0 / edges as f64);
-            let at = [rng.gen_range(-12.0..=12.0), rng.gen_range(-8.0..=8.0)];
+            let at = [
+                rng.gen_range(-EDGE_REACH_MM[0]..=EDGE_REACH_MM[0]),
+                rng.gen_range(-EDGE_REACH_MM[1]..=EDGE_REACH_MM[1]),
+            ];
             let scene = Scene::with_contact(Contact::edge(20.0, 1.0, angle, at, rng.gen_range(3.0..=8.0)));
             push(&mut rng, CaseKind::Edge, main, scene, None, DRIFT);
         }
@@ -306,6 +317,24 @@ impl ValidationSet {
                 push(&mut rng, CaseKind::Resolution, size, scene, None, DRIFT);
             }
         }
+        // Last, so that adding them left every earlier case (and its draws) as it was.
+        for force in FLOOR_FORCES_N {
+            for k in 0..many(2, 4) {
+                for angle in EDGE_FLOOR_ANGLES_DEG {
+                    // Near the centre on the first round, anywhere the edge fits on the others.
+                    let at = if k == 0 {
+                        [rng.gen_range(-3.0..=3.0), rng.gen_range(-3.0..=3.0)]
+                    } else {
+                        [
+                            rng.gen_range(-EDGE_REACH_MM[0]..=EDGE_REACH_MM[0]),
+                            rng.gen_range(-EDGE_REACH_MM[1]..=EDGE_REACH_MM[1]),
+                        ]
+                    };
+                    let scene = Scene::with_contact(Contact::edge(20.0, 1.0, angle, at, force));
+                    push(&mut rng, CaseKind::EdgeFloor, main, scene, None, DRIFT);
+                }
+            }
+        }
         Self { profile, seed, cases }
     }
 
@@ -331,6 +360,7 @@ fn kind_name(kind: CaseKind) -> &'static str {
         CaseKind::Press => "press",
         CaseKind::Floor => "floor",
         CaseKind::Edge => "edge",
+        CaseKind::EdgeFloor => "edge_floor",
         CaseKind::TwoContacts => "two_contacts",
         CaseKind::Tangential => "tangential",
         CaseKind::Twist => "twist",
