@@ -48,6 +48,10 @@ use crate::linalg::{dot, gram, tr_mul_vec, Dense};
 pub const MOTION_PARAMETERS: usize = 8;
 /// Stage 1 pressure above this many of its own noise sigmas marks a cell as loaded.
 const SUPPORT_SIGMAS: f64 = 3.0;
+/// Lengths (cells) of the line shapes stage 2 also picks its loaded cells by, along the grid's rows, columns and
+/// diagonals, and the sides (cells) of the square shapes a line must explain better than.
+const LINE_LENGTHS_CELLS: [usize; 2] = [3, 5];
+const BLOCK_SIDES_CELLS: [usize; 3] = [1, 2, 3];
 /// Most active-set iterations of stage 2 (it converges in a few).
 const MAX_ACTIVE_SET_ITERATIONS: usize = 50;
 /// A local maximum of pressure starts its own contact only if the saddle towards a higher one dips below this
@@ -110,6 +114,17 @@ pub struct InverseModel {
     /// E per sigma^2 of unit pressures on any two cells, cells x cells: Gᵀ Q G with G the pressure columns of A
     /// (E of a 1 N press of any shape w is wᵀ this w).
     pressure_explained: Dense,
+    /// The matched filter of a pressure shape: G0 = A_pᵀ P0 A_p (cells x cells) with A_p the pressure columns of A
+    /// and P0 the projection off the motion basis: a shape w's least-squares amplitude in displacements d with
+    /// motion-only residuals r is wᵀ A_pᵀ r / wᵀ G0 w, its noise sigma / sqrt(wᵀ G0 w).
+    matched_gram: Dense,
+    /// The line shapes (see [`LINE_LENGTHS_CELLS`]) and the square ones, each with its sqrt(wᵀ G0 w) (unit load per
+    /// cell).
+    line_shapes: Vec<(Vec<usize>, f64)>,
+    block_shapes: Vec<(Vec<usize>, f64)>,
+    /// A line shape picks its cells above this many sigmas: the cell test's false-pick rate per cell
+    /// ([`SUPPORT_SIGMAS`]), shared among the line shapes through a cell.
+    line_sigmas: f64,
     /// Normalisation length of the motion basis, mm.
     motion_length_mm: f64,
     false_alarm_probability: f64,
@@ -175,6 +190,26 @@ pub struct Stage2 {
     pub regions: Vec<Region>,
     /// The strongest contact as the node solve sees it (see [`PressureBasis`]), for its edge direction.
     pub edge_region: Option<Region>,
+}
+
+/// Stage 2's cell pressures' covariance per sigma^2.
+struct PressureCovariance {
+    /// Per cell: its unknown in `inverse`, if on the support.
+    unknown_of: Vec<Option<usize>>,
+    inverse: Option<DMatrix<f64>>,
+}
+
+impl PressureCovariance {
+    /// The noise (per sigma) of the difference of two cells' pressures.
+    fn difference_noise(&self, i: usize, j: usize) -> Option<f64> {
+        let inverse = self.inverse.as_ref()?;
+        let (a, b) = (self.unknown_of.get(i).copied()??, self.unknown_of.get(j).copied()??);
+        Some(
+            (inverse[(a, a)] + inverse[(b, b)] - 2.0 * inverse[(a, b)])
+                .max(0.0)
+                .sqrt(),
+        )
+    }
 }
 
 /// The unknowns of stage 2's pressure.
@@ -314,6 +349,32 @@ impl InverseModel {
         let pressure_explained = pressure_columns.transpose() * &q * &pressure_columns;
         let operator = a.transpose() * &s11;
         let pressure_noise = (0..cells.len()).map(|j| operator.row(3 * j + 2).norm()).collect();
+        let matched_gram = pressure_columns.transpose() * &p0 * &pressure_columns;
+        let (rows, cols) = (usize::from(pad.rows), usize::from(pad.cols));
+        let shape_norm = |shape: &[usize]| {
+            shape
+                .iter()
+                .flat_map(|&i| shape.iter().map(move |&j| (i, j)))
+                .map(|(i, j)| matched_gram[(i, j)])
+                .sum::<f64>()
+                .max(0.0)
+                .sqrt()
+        };
+        let with_norms = |shapes: Vec<Vec<usize>>| -> Vec<(Vec<usize>, f64)> {
+            shapes
+                .into_iter()
+                .map(|shape| {
+                    let norm = shape_norm(&shape);
+                    (shape, norm)
+                })
+                .filter(|(_, norm)| *norm > 0.0)
+                .collect()
+        };
+        let line_shapes = with_norms(line_shapes(rows, cols));
+        let block_shapes = with_norms(block_shapes(rows, cols));
+        let lines_per_cell = (LINE_LENGTHS_CELLS.iter().sum::<usize>() * 4) as f64;
+        let cell_false_pick = 0.5 * libm::erfc(SUPPORT_SIGMAS / std::f64::consts::SQRT_2);
+        let line_sigmas = normal_quantile(1.0 - cell_false_pick / lines_per_cell);
 
         let mut model = Self {
             pad,
@@ -334,6 +395,10 @@ impl InverseModel {
             test_dof: trace * trace / trace_sq,
             reference_explained: 0.0,
             pressure_explained: Dense::from_nalgebra(&pressure_explained),
+            matched_gram: Dense::from_nalgebra(&matched_gram),
+            line_shapes,
+            block_shapes,
+            line_sigmas,
             motion_length_mm,
             false_alarm_probability: config.inverse.false_alarm_probability,
             corners_near_cell: Vec::new(),
@@ -627,25 +692,51 @@ impl InverseModel {
             regions: Vec::new(),
             edge_region: None,
         };
-        let groups = self.loaded_groups(seed, noise_mm);
-        if groups.is_empty() {
-            return empty;
+        // The loaded cells are those of stage 1's per-cell test; only when they hold no contact (a light long one,
+        // whose load no single cell carries above its noise) also those of the line shapes. Picked everywhere, the
+        // line shapes also find lines in the smooth errors a moved camera leaves (tried: force over the pad with the
+        // camera moved 0.57 -> 1.22 N RMS on the quick set).
+        let matched = self.matched(d, valid);
+        let mut solved = None;
+        for (pass, lines) in [Vec::new(), self.line_loads(&matched, noise_mm)]
+            .into_iter()
+            .enumerate()
+        {
+            if solved.is_some() && !lines.iter().any(|&l| l) {
+                break;
+            }
+            let groups = self.loaded_groups_and(seed, noise_mm, &lines);
+            if groups.is_empty() {
+                continue;
+            }
+            let Some((tractions, motion, covariance)) =
+                self.constrained_solve(d, valid, seed, &groups, PressureBasis::Cells)
+            else {
+                continue;
+            };
+            let mut support: Vec<usize> = groups.iter().flatten().copied().collect();
+            support.sort_unstable();
+            let regions = self.contacts(
+                self.regions(&tractions, &support, (pass == 1).then_some((&covariance, noise_mm))),
+                &groups,
+                &matched,
+                min_force_n,
+                noise_mm,
+            );
+            let found = !regions.is_empty();
+            solved = Some((groups, support, motion, regions));
+            if found {
+                break;
+            }
         }
-        let Some((tractions, motion)) = self.constrained_solve(d, valid, seed, &groups, PressureBasis::Cells) else {
+        let Some((groups, support, motion, regions)) = solved else {
             return empty;
         };
-        let mut support: Vec<usize> = groups.iter().flatten().copied().collect();
-        support.sort_unstable();
-        let regions: Vec<Region> = self
-            .regions(&tractions, &support)
-            .into_iter()
-            .filter(|r| r.force_vector_n[2] >= min_force_n * r.floor_scale)
-            .collect();
         // The strongest contact's shape, from the node solve: its region there that holds the contact's peak cell.
         let edge_region = regions.first().and_then(|first| {
             let peak = first.cells.iter().max_by(|a, b| a.1[2].total_cmp(&b.1[2]))?.0;
-            let (smooth, _) = self.constrained_solve(d, valid, seed, &groups, PressureBasis::Nodes)?;
-            self.regions(&smooth, &support)
+            let (smooth, _, _) = self.constrained_solve(d, valid, seed, &groups, PressureBasis::Nodes)?;
+            self.regions(&smooth, &support, None)
                 .into_iter()
                 .find(|r| r.cells.iter().any(|c| c.0 == peak))
         });
@@ -660,6 +751,90 @@ impl InverseModel {
             regions,
             edge_region,
         }
+    }
+
+    /// The contacts among stage 2's regions (strongest first), each group of loaded cells judged as a whole: a region
+    /// that clears the floor where it is (`min_force_n` times its [`Region::floor_scale`]) is a contact, and one that
+    /// does not is none where its group has one that does (a bump of the solve's noise). A group none of whose regions
+    /// clears it alone, the fragments the checkerboard noise cuts a light long contact into (the pressure dips
+    /// between them below the watershed's saddle), is one region, a contact if it clears the floor as a whole by
+    /// its unbiased force ([`Self::matched_fit`]).
+    ///
+    /// The test has found a contact when stage 2 runs, and stage 2 only describes it: when no region clears the floor
+    /// (a press near the floor, whose force the noise puts on either side of it), the contact is the group whose
+    /// load is the most significant, if it is significant at all (its unbiased force above [`SUPPORT_SIGMAS`] of its
+    /// noise at `noise_mm`).
+    fn contacts(
+        &self,
+        regions: Vec<Region>,
+        groups: &[Vec<usize>],
+        matched: &[f64],
+        min_force_n: f64,
+        noise_mm: f64,
+    ) -> Vec<Region> {
+        let mut wholes: Vec<(Region, f64)> = Vec::new();
+        let group_of = |region: &Region| {
+            let first = region.cells.first().map(|c| c.0);
+            groups
+                .iter()
+                .position(|g| first.is_some_and(|j| g.binary_search(&j).is_ok()))
+        };
+        let clears = |r: &Region| r.force_vector_n[2] >= min_force_n * r.floor_scale;
+        let mut kept: Vec<Region> = Vec::new();
+        for g in 0..groups.len() {
+            let members: Vec<&Region> = regions.iter().filter(|r| group_of(r) == Some(g)).collect();
+            if members.iter().any(|r| clears(r)) {
+                // Each fragment that does not clear the floor joins the contact it touches (repeatedly: through
+                // other such fragments); one that touches none is none.
+                let (mut strong, mut weak): (Vec<Region>, Vec<Region>) =
+                    members.into_iter().cloned().partition(|r| clears(r));
+                loop {
+                    let joined = weak.iter().position(|w| strong.iter().any(|c| self.touching(c, w)));
+                    let Some(i) = joined else { break };
+                    let fragment = weak.remove(i);
+                    let target = strong
+                        .iter()
+                        .position(|c| self.touching(c, &fragment))
+                        .expect("found touching above");
+                    let mut cells = strong[target].cells.clone();
+                    cells.extend(fragment.cells);
+                    strong[target] = self.region(cells);
+                }
+                kept.extend(strong);
+                continue;
+            }
+            let cells: Vec<(usize, [f64; 3])> = members.iter().flat_map(|r| r.cells.iter().copied()).collect();
+            if cells.is_empty() {
+                continue;
+            }
+            let whole = self.region(cells);
+            let (force, noise) = self.matched_fit(matched, &whole.cells);
+            if force >= min_force_n * whole.floor_scale {
+                kept.push(whole);
+            } else {
+                wholes.push((whole, force / (noise * noise_mm.max(1e-300))));
+            }
+        }
+        if kept.is_empty() {
+            if let Some((whole, z)) = wholes.into_iter().max_by(|a, b| a.1.total_cmp(&b.1)) {
+                if z > SUPPORT_SIGMAS {
+                    kept.push(whole);
+                }
+            }
+        }
+        kept.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
+        kept
+    }
+
+    /// Whether two regions have neighbouring cells (8-connected).
+    fn touching(&self, a: &Region, b: &Region) -> bool {
+        let cols = usize::from(self.pad.cols);
+        a.cells.iter().any(|&(i, _)| {
+            b.cells.iter().any(|&(j, _)| {
+                let (ri, ci, rj, cj) = (i / cols, i % cols, j / cols, j % cols);
+                ri.abs_diff(rj) <= 1 && ci.abs_diff(cj) <= 1
+            })
+        })
     }
 
     /// How much more force a press of this shape (cells and their (fx, fy, fz); the pressure's shape counts) needs
@@ -690,12 +865,86 @@ impl InverseModel {
         }
     }
 
+    /// A_pᵀ r (per cell) with r the motion-only residuals of `d` (2 per corner, mm) over the corners `valid`: the
+    /// matched filter's correlations (see `matched_gram`).
+    fn matched(&self, d: &[f64], valid: &[bool]) -> Vec<f64> {
+        let d0: Vec<f64> = (0..self.observations)
+            .map(|r| if valid[r / 2] { d[r] } else { 0.0 })
+            .collect();
+        let residuals = self.rigid_residuals(&d0, valid);
+        let mut matched = vec![0.0; self.cells.len()];
+        self.a_t_pressure.mul_vec(&residuals, &mut matched);
+        matched
+    }
+
+    /// The least-squares normal force of a region's pressure shape (its cells' fz) in the displacements whose
+    /// [`Self::matched`] correlations are `matched`, and its noise per mm of corner noise (N / mm). Unlike stage 2's
+    /// own force, which its prior and p >= 0 pull low near the floor, it has no bias, so it is what a whole group is
+    /// judged by against the floor.
+    fn matched_fit(&self, matched: &[f64], cells: &[(usize, [f64; 3])]) -> (f64, f64) {
+        let total: f64 = cells.iter().map(|(_, f)| f[2].max(0.0)).sum();
+        if !(total > 0.0) {
+            return (0.0, f64::INFINITY);
+        }
+        let w: Vec<(usize, f64)> = cells.iter().map(|(j, f)| (*j, f[2].max(0.0) / total)).collect();
+        let correlation: f64 = w.iter().map(|(j, wj)| wj * matched[*j]).sum();
+        let energy: f64 = w
+            .iter()
+            .map(|(j, wj)| wj * w.iter().map(|(k, wk)| wk * self.matched_gram.at(*j, *k)).sum::<f64>())
+            .sum();
+        if energy > 0.0 {
+            (correlation / energy, energy.sqrt().recip())
+        } else {
+            (0.0, f64::INFINITY)
+        }
+    }
+
+    /// The cells of the line loads at noise `noise_mm` in displacements with [`Self::matched`] correlations
+    /// `matched`: a line
+    /// shape's cells when its matched filter (see `matched_gram`) finds its load above [`Self::line_sigmas`] and
+    /// above every square shape's (1 to 3 cells a side) on its cells, i.e. when a line explains the load better than
+    /// any round patch there. A long contact spreads its load over a line of cells, none of which need clear its
+    /// noise alone (stage 1's per-cell test is the matched filter of a single cell, blurred by the prior); a round
+    /// one is best explained by a square, so this leaves its cells to the per-cell test.
+    fn line_loads(&self, matched: &[f64], noise_mm: f64) -> Vec<bool> {
+        let cells = self.cells.len();
+        let mut picked = vec![false; cells];
+        if !(noise_mm > 0.0) {
+            return picked;
+        }
+        let z = |(shape, norm): &(Vec<usize>, f64)| shape.iter().map(|&j| matched[j]).sum::<f64>() / (noise_mm * norm);
+        let mut best_block = vec![f64::NEG_INFINITY; cells];
+        for block in &self.block_shapes {
+            let zb = z(block);
+            for &j in &block.0 {
+                best_block[j] = best_block[j].max(zb);
+            }
+        }
+        for line in &self.line_shapes {
+            let zl = z(line);
+            if zl > self.line_sigmas && line.0.iter().all(|&j| zl > best_block[j]) {
+                for &j in &line.0 {
+                    picked[j] = true;
+                }
+            }
+        }
+        picked
+    }
+
     /// Cells where stage 1 finds pressure above its noise, with a ring around them, as connected groups.
     fn loaded_groups(&self, seed: &Stage1, noise_mm: f64) -> Vec<Vec<usize>> {
+        self.loaded_groups_and(seed, noise_mm, &[])
+    }
+
+    /// [`Self::loaded_groups`] with the cells `also` (per cell; empty: none) loaded as well.
+    fn loaded_groups_and(&self, seed: &Stage1, noise_mm: f64, also: &[bool]) -> Vec<Vec<usize>> {
         let cells = self.cells.len();
         let (cols, rows) = (usize::from(self.pad.cols), usize::from(self.pad.rows));
         let loaded: Vec<bool> = (0..cells)
-            .map(|j| seed.tractions[3 * j + 2] > SUPPORT_SIGMAS * noise_mm * self.pressure_noise[j])
+            .map(|j| {
+                seed.tractions[3 * j + 2] > SUPPORT_SIGMAS * noise_mm * self.pressure_noise[j]
+                    || also.get(j).copied().unwrap_or(false)
+            })
             .collect();
         let support: Vec<bool> = (0..cells)
             .map(|j| {
@@ -740,7 +989,7 @@ impl InverseModel {
         seed: &Stage1,
         groups: &[Vec<usize>],
         basis: PressureBasis,
-    ) -> Option<(Vec<f64>, [f64; MOTION_PARAMETERS])> {
+    ) -> Option<(Vec<f64>, [f64; MOTION_PARAMETERS], PressureCovariance)> {
         let cells = self.cells.len();
         // Each unknown as a combination of traction components: (component index, weight).
         let mut unknowns: Vec<Vec<(usize, f64)>> = Vec::new();
@@ -849,7 +1098,25 @@ impl InverseModel {
             }
         }
         let motion = std::array::from_fn(|p| x[nt + p]);
-        Some((tractions, motion))
+        // Per sigma^2, the covariance of the cells' pressures (the cell basis's unknowns: one per cell), from the
+        // unconstrained problem's H^-1 (the bound p >= 0 only narrows it).
+        let covariance = if basis == PressureBasis::Cells {
+            let mut unknown_of = vec![None; cells];
+            for (k, combination) in unknowns.iter().take(pressures).enumerate() {
+                unknown_of[combination[0].0 / 3] = Some(k);
+            }
+            let inverse = h
+                .clone()
+                .cholesky()
+                .map(|c| c.inverse().view((0, 0), (pressures, pressures)).into_owned());
+            PressureCovariance { unknown_of, inverse }
+        } else {
+            PressureCovariance {
+                unknown_of: Vec::new(),
+                inverse: None,
+            }
+        };
+        Some((tractions, motion, covariance))
     }
 
     /// The grid's nodes ((rows + 1) x (cols + 1), row-major: the pattern's corners and its outline) at the corners
@@ -887,7 +1154,10 @@ impl InverseModel {
 
     /// Watershed of the pressure over the support: each cell climbs to its highest neighbour until a local
     /// maximum; maxima joined by a high saddle are merged.
-    fn regions(&self, tractions: &[f64], support: &[usize]) -> Vec<Region> {
+    /// With `noise` (stage 2's pressure covariance per sigma^2, and sigma in mm), maxima whose dip between them is
+    /// not significant (less than [`SUPPORT_SIGMAS`] of its own noise) are merged too: the checkerboard noise cuts a
+    /// light long contact into bumps whose dips are noise.
+    fn regions(&self, tractions: &[f64], support: &[usize], noise: Option<(&PressureCovariance, f64)>) -> Vec<Region> {
         let (cols, rows) = (usize::from(self.pad.cols), usize::from(self.pad.rows));
         let pressure = |j: usize| tractions[3 * j + 2];
         let in_support = |j: usize| support.binary_search(&j).is_ok();
@@ -922,23 +1192,41 @@ impl InverseModel {
             }
             i
         }
-        let mut saddle = vec![vec![0.0f64; peaks.len()]; peaks.len()];
+        // The highest pass between two basins: its level and the cell at it.
+        let mut saddle = vec![vec![(0.0f64, usize::MAX); peaks.len()]; peaks.len()];
         for &j in support {
             let Some(a) = label[j] else { continue };
             let (r, c) = ((j / cols) as isize, (j % cols) as isize);
             for (nr, nc) in neighbourhood(r, c, rows, cols) {
-                if let Some(b) = label[nr * cols + nc] {
+                let k = nr * cols + nc;
+                if let Some(b) = label[k] {
                     if a != b {
-                        let level = pressure(j).min(pressure(nr * cols + nc));
-                        saddle[a][b] = saddle[a][b].max(level);
+                        let low = if pressure(j) <= pressure(k) { j } else { k };
+                        if pressure(low) > saddle[a][b].0 {
+                            saddle[a][b] = (pressure(low), low);
+                        }
                     }
                 }
             }
         }
+        let insignificant = |peak: usize, pass: usize| {
+            let Some((covariance, sigma)) = noise else { return false };
+            let Some(dip_noise) = covariance.difference_noise(peak, pass) else {
+                return false;
+            };
+            pressure(peak) - pressure(pass) < SUPPORT_SIGMAS * sigma * dip_noise
+        };
         for a in 0..peaks.len() {
             for b in 0..peaks.len() {
                 let lower = pressure(peaks[a]).min(pressure(peaks[b]));
-                if a != b && saddle[a][b] > SADDLE_FRACTION * lower {
+                let lower_peak = if pressure(peaks[a]) <= pressure(peaks[b]) {
+                    peaks[a]
+                } else {
+                    peaks[b]
+                };
+                let (level, pass) = saddle[a][b];
+                if a != b && pass != usize::MAX && (level > SADDLE_FRACTION * lower || insignificant(lower_peak, pass))
+                {
                     let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
                     parent[ra] = rb;
                 }
@@ -951,54 +1239,59 @@ impl InverseModel {
                 members[r].push(j);
             }
         }
-        let cell_area = self.pad.pitch_x_mm() * self.pad.pitch_y_mm();
         let mut regions: Vec<Region> = members
             .into_iter()
             .filter(|m| !m.is_empty())
             .map(|m| {
-                let cells: Vec<(usize, [f64; 3])> = m
-                    .iter()
-                    .map(|&j| (j, [tractions[3 * j], tractions[3 * j + 1], tractions[3 * j + 2]]))
-                    .collect();
-                let force: [f64; 3] = std::array::from_fn(|k| cells.iter().map(|c| c.1[k]).sum());
-                let fz = force[2].max(1e-300);
-                let centre = [
-                    cells
-                        .iter()
-                        .map(|(j, f)| f[2] * self.cells[*j].centre_mm[0])
-                        .sum::<f64>()
-                        / fz,
-                    cells
-                        .iter()
-                        .map(|(j, f)| f[2] * self.cells[*j].centre_mm[1])
-                        .sum::<f64>()
-                        / fz,
-                ];
-                let torque = cells
-                    .iter()
-                    .map(|(j, f)| {
-                        let p = self.cells[*j].centre_mm;
-                        (p[0] - centre[0]) * f[1] - (p[1] - centre[1]) * f[0]
-                    })
-                    .sum();
-                let squares: f64 = cells.iter().map(|c| c.1[2] * c.1[2]).sum();
-                let area_mm2 = if squares > 0.0 {
-                    force[2] * force[2] / squares * cell_area
-                } else {
-                    0.0
-                };
-                Region {
-                    centre_mm: centre,
-                    force_vector_n: force,
-                    torque_nmm: torque,
-                    area_mm2,
-                    floor_scale: self.floor_scale(&cells),
-                    cells,
-                }
+                self.region(
+                    m.iter()
+                        .map(|&j| (j, [tractions[3 * j], tractions[3 * j + 1], tractions[3 * j + 2]]))
+                        .collect(),
+                )
             })
             .collect();
         regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
         regions
+    }
+
+    /// A region of cells and their (fx, fy, fz).
+    fn region(&self, cells: Vec<(usize, [f64; 3])>) -> Region {
+        let cell_area = self.pad.pitch_x_mm() * self.pad.pitch_y_mm();
+        let force: [f64; 3] = std::array::from_fn(|k| cells.iter().map(|c| c.1[k]).sum());
+        let fz = force[2].max(1e-300);
+        let centre = [
+            cells
+                .iter()
+                .map(|(j, f)| f[2] * self.cells[*j].centre_mm[0])
+                .sum::<f64>()
+                / fz,
+            cells
+                .iter()
+                .map(|(j, f)| f[2] * self.cells[*j].centre_mm[1])
+                .sum::<f64>()
+                / fz,
+        ];
+        let torque = cells
+            .iter()
+            .map(|(j, f)| {
+                let p = self.cells[*j].centre_mm;
+                (p[0] - centre[0]) * f[1] - (p[1] - centre[1]) * f[0]
+            })
+            .sum();
+        let squares: f64 = cells.iter().map(|c| c.1[2] * c.1[2]).sum();
+        let area_mm2 = if squares > 0.0 {
+            force[2] * force[2] / squares * cell_area
+        } else {
+            0.0
+        };
+        Region {
+            centre_mm: centre,
+            force_vector_n: force,
+            torque_nmm: torque,
+            area_mm2,
+            floor_scale: self.floor_scale(&cells),
+            cells,
+        }
     }
 
     /// The edge direction of a region: the major axis of its pressure's second moments, and their contrast as the
@@ -1112,6 +1405,46 @@ fn motion_rows(p: Point2, length: f64) -> [[f64; MOTION_PARAMETERS]; 2] {
             -y * y * length,
         ],
     ]
+}
+
+/// The line shapes of [`LINE_LENGTHS_CELLS`] along rows, columns and both diagonals, wholly inside a rows x cols grid
+/// (cells row-major).
+fn line_shapes(rows: usize, cols: usize) -> Vec<Vec<usize>> {
+    let mut shapes = Vec::new();
+    for length in LINE_LENGTHS_CELLS {
+        for (dr, dc) in [(0isize, 1isize), (1, 0), (1, 1), (1, -1)] {
+            for r in 0..rows as isize {
+                for c in 0..cols as isize {
+                    let shape: Vec<usize> = (0..length as isize)
+                        .map(|k| (r + k * dr, c + k * dc))
+                        .filter(|&(r, c)| r >= 0 && c >= 0 && (r as usize) < rows && (c as usize) < cols)
+                        .map(|(r, c)| r as usize * cols + c as usize)
+                        .collect();
+                    if shape.len() == length {
+                        shapes.push(shape);
+                    }
+                }
+            }
+        }
+    }
+    shapes
+}
+
+/// The square shapes of [`BLOCK_SIDES_CELLS`] wholly inside a rows x cols grid (cells row-major).
+fn block_shapes(rows: usize, cols: usize) -> Vec<Vec<usize>> {
+    let mut shapes = Vec::new();
+    for side in BLOCK_SIDES_CELLS {
+        for r in 0..(rows + 1).saturating_sub(side) {
+            for c in 0..(cols + 1).saturating_sub(side) {
+                shapes.push(
+                    (r..r + side)
+                        .flat_map(|r| (c..c + side).map(move |c| r * cols + c))
+                        .collect(),
+                );
+            }
+        }
+    }
+    shapes
 }
 
 fn motion_basis(points: &[Point2], length: f64) -> DMatrix<f64> {
