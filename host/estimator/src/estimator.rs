@@ -42,7 +42,7 @@ pub enum Mode {
     Paper,
     /// Fast detection and the traction inverse: force vector, torque, every contact, pressure map. The default:
     /// on the validation set (docs/benchmarks/validation-*.md) it is ahead of `fast` on every accuracy figure and
-    /// detects as light a round or flat press (a light long edge not yet: docs/benchmarks/validation-quick.md).
+    /// detects as light a press as `fast` does, round, flat or a long edge (docs/benchmarks/validation-quick.md).
     #[default]
     Inverse,
 }

@@ -31,7 +31,12 @@
 //! around them), with normal pressure >= 0 (an active-set solve of the small problem, from precomputed Gram
 //! blocks). Contacts are the watershed regions of that pressure, each above the detection floor where it is (the
 //! floor at the centre scaled by how much less a press of its shape there moves the corners, see
-//! [`InverseModel::floor_scale`]); force vectors, torque, centres and areas come from it. The edge direction (second
+//! [`InverseModel::floor_scale`]); force vectors, torque, centres and areas come from it. A long light contact
+//! loads no single cell above its noise: when those cells hold no contact, stage 2 is solved again with the cells of
+//! the line shapes a matched filter finds significant and better explained as a line than as a square patch; there
+//! the fragments a line's pressure breaks into are one contact unless the dip between them is significant, and a
+//! group of cells is judged against the floor as a whole, by its unbiased least-squares force (see
+//! `InverseModel::contacts`). The edge direction (second
 //! moments of the pressure) comes from a second solve with the pressure's unknowns on the grid's nodes instead of its
 //! cells, which has no checkerboard noise (see [`PressureBasis`]).
 
@@ -190,6 +195,14 @@ pub struct Stage2 {
     pub regions: Vec<Region>,
     /// The strongest contact as the node solve sees it (see [`PressureBasis`]), for its edge direction.
     pub edge_region: Option<Region>,
+}
+
+/// A frame's displacements (2 per corner, mm), the corners used, and stage 2's tractions (3 per cell, N).
+#[derive(Clone, Copy)]
+struct Observed<'a> {
+    d: &'a [f64],
+    valid: &'a [bool],
+    tractions: &'a [f64],
 }
 
 /// Stage 2's cell pressures' covariance per sigma^2.
@@ -719,7 +732,7 @@ impl InverseModel {
             let regions = self.contacts(
                 self.regions(&tractions, &support, (pass == 1).then_some((&covariance, noise_mm))),
                 &groups,
-                &matched,
+                Observed { d, valid, tractions: &tractions },
                 min_force_n,
                 noise_mm,
             );
@@ -768,7 +781,7 @@ impl InverseModel {
         &self,
         regions: Vec<Region>,
         groups: &[Vec<usize>],
-        matched: &[f64],
+        observed: Observed,
         min_force_n: f64,
         noise_mm: f64,
     ) -> Vec<Region> {
@@ -808,7 +821,17 @@ impl InverseModel {
                 continue;
             }
             let whole = self.region(cells);
-            let (force, noise) = self.matched_fit(matched, &whole.cells);
+            // Its force in the displacements less those of stage 2's tractions elsewhere (the other groups' loads
+            // move its corners too).
+            let mut elsewhere = observed.tractions.to_vec();
+            for &j in &groups[g] {
+                elsewhere[3 * j..3 * j + 3].fill(0.0);
+            }
+            let mut moved = vec![0.0; self.observations];
+            self.a.mul_vec(&elsewhere, &mut moved);
+            let rest: Vec<f64> = observed.d.iter().zip(&moved).map(|(d, m)| d - m).collect();
+            let matched = self.matched(&rest, observed.valid);
+            let (force, noise) = self.matched_fit(&matched, &whole.cells);
             if force >= min_force_n * whole.floor_scale {
                 kept.push(whole);
             } else {
