@@ -732,7 +732,11 @@ impl InverseModel {
             let regions = self.contacts(
                 self.regions(&tractions, &support, (pass == 1).then_some((&covariance, noise_mm))),
                 &groups,
-                Observed { d, valid, tractions: &tractions },
+                Observed {
+                    d,
+                    valid,
+                    tractions: &tractions,
+                },
                 min_force_n,
                 noise_mm,
             );
@@ -774,9 +778,11 @@ impl InverseModel {
     /// its unbiased force ([`Self::matched_fit`]).
     ///
     /// The test has found a contact when stage 2 runs, and stage 2 only describes it: when no region clears the floor
-    /// (a press near the floor, whose force the noise puts on either side of it), the contact is the group whose
-    /// load is the most significant, if it is significant at all (its unbiased force above [`SUPPORT_SIGMAS`] of its
-    /// noise at `noise_mm`).
+    /// (a press at the floor, whose force the noise puts on either side of it), the contact is the group whose load
+    /// is the most significant, unless its unbiased force is significantly below the floor (by more than
+    /// [`SUPPORT_SIGMAS`] of its noise at `noise_mm`): then the test's contact is none stage 2 can find, as on a rest
+    /// frame where one side's LEDs drift by 20 % (tests/hard_cases.rs: the test's statistic 462 against 457, the
+    /// best group 0.16 +- 0.017 N against a floor of 0.36 N there).
     fn contacts(
         &self,
         regions: Vec<Region>,
@@ -785,7 +791,7 @@ impl InverseModel {
         min_force_n: f64,
         noise_mm: f64,
     ) -> Vec<Region> {
-        let mut wholes: Vec<(Region, f64)> = Vec::new();
+        let mut wholes: Vec<(Region, f64, bool)> = Vec::new();
         let group_of = |region: &Region| {
             let first = region.cells.first().map(|c| c.0);
             groups
@@ -832,15 +838,17 @@ impl InverseModel {
             let rest: Vec<f64> = observed.d.iter().zip(&moved).map(|(d, m)| d - m).collect();
             let matched = self.matched(&rest, observed.valid);
             let (force, noise) = self.matched_fit(&matched, &whole.cells);
-            if force >= min_force_n * whole.floor_scale {
+            let floor_n = min_force_n * whole.floor_scale;
+            if force >= floor_n {
                 kept.push(whole);
             } else {
-                wholes.push((whole, force / (noise * noise_mm.max(1e-300))));
+                let sd = noise * noise_mm;
+                wholes.push((whole, force / sd, force + SUPPORT_SIGMAS * sd >= floor_n));
             }
         }
         if kept.is_empty() {
-            if let Some((whole, z)) = wholes.into_iter().max_by(|a, b| a.1.total_cmp(&b.1)) {
-                if z > SUPPORT_SIGMAS {
+            if let Some((whole, _, near_floor)) = wholes.into_iter().max_by(|a, b| a.1.total_cmp(&b.1)) {
+                if near_floor {
                     kept.push(whole);
                 }
             }
