@@ -197,6 +197,9 @@ pub struct Stage2 {
     pub edge_region: Option<Region>,
 }
 
+/// A cell and its (fx, fy, fz), N.
+type Traction = (usize, [f64; 3]);
+
 /// A frame's displacements (2 per corner, mm), the corners used, and stage 2's tractions (3 per cell, N).
 #[derive(Clone, Copy)]
 struct Observed<'a> {
@@ -711,10 +714,12 @@ impl InverseModel {
         // camera moved 0.57 -> 1.22 N RMS on the quick set).
         let matched = self.matched(d, valid);
         let mut solved = None;
-        for (pass, lines) in [Vec::new(), self.line_loads(&matched, noise_mm)]
-            .into_iter()
-            .enumerate()
-        {
+        for pass in 0..2 {
+            let lines = if pass == 0 {
+                Vec::new()
+            } else {
+                self.line_loads(&matched, noise_mm)
+            };
             if solved.is_some() && !lines.iter().any(|&l| l) {
                 break;
             }
@@ -723,7 +728,7 @@ impl InverseModel {
                 continue;
             }
             let Some((tractions, motion, covariance)) =
-                self.constrained_solve(d, valid, seed, &groups, PressureBasis::Cells)
+                self.constrained_solve(d, valid, seed, &groups, PressureBasis::Cells, pass == 1)
             else {
                 continue;
             };
@@ -752,7 +757,7 @@ impl InverseModel {
         // The strongest contact's shape, from the node solve: its region there that holds the contact's peak cell.
         let edge_region = regions.first().and_then(|first| {
             let peak = first.cells.iter().max_by(|a, b| a.1[2].total_cmp(&b.1[2]))?.0;
-            let (smooth, _, _) = self.constrained_solve(d, valid, seed, &groups, PressureBasis::Nodes)?;
+            let (smooth, _, _) = self.constrained_solve(d, valid, seed, &groups, PressureBasis::Nodes, false)?;
             self.regions(&smooth, &support, None)
                 .into_iter()
                 .find(|r| r.cells.iter().any(|c| c.0 == peak))
@@ -772,10 +777,10 @@ impl InverseModel {
 
     /// The contacts among stage 2's regions (strongest first), each group of loaded cells judged as a whole: a region
     /// that clears the floor where it is (`min_force_n` times its [`Region::floor_scale`]) is a contact, and one that
-    /// does not is none where its group has one that does (a bump of the solve's noise). A group none of whose regions
-    /// clears it alone, the fragments the checkerboard noise cuts a light long contact into (the pressure dips
-    /// between them below the watershed's saddle), is one region, a contact if it clears the floor as a whole by
-    /// its unbiased force ([`Self::matched_fit`]).
+    /// does not joins the contact it touches in its group (a bump of the solve's noise), or is none. When no region
+    /// clears it alone, a group's fragments (the checkerboard noise cuts a light long contact into bumps whose dips
+    /// fall below the watershed's saddle) are one region, a contact if it clears the floor as a whole by its unbiased
+    /// force ([`Self::matched_fit`]).
     ///
     /// The test has found a contact when stage 2 runs, and stage 2 only describes it: when no region clears the floor
     /// (a press at the floor, whose force the noise puts on either side of it), the contact is the group whose load
@@ -791,7 +796,7 @@ impl InverseModel {
         min_force_n: f64,
         noise_mm: f64,
     ) -> Vec<Region> {
-        let mut wholes: Vec<(Region, f64, bool)> = Vec::new();
+        let mut pending: Vec<(&[usize], Vec<Traction>)> = Vec::new();
         let group_of = |region: &Region| {
             let first = region.cells.first().map(|c| c.0);
             groups
@@ -800,7 +805,7 @@ impl InverseModel {
         };
         let clears = |r: &Region| r.force_vector_n[2] >= min_force_n * r.floor_scale;
         let mut kept: Vec<Region> = Vec::new();
-        for g in 0..groups.len() {
+        for (g, group) in groups.iter().enumerate() {
             let members: Vec<&Region> = regions.iter().filter(|r| group_of(r) == Some(g)).collect();
             if members.iter().any(|r| clears(r)) {
                 // Each fragment that does not clear the floor joins the contact it touches (repeatedly: through
@@ -823,14 +828,22 @@ impl InverseModel {
                 continue;
             }
             let cells: Vec<(usize, [f64; 3])> = members.iter().flat_map(|r| r.cells.iter().copied()).collect();
-            if cells.is_empty() {
-                continue;
+            if !cells.is_empty() {
+                pending.push((group, cells));
             }
+        }
+        if !kept.is_empty() {
+            kept.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
+            return kept;
+        }
+        // No fragment is a contact: each group is judged whole.
+        let mut wholes: Vec<(Region, f64, bool)> = Vec::new();
+        for (group, cells) in pending {
             let whole = self.region(cells);
             // Its force in the displacements less those of stage 2's tractions elsewhere (the other groups' loads
             // move its corners too).
             let mut elsewhere = observed.tractions.to_vec();
-            for &j in &groups[g] {
+            for &j in group {
                 elsewhere[3 * j..3 * j + 3].fill(0.0);
             }
             let mut moved = vec![0.0; self.observations];
@@ -1020,6 +1033,7 @@ impl InverseModel {
         seed: &Stage1,
         groups: &[Vec<usize>],
         basis: PressureBasis,
+        with_covariance: bool,
     ) -> Option<(Vec<f64>, [f64; MOTION_PARAMETERS], PressureCovariance)> {
         let cells = self.cells.len();
         // Each unknown as a combination of traction components: (component index, weight).
@@ -1130,8 +1144,8 @@ impl InverseModel {
         }
         let motion = std::array::from_fn(|p| x[nt + p]);
         // Per sigma^2, the covariance of the cells' pressures (the cell basis's unknowns: one per cell), from the
-        // unconstrained problem's H^-1 (the bound p >= 0 only narrows it).
-        let covariance = if basis == PressureBasis::Cells {
+        // unconstrained problem's H^-1 (the bound p >= 0 only narrows it), when asked for.
+        let covariance = if basis == PressureBasis::Cells && with_covariance {
             let mut unknown_of = vec![None; cells];
             for (k, combination) in unknowns.iter().take(pressures).enumerate() {
                 unknown_of[combination[0].0 / 3] = Some(k);
