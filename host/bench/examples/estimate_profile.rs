@@ -7,9 +7,10 @@
 //!   DECODE_SCALE (1, 2, 4, 8) each repeat decodes the press's JPEG bytes first (the pattern's region at that
 //!   scale, as the daemon does), i.e. camera bytes to reading. Prints CPU ms per frame. The two frames are
 //!   rendered once and kept in `$NUSENSE_PROFILE_CACHE` (else the temporary folder).
-//! - `... -- dump OUT CACHE_DIR` writes every reading (elapsed time zeroed) of the quick validation set in fast
-//!   and inverse modes to OUT, to diff before and after a change, and prints CPU ms per frame (the frames are
-//!   rendered once into CACHE_DIR as raw RGB).
+//! - `... -- dump OUT CACHE_DIR [full]` writes every reading (elapsed time zeroed) of the quick validation set (the
+//!   full one with `full`) in fast and inverse modes to OUT, to diff before and after a change, and prints CPU ms
+//!   per frame for each mode and size (the frames are rendered once into CACHE_DIR as raw RGB: about 2.7 GB for
+//!   the full set).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -118,8 +119,8 @@ fn validation_frame(renderer: &ValidationRenderer, case: &Case, cache: &std::pat
     Ok(frame)
 }
 
-fn dump(out: &str, cache: &std::path::Path) -> Result<(), Error> {
-    let set = ValidationSet::new(Profile::Quick, 7);
+fn dump(out: &str, cache: &std::path::Path, profile: Profile) -> Result<(), Error> {
+    let set = ValidationSet::new(profile, 7);
     let mut text = String::new();
     for size in set.sizes() {
         let renderer = ValidationRenderer::new(size)?;
@@ -173,7 +174,14 @@ fn main() -> Result<(), Error> {
             let scale = args.get(4).map(|s| s.parse::<Scale>()).transpose()?;
             run(mode, (w.parse()?, h.parse()?), repeats, scale)
         }
-        Some("dump") if args.len() == 3 => dump(&args[1], std::path::Path::new(&args[2])),
-        _ => Err("usage: estimate_profile run MODE WxH REPEATS [DECODE_SCALE] | dump OUT CACHE_DIR".into()),
+        Some("dump") if args.len() == 3 || args.len() == 4 => {
+            let profile = match args.get(3).map(String::as_str) {
+                None | Some("quick") => Profile::Quick,
+                Some("full") => Profile::Full,
+                Some(other) => return Err(format!("unknown profile {other} (quick or full)").into()),
+            };
+            dump(&args[1], std::path::Path::new(&args[2]), profile)
+        }
+        _ => Err("usage: estimate_profile run MODE WxH REPEATS [DECODE_SCALE] | dump OUT CACHE_DIR [quick|full]".into()),
     }
 }
