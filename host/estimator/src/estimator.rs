@@ -295,7 +295,6 @@ impl Estimator {
         relit_corners: &[bool],
     ) -> Result<(Reading, f64), EstimateError> {
         let valid: Vec<bool> = registration.corners.iter().map(|c| c.valid).collect();
-        let motion = self.remove_motion(lattice, &valid)?;
         // The contact test leaves out the corners a change of light biases (after a camera move, or under the LEDs'
         // drift where the frame clips): their bias is no traction, while a contact moves many corners besides them.
         // Its noise is what this frame's corners show about the motion-only fit; the floor and everything measured
@@ -303,19 +302,21 @@ impl Estimator {
         let tested_valid: Vec<bool> = (0..valid.len())
             .map(|i| valid[i] && !relit_corners[i] && !self.rest.light_sensitive.get(i).copied().unwrap_or(false))
             .collect();
+        let (motion, tested_stage) = self.remove_motion(lattice, &valid, &tested_valid)?;
         // The published detector keeps the noise the fast tracker was first judged by (its residuals after stage 1,
         // never below the configured floors): its corners' scatter on rest frames is not measured.
         let (outcome, near_loads) = match self.mode {
             Mode::Paper => {
                 let floor_mm = self.rest.support_floor_mm;
                 let noise_mm = self.model.frame_noise_mm(&motion.stage, floor_mm).max(floor_mm);
-                let stage = self.model.stage1(&motion.data, &tested_valid);
-                (self.model.test(&stage, noise_mm), Vec::new())
+                (self.model.test(&tested_stage, noise_mm), Vec::new())
             }
-            Mode::Fast | Mode::Inverse => {
-                self.model
-                    .measured_test_and_loads(&motion.data, &tested_valid, self.rest.noise_floor_mm)
-            }
+            Mode::Fast | Mode::Inverse => self.model.measured_test_and_loads_of(
+                &tested_stage,
+                &motion.data,
+                &tested_valid,
+                self.rest.noise_floor_mm,
+            ),
         };
 
         let uncompensated_paper_px: Vec<Point2> = lattice
@@ -433,8 +434,14 @@ impl Estimator {
     /// Camera motion removed in two steps (see [`crate::motion`]): a robust similarity of the raw image brings the
     /// frame's corners back near their rest positions, they are mapped to pad mm there, and a homography of the pad
     /// plane fitted jointly with the tractions takes the rest (the deformation is then measured in the rest frame's
-    /// pad axes, not turned with the camera).
-    fn remove_motion(&self, lattice: &Lattice, valid: &[bool]) -> Result<Compensated, EstimateError> {
+    /// pad axes, not turned with the camera). Also returns stage 1 on the same data over the corners `tested`
+    /// (the contact test's), solved with the motion's.
+    fn remove_motion(
+        &self,
+        lattice: &Lattice,
+        valid: &[bool],
+        tested: &[bool],
+    ) -> Result<(Compensated, Stage1), EstimateError> {
         let rest = &self.rest.corners_mm;
         let mapping = &self.rest.mapping;
         let degenerate = || EstimateError::NoPattern {
@@ -465,7 +472,7 @@ impl Estimator {
                 at.map_or([0.0, 0.0], |c| [c[0] - r[0], c[1] - r[1]])
             })
             .collect();
-        let stage = self.model.stage1(&compensated, valid);
+        let (stage, tested_stage) = self.model.stage1_pair(&compensated, valid, tested);
         let fine = Homography::from_matrix(self.model.motion_homography(&stage.motion)).ok_or_else(degenerate)?;
         let mut displacement = compensated.clone();
         for (i, r) in rest.iter().enumerate() {
@@ -494,13 +501,14 @@ impl Estimator {
             Some((from, to)) => camera_motion(&reported_pairs, from, to),
             None => CameraMotion::NONE,
         };
-        Ok(Compensated {
+        let compensated = Compensated {
             data: compensated,
             displacement,
             stage,
             reported,
             largest_mm,
-        })
+        };
+        Ok((compensated, tested_stage))
     }
 
     /// Contact from the traction inverse.

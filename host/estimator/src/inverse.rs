@@ -487,33 +487,73 @@ impl InverseModel {
 
     /// Stage 1 (see the module notes). `d`: 2 per corner, mm; `valid`: per corner.
     pub fn stage1(&self, d: &[f64], valid: &[bool]) -> Stage1 {
+        let (d0, missing) = self.masked(d, valid);
+        let mut x = vec![0.0; self.observations + MOTION_PARAMETERS];
+        self.s.mul_vec(&d0, &mut x);
+        self.correct_missing(&mut x, &missing);
+        let mut pressure = vec![0.0; self.cells.len()];
+        self.a_t_pressure.mul_vec(&x[..self.observations], &mut pressure);
+        self.stage1_result(&x, pressure, &d0, valid)
+    }
+
+    /// [`Self::stage1`] of the same displacements over two sets of corners (each result bit for bit what `stage1`
+    /// gives): the operators are read once for both, a frame's two stage 1 solves (the motion's and the contact
+    /// test's) being otherwise two passes over about 1.4 MB, and when the sets are the same it is solved once.
+    pub fn stage1_pair(&self, d: &[f64], first: &[bool], second: &[bool]) -> (Stage1, Stage1) {
+        if first == second {
+            let stage = self.stage1(d, first);
+            return (stage.clone(), stage);
+        }
         let n = self.observations;
+        let ((d0_a, missing_a), (d0_b, missing_b)) = (self.masked(d, first), self.masked(d, second));
+        let (mut x_a, mut x_b) = (vec![0.0; n + MOTION_PARAMETERS], vec![0.0; n + MOTION_PARAMETERS]);
+        self.s.mul_vec_pair([&d0_a, &d0_b], [&mut x_a, &mut x_b]);
+        self.correct_missing(&mut x_a, &missing_a);
+        self.correct_missing(&mut x_b, &missing_b);
+        let (mut pressure_a, mut pressure_b) = (vec![0.0; self.cells.len()], vec![0.0; self.cells.len()]);
+        self.a_t_pressure
+            .mul_vec_pair([&x_a[..n], &x_b[..n]], [&mut pressure_a, &mut pressure_b]);
+        (
+            self.stage1_result(&x_a, pressure_a, &d0_a, first),
+            self.stage1_result(&x_b, pressure_b, &d0_b, second),
+        )
+    }
+
+    /// `d` zeroed on the rows of the corners not `valid`, and those rows.
+    fn masked(&self, d: &[f64], valid: &[bool]) -> (Vec<f64>, Vec<usize>) {
         let mut d0 = d.to_vec();
-        let missing: Vec<usize> = (0..n).filter(|&r| !valid[r / 2]).collect();
+        let missing: Vec<usize> = (0..self.observations).filter(|&r| !valid[r / 2]).collect();
         for &r in &missing {
             d0[r] = 0.0;
         }
-        let mut x = vec![0.0; n + MOTION_PARAMETERS];
-        self.s.mul_vec(&d0, &mut x);
-        if !missing.is_empty() {
-            // Capacitance correction: find z on the missing rows so that the solution vanishes there.
-            let k = missing.len();
-            let s_mm = DMatrix::from_fn(k, k, |i, j| self.s.at(missing[i], missing[j]));
-            let rhs = DVector::from_fn(k, |i, _| -x[missing[i]]);
-            if let Some(z) = s_mm.lu().solve(&rhs) {
-                for (j, &col) in missing.iter().enumerate() {
-                    for (xr, s) in x.iter_mut().zip(self.s_t.row(col)) {
-                        *xr += s * z[j];
-                    }
+        (d0, missing)
+    }
+
+    /// Capacitance correction of the kriging solution `x` for the `missing` rows: find z on them so that the
+    /// solution vanishes there.
+    fn correct_missing(&self, x: &mut [f64], missing: &[usize]) {
+        if missing.is_empty() {
+            return;
+        }
+        let k = missing.len();
+        let s_mm = DMatrix::from_fn(k, k, |i, j| self.s.at(missing[i], missing[j]));
+        let rhs = DVector::from_fn(k, |i, _| -x[missing[i]]);
+        if let Some(z) = s_mm.lu().solve(&rhs) {
+            for (j, &col) in missing.iter().enumerate() {
+                for (xr, s) in x.iter_mut().zip(self.s_t.row(col)) {
+                    *xr += s * z[j];
                 }
             }
-            for &r in &missing {
-                x[r] = 0.0;
-            }
         }
+        for &r in missing {
+            x[r] = 0.0;
+        }
+    }
+
+    /// Stage 1's result from the corrected kriging solution `x` and its pressure.
+    fn stage1_result(&self, x: &[f64], pressure: Vec<f64>, d0: &[f64], valid: &[bool]) -> Stage1 {
+        let n = self.observations;
         let (y, m) = x.split_at(n);
-        let mut pressure = vec![0.0; self.cells.len()];
-        self.a_t_pressure.mul_vec(y, &mut pressure);
         let mut tractions = vec![0.0; self.a_t.rows];
         for (j, p) in pressure.into_iter().enumerate() {
             tractions[3 * j + 2] = p;
@@ -527,7 +567,7 @@ impl InverseModel {
             tractions,
             motion,
             residuals,
-            rss_rigid: self.rigid_rss(&d0, valid),
+            rss_rigid: self.rigid_rss(d0, valid),
             rss_full,
         }
     }
@@ -633,14 +673,25 @@ impl InverseModel {
     /// [`Self::measured_test`], and the corners (ascending) within [`MEASURED_NOISE_REACH_CELLS`] of a load that its
     /// stage 1 on `valid` finds (the corners its noise leaves out).
     pub fn measured_test_and_loads(&self, d: &[f64], valid: &[bool], floor_mm: f64) -> (TestOutcome, Vec<usize>) {
-        let stage = self.stage1(d, valid);
+        self.measured_test_and_loads_of(&self.stage1(d, valid), d, valid, floor_mm)
+    }
+
+    /// [`Self::measured_test_and_loads`] given its stage 1 on `valid` (`stage1(d, valid)`, e.g. from
+    /// [`Self::stage1_pair`]).
+    pub fn measured_test_and_loads_of(
+        &self,
+        stage: &Stage1,
+        d: &[f64],
+        valid: &[bool],
+        floor_mm: f64,
+    ) -> (TestOutcome, Vec<usize>) {
         let scatter = self.rigid_scatter_mm(d, valid).max(floor_mm);
         // A heavy load moves more than half the corners: its far field is no noise. The scatter is measured again
         // without the corners near the cells stage 1 finds loaded at that first estimate (with the motion fitted to
         // the others).
-        let near = self.near_loads(&stage, scatter, MEASURED_NOISE_REACH_CELLS);
+        let near = self.near_loads(stage, scatter, MEASURED_NOISE_REACH_CELLS);
         if near.is_empty() {
-            return (self.test(&stage, scatter), near);
+            return (self.test(stage, scatter), near);
         }
         let far: Vec<bool> = (0..valid.len())
             .map(|i| valid[i] && near.binary_search(&i).is_err())
@@ -650,7 +701,7 @@ impl InverseModel {
         } else {
             scatter
         };
-        (self.test(&stage, noise), near)
+        (self.test(stage, noise), near)
     }
 
     /// The corners' scatter about the motion-only fit, mm per axis: the median corner's, so that a contact (a

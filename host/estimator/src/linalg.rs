@@ -66,6 +66,19 @@ impl Dense {
         }
     }
 
+    /// [`Self::mul_vec`] of two vectors in one pass over the matrix (read from memory once rather than twice); each
+    /// output is bit for bit what `mul_vec` gives it.
+    pub fn mul_vec_pair(&self, x: [&[f64]; 2], out: [&mut [f64]; 2]) {
+        debug_assert!(x.iter().all(|x| x.len() == self.cols));
+        let [first, second] = out;
+        debug_assert!(first.len() == self.rows && second.len() == self.rows);
+        for (r, (a, b)) in first.iter_mut().zip(second.iter_mut()).enumerate() {
+            let row = self.row(r);
+            *a = dot(row, x[0]);
+            *b = dot(row, x[1]);
+        }
+    }
+
     /// out = selfᵀ * x.
     pub fn mul_transposed_vec(&self, x: &[f64], out: &mut [f64]) {
         debug_assert!(x.len() == self.rows && out.len() == self.cols);
@@ -165,6 +178,13 @@ mod tests {
         dense.mul_vec(&x, &mut out);
         let expected = &m * nalgebra::DVector::from_column_slice(&x);
         assert!(out.iter().zip(expected.iter()).all(|(a, b)| (a - b).abs() < 1e-12));
+        let other: Vec<f64> = (0..5).map(|i| (i as f64 * 0.37).sin()).collect();
+        let mut single = vec![0.0; 7];
+        dense.mul_vec(&other, &mut single);
+        let (mut first, mut second) = (vec![0.0; 7], vec![0.0; 7]);
+        dense.mul_vec_pair([&x, &other], [&mut first, &mut second]);
+        assert!(first.iter().zip(&out).all(|(a, b)| a.to_bits() == b.to_bits()));
+        assert!(second.iter().zip(&single).all(|(a, b)| a.to_bits() == b.to_bits()));
         let mut out = vec![0.0; 5];
         dense.mul_transposed_vec(&y, &mut out);
         let expected = m.transpose() * nalgebra::DVector::from_column_slice(&y);
