@@ -346,10 +346,12 @@ impl Estimator {
                 p.map(|p| self.rest.mapping.to_paper(p)).unwrap_or([0.0, 0.0])
             })
             .collect();
-        let samples = self.rest.sampler.sample(&compensated_paper_px, &valid)?;
-        let gamma_compensated = gamma(&samples, self.config.calibration.alpha);
-        let uncompensated = self.rest.sampler.sample(&uncompensated_paper_px, &valid)?;
-        let gamma_uncompensated = gamma(&uncompensated, self.config.calibration.alpha);
+        let (samples, gamma_compensated, gamma_uncompensated) = self.rest.sampler.sample_with_gammas(
+            &compensated_paper_px,
+            &uncompensated_paper_px,
+            &valid,
+            self.config.calibration.alpha,
+        )?;
         let line = force(&self.config.calibration, gamma_compensated);
 
         let mut local: Vec<f64> = (0..valid.len())

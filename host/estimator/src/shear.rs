@@ -71,18 +71,54 @@ impl ShearSampler {
     /// `current` holds the frame's corners in paper px; `valid` marks the corners valid in both frames.
     /// By linearity s - s_ref is the surface of the corners' displacements, so one surface is evaluated.
     pub fn sample(&self, current: &[Point2], valid: &[bool]) -> Result<ShearSamples, SurfaceError> {
+        let net = self.displacement_net(current, valid)?;
+        let grid = BSplineSurface::new(net, self.degree_u, self.degree_v)?.sample_on(&self.basis);
+        Ok(ShearSamples {
+            displacement: grid.points,
+            valid: grid.rests_on_valid,
+        })
+    }
+
+    /// [`Self::sample`] of `current`, with the [`gamma`] of those samples and of `other`'s (the same frame's corners
+    /// otherwise placed, over the same `valid`), each bit for bit: one pass over the sample basis for both, and
+    /// `other`'s samples are summed, never stored (a frame's compensated and uncompensated gamma).
+    pub fn sample_with_gammas(
+        &self,
+        current: &[Point2],
+        other: &[Point2],
+        valid: &[bool],
+        alpha: f64,
+    ) -> Result<(ShearSamples, f64, f64), SurfaceError> {
+        let (net, other_net) = (
+            self.displacement_net(current, valid)?,
+            self.displacement_net(other, valid)?,
+        );
+        let mut samples = ShearSamples {
+            displacement: Vec::with_capacity(self.basis.len()),
+            valid: Vec::with_capacity(self.basis.len()),
+        };
+        // Summed as `gamma` sums: in sample order, from the empty sum.
+        let (mut sum, mut other_sum): (f64, f64) = (std::iter::empty::<f64>().sum(), std::iter::empty::<f64>().sum());
+        self.basis.for_each_pair(&net, &other_net, |d, e, ok| {
+            if ok {
+                sum += d[0].hypot(d[1]);
+                other_sum += e[0].hypot(e[1]);
+            }
+            samples.displacement.push(d);
+            samples.valid.push(ok);
+        });
+        Ok((samples, alpha * sum, alpha * other_sum))
+    }
+
+    /// The net of the corners' displacements from the reference (zero where not `valid`).
+    fn displacement_net(&self, current: &[Point2], valid: &[bool]) -> Result<ControlNet, SurfaceError> {
         let displacement: Vec<Point2> = current
             .iter()
             .zip(&self.reference_net)
             .zip(valid)
             .map(|((c, r), &ok)| if ok { [c[0] - r[0], c[1] - r[1]] } else { [0.0, 0.0] })
             .collect();
-        let net = ControlNet::new(self.rows, self.cols, displacement, valid.to_vec())?;
-        let grid = BSplineSurface::new(net, self.degree_u, self.degree_v)?.sample_on(&self.basis);
-        Ok(ShearSamples {
-            displacement: grid.points,
-            valid: grid.rests_on_valid,
-        })
+        ControlNet::new(self.rows, self.cols, displacement, valid.to_vec())
     }
 }
 
@@ -96,4 +132,41 @@ pub fn gamma(samples: &ShearSamples, alpha: f64) -> f64 {
             .filter(|(_, &ok)| ok)
             .map(|(d, _)| d[0].hypot(d[1]))
             .sum::<f64>()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gammas_in_one_pass_are_those_of_two_samplings_bit_for_bit() {
+        let (rows, cols) = (5, 6);
+        let reference: Vec<Point2> = (0..rows * cols)
+            .map(|i| [(i % cols) as f64 * 31.7, (i / cols) as f64 * 29.3])
+            .collect();
+        let mut valid = vec![true; rows * cols];
+        valid[7] = false;
+        valid[20] = false;
+        let moved = |k: f64| -> Vec<Point2> {
+            reference
+                .iter()
+                .enumerate()
+                .map(|(i, r)| [r[0] + (i as f64 * k).sin() * 0.37, r[1] + (i as f64 * k).cos() * 0.21])
+                .collect()
+        };
+        let (current, other) = (moved(0.7), moved(1.3));
+        let surface = SurfaceConfig {
+            degree_u: 2,
+            degree_v: 1,
+            uv_step: 0.03,
+        };
+        let sampler = ShearSampler::new(rows, cols, &surface, &reference, &vec![true; rows * cols]).unwrap();
+        let (samples, g, g_other) = sampler.sample_with_gammas(&current, &other, &valid, 0.25).unwrap();
+        let expected = sampler.sample(&current, &valid).unwrap();
+        assert_eq!(samples, expected);
+        assert_eq!(g.to_bits(), gamma(&expected, 0.25).to_bits());
+        let expected_other = gamma(&sampler.sample(&other, &valid).unwrap(), 0.25);
+        assert_eq!(g_other.to_bits(), expected_other.to_bits());
+        assert!(g > 0.0 && g_other > 0.0);
+    }
 }

@@ -403,6 +403,30 @@ impl SampleBasis {
         Ok(Self::new(&ku, &kv, &values, &values))
     }
 
+    /// Visits every sample of two nets of the same shape at once, in sample order: the two points, each bit for bit
+    /// the one [`BSplineSurface::sample_on`] gives, and whether the sample rests only on points valid in `first`.
+    pub fn for_each_pair(&self, first: &ControlNet, second: &ControlNet, mut f: impl FnMut(Point2, Point2, bool)) {
+        assert!(
+            first.rows == second.rows && first.cols == second.cols,
+            "two nets of different shapes"
+        );
+        let mut start = 0;
+        for &end in &self.term_ends {
+            let (mut a, mut b) = ([0.0, 0.0], [0.0, 0.0]);
+            let mut valid = true;
+            for term in &self.terms[start..end as usize] {
+                let i = term.row as usize * first.cols + term.col as usize;
+                valid &= first.valid[i];
+                a[0] += term.weight * first.points[i][0];
+                a[1] += term.weight * first.points[i][1];
+                b[0] += term.weight * second.points[i][0];
+                b[1] += term.weight * second.points[i][1];
+            }
+            f(a, b, valid);
+            start = end as usize;
+        }
+    }
+
     pub fn len(&self) -> usize {
         self.term_ends.len()
     }
