@@ -307,14 +307,23 @@ impl WindowTotals {
             let piece = (longest - start).min(PIXELS_AT_ONCE);
             for (k, span) in spans.iter().enumerate() {
                 let from = (start * stride * 3).min(span.pixels.len());
-                let pixels = span.pixels[from..].chunks(stride * 3);
+                // Whole steps of the stride, then the row's last pixel, which ends the span without a step's tail
+                // after it (exact chunks let the loop go without a length check per pixel).
+                let whole = span.pixels[from..].chunks_exact(stride * 3);
+                let last = whole.remainder();
                 let mut filled = 0;
-                for (slot, p) in looked_up[..piece].iter_mut().zip(pixels) {
-                    if let Some(&[r, g, b]) = p.first_chunk::<3>() {
-                        slot[k] = member(membership, [r, g, b]);
-                        self.clipped += usize::from(r.min(g).min(b) >= CLIPPED_LEVEL);
-                    }
+                for (slot, p) in looked_up[..piece].iter_mut().zip(whole) {
+                    let (r, g, b) = (p[0], p[1], p[2]);
+                    slot[k] = member(membership, [r, g, b]);
+                    self.clipped += usize::from(r.min(g).min(b) >= CLIPPED_LEVEL);
                     filled += 1;
+                }
+                if filled < piece {
+                    if let Some(&[r, g, b]) = last.first_chunk::<3>() {
+                        looked_up[filled][k] = member(membership, [r, g, b]);
+                        self.clipped += usize::from(r.min(g).min(b) >= CLIPPED_LEVEL);
+                        filled += 1;
+                    }
                 }
                 for slot in &mut looked_up[filled..piece] {
                     slot[k] = 0.0;
