@@ -9,7 +9,7 @@
 //!   rendered once and kept in `$NUSENSE_PROFILE_CACHE` (else the temporary folder).
 //! - `... -- dump OUT CACHE_DIR [full]` writes every reading (elapsed time zeroed) of the quick validation set (the
 //!   full one with `full`) in fast and inverse modes to OUT, to diff before and after a change, and prints CPU ms
-//!   per frame for each mode and size (the frames are rendered once into CACHE_DIR as raw RGB: about 2.7 GB for
+//!   per frame for each mode and size (the frames are rendered once into CACHE_DIR as raw RGB: about 3.8 GB for
 //!   the full set).
 
 use std::sync::Arc;
@@ -182,6 +182,8 @@ fn main() -> Result<(), Error> {
             };
             dump(&args[1], std::path::Path::new(&args[2]), profile)
         }
-        _ => Err("usage: estimate_profile run MODE WxH REPEATS [DECODE_SCALE] | dump OUT CACHE_DIR [quick|full]".into()),
+        _ => {
+            Err("usage: estimate_profile run MODE WxH REPEATS [DECODE_SCALE] | dump OUT CACHE_DIR [quick|full]".into())
+        }
     }
 }
