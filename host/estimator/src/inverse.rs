@@ -795,6 +795,7 @@ impl InverseModel {
                 },
                 min_force_n,
                 noise_mm,
+                pass == 1,
             );
             let found = !regions.is_empty();
             solved = Some((groups, support, motion, regions));
@@ -828,7 +829,10 @@ impl InverseModel {
 
     /// The contacts among stage 2's regions (strongest first), each group of loaded cells judged as a whole: a region
     /// that clears the floor where it is (`min_force_n` times its [`Region::floor_scale`]) is a contact, and one that
-    /// does not joins the contact it touches in its group (a bump of the solve's noise), or is none. When no region
+    /// does not is none, or with `join_fragments` (the line shapes' solve) joins the contact it touches in its group
+    /// (a fragment of a long contact). The solve of the per-cell cells leaves such regions out, as it did before the
+    /// line shapes: its contacts are whole, and a fragment joined there would move a round contact's centre and
+    /// force by its noise. When no region
     /// clears it alone, a group's fragments (the checkerboard noise cuts a light long contact into bumps whose dips
     /// fall below the watershed's saddle) are one region, a contact if it clears the floor as a whole by its unbiased
     /// force ([`Self::matched_fit`]).
@@ -846,6 +850,7 @@ impl InverseModel {
         observed: Observed,
         min_force_n: f64,
         noise_mm: f64,
+        join_fragments: bool,
     ) -> Vec<Region> {
         let mut pending: Vec<(&[usize], Vec<Traction>)> = Vec::new();
         let group_of = |region: &Region| {
@@ -863,17 +868,19 @@ impl InverseModel {
                 // other such fragments); one that touches none is none.
                 let (mut strong, mut weak): (Vec<Region>, Vec<Region>) =
                     members.into_iter().cloned().partition(|r| clears(r));
-                loop {
-                    let joined = weak.iter().position(|w| strong.iter().any(|c| self.touching(c, w)));
-                    let Some(i) = joined else { break };
-                    let fragment = weak.remove(i);
-                    let target = strong
-                        .iter()
-                        .position(|c| self.touching(c, &fragment))
-                        .expect("found touching above");
-                    let mut cells = strong[target].cells.clone();
-                    cells.extend(fragment.cells);
-                    strong[target] = self.region(cells);
+                if join_fragments {
+                    loop {
+                        let joined = weak.iter().position(|w| strong.iter().any(|c| self.touching(c, w)));
+                        let Some(i) = joined else { break };
+                        let fragment = weak.remove(i);
+                        let target = strong
+                            .iter()
+                            .position(|c| self.touching(c, &fragment))
+                            .expect("found touching above");
+                        let mut cells = strong[target].cells.clone();
+                        cells.extend(fragment.cells);
+                        strong[target] = self.region(cells);
+                    }
                 }
                 kept.extend(strong);
                 continue;
