@@ -36,6 +36,17 @@ async fn readings_status_and_frames_follow_the_simulated_contact() {
     assert_eq!(status["board"]["kind"], json!("virtual"), "{status}");
     assert_eq!(status["board"]["connected"], json!(true), "{status}");
     assert_eq!(status["problems"], json!([]), "{status}");
+    assert_eq!(status["zenoh"], Value::Null, "not on Zenoh without --zenoh: {status}");
+    // Capture to reading in three parts, each with its percentiles over the same frames.
+    let stages = &status["pipeline"]["stage_latency_ms"];
+    let samples = stages["capture_to_decode"]["samples"].as_u64().unwrap_or(0);
+    assert!(samples > 0, "{stages}");
+    for stage in ["capture_to_decode", "decode_to_estimate", "estimate_to_publish"] {
+        let summary = &stages[stage];
+        assert_eq!(summary["samples"].as_u64(), Some(samples), "{stage}: {stages}");
+        let [p50, p99, max] = ["p50", "p99", "max"].map(|p| summary[p].as_f64().unwrap_or(f64::NAN));
+        assert!(0.0 <= p50 && p50 <= p99 && p99 <= max, "{stage}: {summary}");
+    }
     assert_eq!(
         status["recordings_dir"].as_str().unwrap(),
         daemon.default_recordings().to_str().unwrap(),

@@ -143,12 +143,16 @@ async fn a_zenoh_endpoint_on_port_0_is_reported_as_the_port_bound_and_reaches_th
         .unwrap_or_else(|| panic!("a loopback TCP endpoint with its port: {endpoint}"));
     assert_ne!(port, 0, "the port the system gave, not the 0 asked for");
 
-    let serial = daemon
+    let http_status = daemon
         .wait_status("with the board's serial", |s| s["serial_number"].is_string())
-        .await["serial_number"]
-        .as_str()
-        .unwrap()
-        .to_owned();
+        .await;
+    // The status says the same endpoint as the log line: a client can ask the daemon where to connect.
+    assert_eq!(
+        http_status["zenoh"],
+        json!({ "listening_on": [endpoint] }),
+        "{http_status}"
+    );
+    let serial = http_status["serial_number"].as_str().unwrap().to_owned();
     let session = zenoh_client(endpoint).await;
     let deadline = tokio::time::Instant::now() + PATIENCE;
     // The first query may leave before the connection is up (no reply then): ask again until one comes.
@@ -164,4 +168,5 @@ async fn a_zenoh_endpoint_on_port_0_is_reported_as_the_port_bound_and_reaches_th
         tokio::time::sleep(std::time::Duration::from_millis(100)).await;
     };
     assert_eq!(status["serial_number"], json!(serial), "{status}");
+    assert_eq!(status["zenoh"], http_status["zenoh"], "{status}");
 }

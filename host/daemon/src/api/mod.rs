@@ -10,7 +10,7 @@ mod recordings;
 mod stream;
 
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 
 use axum::body::{Body, Bytes};
 use axum::extract::rejection::{JsonRejection, QueryRejection};
@@ -54,6 +54,9 @@ pub struct AppState {
     encoded: Arc<Mutex<[Option<EncodedFrame>; 2]>>,
     /// Set once when the daemon stops: WebSocket clients are told goodbye instead of waiting on a dead stream.
     closing: tokio::sync::watch::Sender<bool>,
+    /// The daemon's Zenoh side once it is up (one session for every sensor, so shared by [`Self::for_sensor`]):
+    /// unset without `--zenoh`.
+    zenoh: Arc<OnceLock<ZenohStatus>>,
 }
 
 #[derive(Clone)]
@@ -78,6 +81,7 @@ impl AppState {
             stream_options: StreamOptions::default(),
             encoded: Arc::default(),
             closing: tokio::sync::watch::Sender::new(false),
+            zenoh: Arc::default(),
         }
     }
 
@@ -93,7 +97,15 @@ impl AppState {
             stream_options: self.stream_options,
             encoded: Arc::default(),
             closing: tokio::sync::watch::Sender::new(false),
+            zenoh: self.zenoh.clone(),
         }
+    }
+
+    /// Says in the status of this sensor (and of every sensor made from it by [`Self::for_sensor`]) that the daemon
+    /// is on Zenoh, listening on `listening_on` (endpoints as bound: a port 0 asked for is the port given). Once:
+    /// later calls change nothing.
+    pub fn set_zenoh_listening_on(&self, listening_on: Vec<String>) {
+        let _ = self.zenoh.set(ZenohStatus { listening_on });
     }
 }
 
@@ -207,6 +219,8 @@ pub struct StatusMessage {
     pub pipeline: PipelineStatus,
     pub board: BoardStatus,
     pub websocket: StreamStatsSnapshot,
+    /// The daemon's Zenoh side; null without `--zenoh` / `--zenoh-config`.
+    pub zenoh: Option<ZenohStatus>,
     /// Where `POST /api/v1/record` writes; names are relative to it.
     pub recordings_dir: String,
     pub token_required: bool,
@@ -216,6 +230,14 @@ pub struct StatusMessage {
 
 async fn status(State(state): State<AppState>) -> Json<Versioned<StatusMessage>> {
     Json(status_message(&state))
+}
+
+/// The `zenoh` part of the status.
+#[derive(Clone, Debug, Serialize)]
+pub struct ZenohStatus {
+    /// The endpoints the daemon's Zenoh session listens on, as bound (`tcp/127.0.0.1:40517`; a port 0 asked for
+    /// is the port the system gave): what a client connects to. Empty when a `--zenoh-config` opens no listener.
+    pub listening_on: Vec<String>,
 }
 
 /// What `GET /api/v1/status` answers (and the Zenoh queryable `nusense/<serial>/status`).
@@ -233,6 +255,7 @@ pub fn status_message(state: &AppState) -> Versioned<StatusMessage> {
         pipeline,
         board,
         websocket: state.stream.snapshot(),
+        zenoh: state.zenoh.get().cloned(),
         recordings_dir: state.recordings.root().display().to_string(),
         token_required: state.access.token_required(),
     })

@@ -142,6 +142,7 @@ fn truncated_frame_among_good_ones(stages: Stages) {
         "{region:?} is the pattern's part of the frame"
     );
     assert_eq!(status.stage_latency_ms.capture_to_decode.samples, 3);
+    assert_eq!(status.stage_latency_ms.decode_to_estimate.samples, 3);
     assert_eq!(status.stage_latency_ms.estimate_to_publish.samples, 3);
 
     let last = &published[2].message;

@@ -116,6 +116,11 @@ impl ZenohOut {
             telemetry_stop: Arc::new(AtomicBool::new(false)),
             telemetry_threads: Vec::new(),
         };
+        // Every sensor's status says where the session listens, from its first answer on.
+        let listening_on = out.listening_on().await;
+        for sensor in &sensors {
+            sensor.api.set_zenoh_listening_on(listening_on.clone());
+        }
         for sensor in sensors {
             out.serve_sensor(sensor).await?;
         }
