@@ -5,7 +5,7 @@
 
 use image::RgbImage;
 use nusense_estimator::calibration::{fit_force_line, CalibrationSample, FitOptions};
-use nusense_estimator::{Estimator, Mode, ReadingJson, SensorConfig};
+use nusense_estimator::{Estimator, Mode, ReadingJson, SensorConfig, Touch};
 use nusense_sim::validation::{CameraMotion, Case, CaseKind, ValidationRenderer};
 use nusense_sim::{Contact, Scene, NOMINAL_LED_CURRENT_MA};
 
@@ -110,6 +110,10 @@ fn false_contacts(size: (u32, u32), mode: Mode, frames: usize, draw: &mut Draw) 
     found
 }
 
+fn distance_mm(found: [f64; 2], at: [f64; 2]) -> f64 {
+    (found[0] - at[0]).hypot(found[1] - at[1])
+}
+
 #[test]
 fn rest_frames_under_led_drift_noise_jpeg_and_camera_motion_are_no_contact_at_2048x1536() {
     let mut draw = Draw(0x2048_1536);
@@ -177,8 +181,10 @@ fn half_a_newton_is_a_contact_where_it_presses() {
             // up to about 4 mm, which is not this test's question).
             if mode == Mode::Inverse {
                 let found = reading.contact_mm().expect("a contact has a position");
-                let off = (found[0] - at[0]).hypot(found[1] - at[1]);
-                assert!(off <= 2.0, "{mode}: 0.5 N at {at:?} found at {found:.1?}");
+                assert!(
+                    distance_mm(found, at) <= 2.0,
+                    "{mode}: 0.5 N at {at:?} found at {found:.1?}"
+                );
             }
         }
     }
@@ -252,53 +258,68 @@ fn in_the_gamma_mode_a_force_below_the_floor_is_no_contact_never_a_negative_one(
 /// under a press this light and listed no contact: on the quick validation set 0.2 N was detected 0 of 3 times and
 /// 0.3 N 1 of 3 by the inverse, 3 of 3 each by the fast mode. Each press here must be one contact, where it presses,
 /// and the same sensor's rest frames (LED drift, half with the camera moved) none.
+/// Presses each contact of `presses` on the validation sensor at `size` (LEDs drifting as in the validation set's
+/// presses, frame seeds from `first_seed`), asserts that the noise test finds it and that the inverse lists a contact,
+/// and hands that contact to `check` with the press's name and position (mm); then asserts that four of the same
+/// sensor's rest frames are no contact.
+fn inverse_touches(
+    size: (u32, u32),
+    presses: impl IntoIterator<Item = (String, Contact)>,
+    first_seed: u64,
+    draw: &mut Draw,
+    mut check: impl FnMut(&str, [f64; 2], &Touch),
+) {
+    let renderer = ValidationRenderer::new(size).expect("the validation sensor renders");
+    let reference = renderer.reference(SET_SEED).expect("the rest frame renders");
+    let mut estimator =
+        Estimator::new(SensorConfig::default(), Mode::Inverse, &reference).expect("the rest frame measures");
+    for (seed, (name, tip)) in (first_seed..).zip(presses) {
+        let name = format!("{name}, {}x{}", size.0, size.1);
+        let at = tip.position_mm;
+        let leds = draw.leds(PRESS_DRIFT);
+        let (frame, _) = renderer
+            .render(&case(size, Scene::with_contact(tip), None, leds, seed))
+            .expect("the frame renders");
+        let reading = estimator.estimate(&frame).expect("a light press is measurable");
+        assert!(
+            reading.test.statistic > reading.test.threshold,
+            "{name}: the noise test misses it: {:?}",
+            reading.test
+        );
+        let touch = reading
+            .touch
+            .as_ref()
+            .unwrap_or_else(|| panic!("{name}: no contact listed"));
+        check(&name, at, touch);
+    }
+    let found = false_contacts(size, Mode::Inverse, 4, draw);
+    assert!(
+        found.is_empty(),
+        "{}x{}: {} false contacts:\n{}",
+        size.0,
+        size.1,
+        found.len(),
+        found.join("\n")
+    );
+}
+
 #[test]
 fn the_inverse_lists_the_light_presses_the_test_finds_and_no_rest_frame() {
     let mut draw = Draw(0x0_3);
     for (size, force_n) in [((1024, 768), 0.3), ((640, 480), 0.5)] {
-        let renderer = ValidationRenderer::new(size).expect("the validation sensor renders");
-        let reference = renderer.reference(SET_SEED).expect("the rest frame renders");
-        let mut estimator =
-            Estimator::new(SensorConfig::default(), Mode::Inverse, &reference).expect("the rest frame measures");
-        for (k, (at, tip)) in [
-            ([4.0, -2.0], Contact::sphere(5.0, [4.0, -2.0], force_n)),
-            ([-20.0, -12.0], Contact::flat_punch(3.0, [-20.0, -12.0], force_n)),
-            ([18.0, 10.0], Contact::sphere(5.0, [18.0, 10.0], force_n)),
-            ([-9.0, 13.0], Contact::flat_punch(3.0, [-9.0, 13.0], force_n)),
+        let presses = [
+            Contact::sphere(5.0, [4.0, -2.0], force_n),
+            Contact::flat_punch(3.0, [-20.0, -12.0], force_n),
+            Contact::sphere(5.0, [18.0, 10.0], force_n),
+            Contact::flat_punch(3.0, [-9.0, 13.0], force_n),
         ]
-        .into_iter()
-        .enumerate()
-        {
-            let leds = draw.leds(PRESS_DRIFT);
-            let (frame, _) = renderer
-                .render(&case(size, Scene::with_contact(tip), None, leds, 500 + k as u64))
-                .expect("the frame renders");
-            let reading = estimator.estimate(&frame).expect("a light press is measurable");
-            let name = format!("{force_n} N at {at:?}, {}x{}", size.0, size.1);
-            assert!(
-                reading.test.statistic > reading.test.threshold,
-                "{name}: the noise test misses it: {:?}",
-                reading.test
-            );
-            let touch = reading
-                .touch
-                .as_ref()
-                .unwrap_or_else(|| panic!("{name}: no contact listed"));
+        .map(|tip| (format!("{force_n} N at {:?}", tip.position_mm), tip));
+        inverse_touches(size, presses, 500, &mut draw, |name, at, touch| {
             assert!(touch.others.is_empty(), "{name}: {} more contacts", touch.others.len());
             let found = touch.strongest.centre_mm;
-            let off = (found[0] - at[0]).hypot(found[1] - at[1]);
-            assert!(off <= 2.0, "{name}: found at {found:.1?}");
+            assert!(distance_mm(found, at) <= 2.0, "{name}: found at {found:.1?}");
             assert!(touch.force_n > 0.0, "{name}: {} N", touch.force_n);
-        }
-        let found = false_contacts(size, Mode::Inverse, 4, &mut draw);
-        assert!(
-            found.is_empty(),
-            "{}x{}: {} false contacts:\n{}",
-            size.0,
-            size.1,
-            found.len(),
-            found.join("\n")
-        );
+        });
     }
 }
 
@@ -312,11 +333,7 @@ fn the_inverse_lists_the_light_presses_the_test_finds_and_no_rest_frame() {
 fn the_inverse_lists_a_light_long_edge_where_it_presses() {
     let mut draw = Draw(0xED6E);
     for (size, force_n) in [((1024, 768), 0.75), ((640, 480), 1.0)] {
-        let renderer = ValidationRenderer::new(size).expect("the validation sensor renders");
-        let reference = renderer.reference(SET_SEED).expect("the rest frame renders");
-        let mut estimator =
-            Estimator::new(SensorConfig::default(), Mode::Inverse, &reference).expect("the rest frame measures");
-        for (k, (angle_deg, at)) in [
+        let edges = [
             (0.0, [0.0, 0.0]),
             (45.0, [0.0, 0.0]),
             (90.0, [0.0, 0.0]),
@@ -324,42 +341,18 @@ fn the_inverse_lists_a_light_long_edge_where_it_presses() {
             (45.0, [7.0, -4.0]),
             (90.0, [10.0, 3.0]),
         ]
-        .into_iter()
-        .enumerate()
-        {
-            let edge = Contact::edge(20.0, 1.0, angle_deg, at, force_n);
-            let leds = draw.leds(PRESS_DRIFT);
-            let (frame, _) = renderer
-                .render(&case(size, Scene::with_contact(edge), None, leds, 700 + k as u64))
-                .expect("the frame renders");
-            let reading = estimator.estimate(&frame).expect("a light edge is measurable");
-            let name = format!("{force_n} N edge at {angle_deg} deg, {at:?}, {}x{}", size.0, size.1);
-            assert!(
-                reading.test.statistic > reading.test.threshold,
-                "{name}: the noise test misses it: {:?}",
-                reading.test
-            );
-            let touch = reading
-                .touch
-                .as_ref()
-                .unwrap_or_else(|| panic!("{name}: no contact listed"));
+        .map(|(angle_deg, at)| {
+            let name = format!("{force_n} N edge at {angle_deg} deg, {at:?}");
+            (name, Contact::edge(20.0, 1.0, angle_deg, at, force_n))
+        });
+        inverse_touches(size, edges, 700, &mut draw, |name, at, touch| {
             let found = touch.strongest.centre_mm;
-            let off = (found[0] - at[0]).hypot(found[1] - at[1]);
-            assert!(off <= 2.5, "{name}: found at {found:.1?}");
+            assert!(distance_mm(found, at) <= 2.5, "{name}: found at {found:.1?}");
             assert!(
                 touch.force_n >= 0.35 * force_n && touch.force_n <= 1.5 * force_n,
                 "{name}: {:.2} N",
                 touch.force_n
             );
-        }
-        let found = false_contacts(size, Mode::Inverse, 4, &mut draw);
-        assert!(
-            found.is_empty(),
-            "{}x{}: {} false contacts:\n{}",
-            size.0,
-            size.1,
-            found.len(),
-            found.join("\n")
-        );
+        });
     }
 }
