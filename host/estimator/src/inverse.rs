@@ -708,9 +708,7 @@ impl InverseModel {
     /// minority of the corners) leaves it, while every error the motion does not explain (lighting, JPEG, the
     /// tracker) counts, smooth ones included.
     pub fn rigid_scatter_mm(&self, d: &[f64], valid: &[bool]) -> f64 {
-        let d0: Vec<f64> = (0..self.observations)
-            .map(|r| if valid[r / 2] { d[r] } else { 0.0 })
-            .collect();
+        let (d0, _) = self.masked(d, valid);
         let residuals = self.rigid_residuals(&d0, valid);
         let mut squares: Vec<f64> = (0..self.observations / 2)
             .filter(|&i| valid[i])
@@ -763,13 +761,12 @@ impl InverseModel {
         // whose load no single cell carries above its noise) also those of the line shapes. Picked everywhere, the
         // line shapes also find lines in the smooth errors a moved camera leaves (tried: force over the pad with the
         // camera moved 0.57 -> 1.22 N RMS on the quick set).
-        let matched = self.matched(d, valid);
         let mut solved = None;
         for pass in 0..2 {
             let lines = if pass == 0 {
                 Vec::new()
             } else {
-                self.line_loads(&matched, noise_mm)
+                self.line_loads(&self.matched(d, valid), noise_mm)
             };
             if solved.is_some() && !lines.iter().any(|&l| l) {
                 break;
@@ -970,9 +967,7 @@ impl InverseModel {
     /// A_pᵀ r (per cell) with r the motion-only residuals of `d` (2 per corner, mm) over the corners `valid`: the
     /// matched filter's correlations (see `matched_gram`).
     fn matched(&self, d: &[f64], valid: &[bool]) -> Vec<f64> {
-        let d0: Vec<f64> = (0..self.observations)
-            .map(|r| if valid[r / 2] { d[r] } else { 0.0 })
-            .collect();
+        let (d0, _) = self.masked(d, valid);
         let residuals = self.rigid_residuals(&d0, valid);
         let mut matched = vec![0.0; self.cells.len()];
         self.a_t_pressure.mul_vec(&residuals, &mut matched);
