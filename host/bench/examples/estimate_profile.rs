@@ -11,6 +11,10 @@
 //!   full one with `full`) in fast and inverse modes to OUT, to diff before and after a change, and prints CPU ms
 //!   per frame for each mode and size (the frames are rendered once into CACHE_DIR as raw RGB: about 3.8 GB for
 //!   the full set).
+//! - `... -- time MODE CACHE_DIR PASSES [quick|full]` times MODE alone on the set's main-size frames (those of
+//!   `dump`'s cache, rendered there if missing), PASSES times over the set, the frames read in batches of 32 (not
+//!   in the cache, as in `dump`), and prints the per-frame CPU ms's median and p99 per pass: two builds run one after
+//!   the other this way give a speed ratio on a busy machine.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -164,6 +168,53 @@ fn dump(out: &str, cache: &std::path::Path, profile: Profile) -> Result<(), Erro
     Ok(())
 }
 
+fn time(mode: Mode, cache: &std::path::Path, passes: usize, profile: Profile) -> Result<(), Error> {
+    let set = ValidationSet::new(profile, 7);
+    let size = set.sizes()[0];
+    let renderer = ValidationRenderer::new(size)?;
+    let reference = renderer.reference(7)?;
+    let cases: Vec<&Case> = set.cases.iter().filter(|c| c.size == size).collect();
+    for case in &cases {
+        validation_frame(&renderer, case, cache)?;
+    }
+    for pass in 0..passes {
+        let mut estimator = Estimator::new(SensorConfig::default(), mode, &reference)?;
+        let mut cpu_ms = Vec::with_capacity(cases.len());
+        for batch in cases.chunks(32) {
+            let frames = batch
+                .iter()
+                .map(|case| validation_frame(&renderer, case, cache))
+                .collect::<Result<Vec<_>, Error>>()?;
+            for frame in &frames {
+                let started = thread_cpu_s();
+                let reading = estimator.estimate(frame);
+                cpu_ms.push((thread_cpu_s() - started) * 1e3);
+                std::hint::black_box(reading.ok());
+            }
+        }
+        cpu_ms.sort_by(f64::total_cmp);
+        println!(
+            "{mode} {}x{} pass {pass}: {} frames, CPU ms per frame median {:.3}, p90 {:.3}, p99 {:.3}, mean {:.3}",
+            size.0,
+            size.1,
+            cpu_ms.len(),
+            cpu_ms[cpu_ms.len() / 2],
+            cpu_ms[cpu_ms.len() * 9 / 10],
+            cpu_ms[cpu_ms.len() * 99 / 100],
+            cpu_ms.iter().sum::<f64>() / cpu_ms.len() as f64
+        );
+    }
+    Ok(())
+}
+
+fn profile_arg(arg: Option<&String>) -> Result<Profile, Error> {
+    match arg.map(String::as_str) {
+        None | Some("quick") => Ok(Profile::Quick),
+        Some("full") => Ok(Profile::Full),
+        Some(other) => Err(format!("unknown profile {other} (quick or full)").into()),
+    }
+}
+
 fn main() -> Result<(), Error> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.first().map(String::as_str) {
@@ -175,15 +226,18 @@ fn main() -> Result<(), Error> {
             run(mode, (w.parse()?, h.parse()?), repeats, scale)
         }
         Some("dump") if args.len() == 3 || args.len() == 4 => {
-            let profile = match args.get(3).map(String::as_str) {
-                None | Some("quick") => Profile::Quick,
-                Some("full") => Profile::Full,
-                Some(other) => return Err(format!("unknown profile {other} (quick or full)").into()),
-            };
-            dump(&args[1], std::path::Path::new(&args[2]), profile)
+            dump(&args[1], std::path::Path::new(&args[2]), profile_arg(args.get(3))?)
         }
-        _ => {
-            Err("usage: estimate_profile run MODE WxH REPEATS [DECODE_SCALE] | dump OUT CACHE_DIR [quick|full]".into())
-        }
+        Some("time") if args.len() == 4 || args.len() == 5 => time(
+            args[1].parse()?,
+            std::path::Path::new(&args[2]),
+            args[3].parse()?,
+            profile_arg(args.get(4))?,
+        ),
+        _ => Err(
+            "usage: estimate_profile run MODE WxH REPEATS [DECODE_SCALE] | dump OUT CACHE_DIR [quick|full] \
+             | time MODE CACHE_DIR PASSES [quick|full]"
+                .into(),
+        ),
     }
 }
