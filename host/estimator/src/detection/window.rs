@@ -178,7 +178,9 @@ pub struct WindowCentroid {
 /// by pixel, and the rows' totals in f64 from the top. A row's f32 sums are two chains of dependent additions,
 /// which would bound this loop's speed, so [`ROWS_AT_ONCE`] rows are summed together, as the lanes of one vector:
 /// their memberships are first looked up into a buffer (pixel-major, a row per lane, zeros past a row's end, which
-/// add nothing), then added lane by lane. Each row's own order is kept, and with it every bit of the result.
+/// add nothing), then added lane by lane. Each row's own order is kept, and with it every bit of the result. On a
+/// processor with AVX2 (checked at run time: the build targets any x86-64) the lookups are vector gathers, one
+/// pixel of every lane at a time, summed as they come (see `gathered`): the same additions in the same order.
 pub fn centroid(
     px: &Pixels,
     centre: Point2,
@@ -187,6 +189,48 @@ pub fn centroid(
     stride: usize,
     membership: &MembershipTable,
 ) -> Option<WindowCentroid> {
+    centroid_with(px, centre, cell, half, stride, membership, Lookup::detect())
+}
+
+/// How [`centroid`] looks its memberships up.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Lookup {
+    /// One pixel at a time, on any processor.
+    Scalar,
+    /// Vector gathers (x86-64 with AVX2 only: see [`Lookup::detect`]).
+    #[cfg(target_arch = "x86_64")]
+    Gathered,
+}
+
+impl Lookup {
+    /// The fastest this processor runs.
+    #[inline]
+    fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            return Self::Gathered;
+        }
+        Self::Scalar
+    }
+}
+
+#[inline(always)]
+fn centroid_with(
+    px: &Pixels,
+    centre: Point2,
+    cell: &CellFrame,
+    half: f64,
+    stride: usize,
+    membership: &MembershipTable,
+    lookup: Lookup,
+) -> Option<WindowCentroid> {
+    // The gathers address the frame with 32-bit offsets.
+    #[cfg(target_arch = "x86_64")]
+    let lookup = if px.raw.len() <= i32::MAX as usize {
+        lookup
+    } else {
+        Lookup::Scalar
+    };
     let mut totals = WindowTotals::default();
     let mut pending: [RowSpan; ROWS_AT_ONCE] = [RowSpan::EMPTY; ROWS_AT_ONCE];
     let mut held = 0;
@@ -194,12 +238,12 @@ pub fn centroid(
         pending[held] = RowSpan::new(y, line, x0, x1, stride);
         held += 1;
         if held == ROWS_AT_ONCE {
-            totals.add_rows(&pending, stride, membership);
+            totals.add_rows(&pending, px.raw, stride, membership, lookup);
             held = 0;
         }
     });
     if held > 0 {
-        totals.add_rows(&pending[..held], stride, membership);
+        totals.add_rows(&pending[..held], px.raw, stride, membership, lookup);
     }
     let WindowTotals {
         sum_w,
@@ -267,9 +311,19 @@ struct WindowTotals {
 }
 
 impl WindowTotals {
-    /// Sums up to [`ROWS_AT_ONCE`] rows together and adds them in order.
+    /// Sums up to [`ROWS_AT_ONCE`] rows together and adds them in order. `raw`: the frame the spans are rows of.
     #[inline(always)]
-    fn add_rows(&mut self, spans: &[RowSpan], stride: usize, membership: &MembershipTable) {
+    fn add_rows(&mut self, spans: &[RowSpan], raw: &[u8], stride: usize, membership: &MembershipTable, lookup: Lookup) {
+        #[cfg(target_arch = "x86_64")]
+        if lookup == Lookup::Gathered {
+            // SAFETY: `Gathered` is chosen only where the processor has AVX2 (`Lookup::detect`), and only for a frame
+            // of at most i32::MAX bytes (`centroid_with`); the spans are rows of `raw` (`for_each_row`).
+            if unsafe { self.add_rows_gathered(spans, raw, stride, membership) } {
+                return;
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = (raw, lookup);
         // The common strides get their own copies of the loops, with the stride a constant.
         match stride {
             1 => self.add_rows_at(spans, 1, membership),
@@ -347,6 +401,113 @@ impl WindowTotals {
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+impl WindowTotals {
+    /// [`Self::add_rows_at`] with AVX2: each lane (a row) reads its next pixel's four bytes from one byte before it
+    /// (a gather of 32-bit words: the byte before, R, G, B, so that no read passes the row's last pixel) and its
+    /// membership (a gather from the table), and adds them to its sums as the plain loop does, in f32, the same
+    /// operations in the same order (no fused multiply-add), so every bit is the same. Lanes past their row's end
+    /// read the row's last pixel again and add zeros, as the plain loop's zero-filled slots do. Returns false, having
+    /// added nothing, when some row starts at the frame's first byte (there is no byte before it).
+    ///
+    /// # Safety
+    /// The processor has AVX2; `raw` is at most `i32::MAX` bytes long and every span's pixels lie in it.
+    #[target_feature(enable = "avx2")]
+    unsafe fn add_rows_gathered(
+        &mut self,
+        spans: &[RowSpan],
+        raw: &[u8],
+        stride: usize,
+        membership: &MembershipTable,
+    ) -> bool {
+        use std::arch::x86_64::*;
+        let Some(first_span) = spans.first() else {
+            return true;
+        };
+        let base = raw.as_ptr();
+        let offset_of = |span: &RowSpan| span.pixels.as_ptr() as usize - base as usize;
+        if spans.iter().any(|span| offset_of(span) == 0 || span.count == 0) {
+            return false;
+        }
+        let pixel_bytes = 3 * stride;
+        // Per lane: the offset of the word before its first pixel, of the one before its last, its pixel count, and
+        // its first x. Lanes without a row read the first row's first pixel and add nothing (count 0).
+        let mut first = [(offset_of(first_span) - 1) as i32; ROWS_AT_ONCE];
+        let mut last = first;
+        let mut count = [0i32; ROWS_AT_ONCE];
+        let mut x0 = [0f32; ROWS_AT_ONCE];
+        for (k, span) in spans.iter().enumerate() {
+            first[k] = (offset_of(span) - 1) as i32;
+            last[k] = first[k] + ((span.count - 1) * pixel_bytes) as i32;
+            count[k] = span.count as i32;
+            x0[k] = span.x0 as f32;
+        }
+        // The same prefetch as the plain loop's.
+        let mut touched = 0u8;
+        for span in spans {
+            for byte in span.pixels.iter().step_by(CACHE_LINE) {
+                touched ^= byte;
+            }
+            touched ^= span.pixels.last().copied().unwrap_or(0);
+        }
+        std::hint::black_box(touched);
+        let longest = spans.iter().map(|s| s.count).max().unwrap_or(0);
+        // SAFETY (the loads and gathers below): the arrays are ROWS_AT_ONCE = 8 lanes of 32 bits, a vector's width;
+        // every word gathered from `raw` starts at `min(first + i * pixel_bytes, last)` for a lane, between the byte
+        // before its row's first pixel (which exists: no row starts at 0) and the byte before its last pixel, so its
+        // four bytes lie in the row's span; every table index is min(R, G) + 255 - B, in 0..=510, the table's range.
+        let (mut offset, last, count) = unsafe {
+            (
+                _mm256_loadu_si256(first.as_ptr().cast()),
+                _mm256_loadu_si256(last.as_ptr().cast()),
+                _mm256_loadu_si256(count.as_ptr().cast()),
+            )
+        };
+        let mut x = unsafe { _mm256_loadu_ps(x0.as_ptr()) };
+        let step_bytes = _mm256_set1_epi32(pixel_bytes as i32);
+        let step = _mm256_set1_ps(stride as f32);
+        let byte = _mm256_set1_epi32(0xff);
+        let bin_zero = _mm256_set1_epi32(255);
+        let below_clipped = _mm256_set1_epi32(i32::from(CLIPPED_LEVEL) - 1);
+        let (mut w, mut wx) = (_mm256_setzero_ps(), _mm256_setzero_ps());
+        let mut clipped = _mm256_setzero_si256();
+        let table = membership.as_ptr();
+        for i in 0..longest {
+            let at = _mm256_min_epi32(offset, last);
+            let words = unsafe { _mm256_i32gather_epi32::<1>(base.cast(), at) };
+            let r = _mm256_and_si256(_mm256_srli_epi32::<8>(words), byte);
+            let g = _mm256_and_si256(_mm256_srli_epi32::<16>(words), byte);
+            let b = _mm256_srli_epi32::<24>(words);
+            let low = _mm256_min_epi32(r, g);
+            let bin = _mm256_sub_epi32(_mm256_add_epi32(low, bin_zero), b);
+            let m = unsafe { _mm256_i32gather_ps::<4>(table, bin) };
+            let live = _mm256_cmpgt_epi32(count, _mm256_set1_epi32(i as i32));
+            let m = _mm256_and_ps(m, _mm256_castsi256_ps(live));
+            let white = _mm256_and_si256(_mm256_cmpgt_epi32(_mm256_min_epi32(low, b), below_clipped), live);
+            clipped = _mm256_sub_epi32(clipped, white);
+            w = _mm256_add_ps(w, m);
+            wx = _mm256_add_ps(wx, _mm256_mul_ps(m, x));
+            x = _mm256_add_ps(x, step);
+            offset = _mm256_add_epi32(offset, step_bytes);
+        }
+        let (mut w_lanes, mut wx_lanes, mut clipped_lanes) =
+            ([0f32; ROWS_AT_ONCE], [0f32; ROWS_AT_ONCE], [0i32; ROWS_AT_ONCE]);
+        unsafe {
+            _mm256_storeu_ps(w_lanes.as_mut_ptr(), w);
+            _mm256_storeu_ps(wx_lanes.as_mut_ptr(), wx);
+            _mm256_storeu_si256(clipped_lanes.as_mut_ptr().cast(), clipped);
+        }
+        for (k, span) in spans.iter().enumerate() {
+            self.sum_w += f64::from(w_lanes[k]);
+            self.sum_x += f64::from(wx_lanes[k]);
+            self.sum_y += f64::from(w_lanes[k]) * span.y as f64;
+            self.visited += span.count;
+            self.clipped += clipped_lanes[k] as usize;
+        }
+        true
+    }
+}
+
 /// Mean membership over the window of half-size `half` (cell units) around `centre`; 0 for an empty window. A
 /// centroid that is truly a square's has yellow all around it; one taken over parts of two squares lies on the
 /// lines and red between them.
@@ -375,6 +536,80 @@ pub fn mean_membership(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The gathered lookups (AVX2) give every bit the plain loop gives: windows of every stride the tracker uses and
+    /// more, clipped by every border of the frame (the top-left corner's first byte included, where they fall back to
+    /// the plain loop), over a frame of noise with clipped pixels, and a ramp of memberships.
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn gathered_lookups_are_the_plain_loops_bit_for_bit() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2 here: the plain loop is the only one this processor runs");
+            return;
+        }
+        let (w, h) = (97usize, 61usize);
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let raw: Vec<u8> = (0..w * h * 3)
+            .map(|_| match next() % 8 {
+                0 => 255,
+                1 => 250,
+                _ => (next() % 256) as u8,
+            })
+            .collect();
+        let px = Pixels {
+            raw: &raw,
+            width: w,
+            height: h,
+        };
+        let membership: MembershipTable =
+            std::array::from_fn(|bin| ((bin as f64 - 255.0 - 13.7) / 97.3).clamp(0.0, 1.0) as f32);
+        let cells = [
+            CellFrame::new([21.0, 0.0], [0.0, 19.0]).unwrap(),
+            CellFrame::new([17.3, 4.1], [-3.7, 16.2]).unwrap(),
+            CellFrame::new([40.0, -9.0], [8.0, 33.0]).unwrap(),
+        ];
+        let mut compared = 0;
+        for stride in [1, 2, 3, 5] {
+            for cell in &cells {
+                for centre in [
+                    [0.0, 0.0],
+                    [3.0, 2.0],
+                    [48.0, 30.0],
+                    [96.0, 60.0],
+                    [90.0, 4.0],
+                    [7.4, 55.6],
+                ] {
+                    for half in [0.15, 0.55] {
+                        let plain = centroid_with(&px, centre, cell, half, stride, &membership, Lookup::Scalar);
+                        let gathered = centroid_with(&px, centre, cell, half, stride, &membership, Lookup::Gathered);
+                        let bits = |c: Option<WindowCentroid>| {
+                            c.map(|c| {
+                                [
+                                    c.at[0].to_bits(),
+                                    c.at[1].to_bits(),
+                                    c.area.to_bits(),
+                                    c.clipped_fraction.to_bits(),
+                                ]
+                            })
+                        };
+                        assert_eq!(
+                            bits(plain),
+                            bits(gathered),
+                            "stride {stride} centre {centre:?} half {half}"
+                        );
+                        compared += usize::from(plain.is_some());
+                    }
+                }
+            }
+        }
+        assert!(compared > 100, "{compared} windows held yellow");
+    }
 
     #[test]
     fn centroid_of_a_square_is_sub_pixel() {
