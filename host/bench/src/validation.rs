@@ -11,6 +11,7 @@ use image::RgbImage;
 use nusense_estimator::calibration::{fit_force_line, CalibrationSample, FitOptions};
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use nusense_sim::validation::{CaseKind, CaseTruth, Profile, ValidationRenderer, ValidationSet, FLOOR_FORCES_N};
+use nusense_sim::ContactTruth;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
@@ -65,12 +66,14 @@ fn field<T: DeserializeOwned>(value: &serde_json::Value, name: &str) -> Option<T
 }
 
 impl Observed {
+    #[cfg(test)]
     fn of(reading: &impl Serialize) -> Self {
-        let Ok(value) = serde_json::to_value(reading) else {
-            return Self::default();
-        };
-        let contacts: Option<Vec<ObservedContact>> = field(&value, "contacts");
-        let contact_mm: Option<[f64; 2]> = field(&value, "contact_mm");
+        serde_json::to_value(reading).map_or_else(|_| Self::default(), |value| Self::of_value(&value))
+    }
+
+    fn of_value(value: &serde_json::Value) -> Self {
+        let contacts: Option<Vec<ObservedContact>> = field(value, "contacts");
+        let contact_mm: Option<[f64; 2]> = field(value, "contact_mm");
         // `contact` is a flag today and may become the contact itself: either way, present and not false/null.
         let flagged = match value.get("contact") {
             Some(serde_json::Value::Bool(b)) => *b,
@@ -80,12 +83,12 @@ impl Observed {
         Self {
             contact: flagged || contacts.as_ref().is_some_and(|c| !c.is_empty()),
             contact_mm,
-            gamma: field(&value, "gamma"),
-            force_vector_n: field(&value, "force_vector_n"),
-            torque_nmm: field(&value, "torque_nmm"),
+            gamma: field(value, "gamma"),
+            force_vector_n: field(value, "force_vector_n"),
+            torque_nmm: field(value, "torque_nmm"),
             contacts,
-            camera_motion: field(&value, "camera_motion"),
-            edge_angle_deg: field(&value, "edge_angle_deg"),
+            camera_motion: field(value, "camera_motion"),
+            edge_angle_deg: field(value, "edge_angle_deg"),
         }
     }
 }
@@ -149,6 +152,21 @@ pub struct ValidationReport {
     pub machine: crate::report::Machine,
 }
 
+/// One mode's reading of one case with the case's truth (the corners left out), for looking at the figures case
+/// by case: [`run_validation_with`] hands one to its `record` callback per mode and case.
+#[derive(Clone, Debug, Serialize)]
+pub struct CaseRecord<'a> {
+    pub mode: Mode,
+    pub case: &'a str,
+    pub kind: CaseKind,
+    pub size: (u32, u32),
+    pub truth_contacts: &'a [ContactTruth],
+    pub truth_force_vector_n: [f64; 3],
+    pub truth_torque_nmm: f64,
+    /// The reading's JSON (the `analyze --json` contract); `None`: refused.
+    pub reading: Option<&'a serde_json::Value>,
+}
+
 pub(crate) struct Scored {
     kind: CaseKind,
     truth: CaseTruth,
@@ -162,6 +180,17 @@ pub fn run_validation(
     seed: u64,
     modes: &[Mode],
     progress: &mut dyn FnMut(&str),
+) -> Result<ValidationReport, BenchError> {
+    run_validation_with(profile, seed, modes, progress, &mut |_| {})
+}
+
+/// [`run_validation`], handing every mode's reading of every case to `record` as it is measured.
+pub fn run_validation_with(
+    profile: Profile,
+    seed: u64,
+    modes: &[Mode],
+    progress: &mut dyn FnMut(&str),
+    record: &mut dyn FnMut(&CaseRecord),
 ) -> Result<ValidationReport, BenchError> {
     let set = ValidationSet::new(profile, seed);
     let sizes = set.sizes();
@@ -210,13 +239,24 @@ pub fn run_validation(
                         let started = Instant::now();
                         let reading = estimator.estimate(&frame);
                         let elapsed = started.elapsed().as_secs_f64() * 1e3;
-                        match reading {
-                            Ok(reading) => (Some(Observed::of(&reading)), (size_index == 0).then_some(elapsed)),
-                            Err(_) => (None, None),
+                        match reading.ok().and_then(|r| serde_json::to_value(r).ok()) {
+                            Some(value) => (Some(value), (size_index == 0).then_some(elapsed)),
+                            None => (None, None),
                         }
                     }
                     None => (None, None),
                 };
+                record(&CaseRecord {
+                    mode: modes[m],
+                    case: &case.name,
+                    kind: case.kind,
+                    size,
+                    truth_contacts: &truth.frame.contacts,
+                    truth_force_vector_n: truth.frame.force_vector_n,
+                    truth_torque_nmm: truth.frame.torque_nmm,
+                    reading: observed.as_ref(),
+                });
+                let observed = observed.as_ref().map(Observed::of_value);
                 scored[m].push(Scored {
                     kind: case.kind,
                     truth: truth.clone(),
