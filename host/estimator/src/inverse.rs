@@ -84,6 +84,13 @@ const MOMENT_FLOOR_FRACTION: f64 = 0.3;
 /// smallest contact the node unknowns can show covers 2 x 2 to 3 x 3 cells depending on where it falls on the grid,
 /// so a round contact can look up to about a pitch longer one way than the other.
 const ROUND_EXTENT_PITCHES: f64 = 2.0;
+/// [`InverseModel::fit_line_to`]'s points along a line (mm apart), its most rounds, and the angle step (degrees) at
+/// which it stops.
+const LINE_SAMPLE_MM: f64 = 0.5;
+const LINE_FIT_ROUNDS: usize = 200;
+const LINE_FIT_ANGLE_TOLERANCE_DEG: f64 = 0.1;
+/// [`InverseModel::split_pair`]'s two points' search stops at steps below this (mm).
+const PAIR_FIT_TOLERANCE_MM: f64 = 0.05;
 
 /// Everything precomputed for one sensor config.
 #[derive(Debug)]
@@ -197,6 +204,15 @@ pub struct Stage2 {
     pub edge_region: Option<Region>,
 }
 
+/// A uniform load along a straight segment.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct LineLoad {
+    pub centre_mm: Point2,
+    /// Degrees from +x towards +y, in [0, 180).
+    pub angle_deg: f64,
+    pub length_mm: f64,
+}
+
 /// A cell and its (fx, fy, fz), N.
 type Traction = (usize, [f64; 3]);
 
@@ -255,6 +271,7 @@ pub struct Moments {
 }
 
 struct SecondMoments {
+    centre: Point2,
     xx: f64,
     yy: f64,
     xy: f64,
@@ -762,6 +779,8 @@ impl InverseModel {
         // line shapes also find lines in the smooth errors a moved camera leaves (tried: force over the pad with the
         // camera moved 0.57 -> 1.22 N RMS on the quick set).
         let mut solved = None;
+        // The cells of contacts split in two (see `split_pair`).
+        let mut halved: Vec<usize> = Vec::new();
         for pass in 0..2 {
             let lines = if pass == 0 {
                 Vec::new()
@@ -794,6 +813,23 @@ impl InverseModel {
                 noise_mm,
                 pass == 1,
             );
+            let observed = Observed {
+                d,
+                valid,
+                tractions: &tractions,
+            };
+            halved.clear();
+            let mut regions: Vec<Region> = regions
+                .into_iter()
+                .flat_map(|r| match self.split_pair(&r, observed, noise_mm, min_force_n) {
+                    Some(halves) => {
+                        halved.extend(r.cells.iter().map(|c| c.0));
+                        halves.to_vec()
+                    }
+                    None => vec![r],
+                })
+                .collect();
+            regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
             let found = !regions.is_empty();
             solved = Some((groups, support, motion, regions));
             if found {
@@ -804,7 +840,12 @@ impl InverseModel {
             return empty;
         };
         // The strongest contact's shape, from the node solve: its region there that holds the contact's peak cell.
+        // Half of a contact split in two is a point load's (see `split_pair`): it has no direction, and the node
+        // solve's region holds both halves, bridged by the blur.
         let edge_region = regions.first().and_then(|first| {
+            if first.cells.iter().any(|c| halved.contains(&c.0)) {
+                return None;
+            }
             let peak = first.cells.iter().max_by(|a, b| a.1[2].total_cmp(&b.1[2]))?.0;
             let (smooth, _, _) = self.constrained_solve(d, valid, seed, &groups, PressureBasis::Nodes, false)?;
             self.regions(&smooth, &support, None)
@@ -822,6 +863,201 @@ impl InverseModel {
             regions,
             edge_region,
         }
+    }
+
+    /// The line load along a region's second moments' major axis, through its centre, as long as its core, when the
+    /// core is elongated (longer than wide by more than [`ROUND_EXTENT_PITCHES`]): where [`Self::fit_line_to`] starts.
+    fn elongation(&self, region: &Region) -> Option<LineLoad> {
+        let all = self.second_moments(region, 0.0)?;
+        let core = self.second_moments(region, MOMENT_FLOOR_FRACTION)?;
+        let (major, minor) = core.axes();
+        let (length_mm, width_mm) = ((12.0 * major).sqrt(), (12.0 * minor).sqrt());
+        (length_mm - width_mm > ROUND_EXTENT_PITCHES * self.pad.pitch_x_mm().max(self.pad.pitch_y_mm())).then(|| {
+            LineLoad {
+                centre_mm: all.centre,
+                angle_deg: all.angle_deg(),
+                length_mm,
+            }
+        })
+    }
+
+    /// [`Self::matched`] of the displacements less those of stage 2's tractions but the pressure on `cells`
+    /// (sorted).
+    fn matched_without(&self, observed: Observed, cells: &[usize]) -> Vec<f64> {
+        // Only the support's cells carry tractions: their columns of A, not all of it.
+        let mut rest = observed.d.to_vec();
+        for (component, &t) in observed.tractions.iter().enumerate() {
+            let fitted = component % 3 == 2 && cells.binary_search(&(component / 3)).is_ok();
+            if t != 0.0 && !fitted {
+                for (r, a) in rest.iter_mut().zip(self.a_t.row(component)) {
+                    *r -= t * a;
+                }
+            }
+        }
+        self.matched(&rest, observed.valid)
+    }
+
+    /// The straight, uniform line load (centre, direction, length) that explains the most of a normal load in the
+    /// displacements whose [`Self::matched`] correlations are `matched`: the one whose least-squares fit, the motion
+    /// free, lowers the residuals most, i.e. the largest (wᵀ A_pᵀ r)² / wᵀ G0 w over line shapes w (see
+    /// `matched_gram`), searched from `start`; and that explained sum of squares (mm^2). A line is laid on the cells by
+    /// bilinear shares of points 0.5 mm apart along it (see [`Self::line_shape`]), so it may lie at any angle and
+    /// position.
+    fn fit_line_to(&self, matched: &[f64], start: LineLoad) -> (LineLoad, f64) {
+        let pitch = self.pad.pitch_x_mm().min(self.pad.pitch_y_mm());
+        let mut shape = Vec::new();
+        let mut score = |p: &[f64; 4]| -> f64 {
+            self.line_shape([p[0], p[1]], p[2], p[3], &mut shape);
+            let correlation: f64 = shape.iter().map(|(j, w)| w * matched[*j]).sum();
+            let energy: f64 = shape
+                .iter()
+                .map(|(j, wj)| {
+                    let row = self.matched_gram.row(*j);
+                    wj * shape.iter().map(|(k, wk)| wk * row[*k]).sum::<f64>()
+                })
+                .sum();
+            if correlation > 0.0 && energy > 0.0 {
+                correlation * correlation / energy
+            } else {
+                0.0
+            }
+        };
+        // A pattern search: each parameter stepped both ways, the steps halved when none improves.
+        let mut best = [start.centre_mm[0], start.centre_mm[1], start.angle_deg, start.length_mm];
+        let mut best_score = score(&best);
+        let mut steps = [0.25 * pitch, 0.25 * pitch, 4.0, 0.5 * pitch];
+        for _ in 0..LINE_FIT_ROUNDS {
+            let mut improved = false;
+            for k in 0..4 {
+                for sign in [1.0, -1.0] {
+                    let mut trial = best;
+                    trial[k] += sign * steps[k];
+                    trial[3] = trial[3].clamp(pitch, self.pad.width_mm.max(self.pad.height_mm));
+                    let trial_score = score(&trial);
+                    if trial_score > best_score {
+                        (best, best_score, improved) = (trial, trial_score, true);
+                        break;
+                    }
+                }
+            }
+            if !improved {
+                steps.iter_mut().for_each(|s| *s *= 0.5);
+                if steps[2] < LINE_FIT_ANGLE_TOLERANCE_DEG {
+                    break;
+                }
+            }
+        }
+        let line = LineLoad {
+            centre_mm: [best[0], best[1]],
+            angle_deg: best[2].rem_euclid(180.0) % 180.0,
+            length_mm: best[3],
+        };
+        (line, best_score)
+    }
+
+    /// Sum over `u`'s and `v`'s cells of their shares times the matched filter's Gram entry (see `matched_gram`).
+    fn matched_product(&self, u: &[(usize, f64)], v: &[(usize, f64)]) -> f64 {
+        u.iter()
+            .map(|(j, wj)| {
+                let row = self.matched_gram.row(*j);
+                wj * v.iter().map(|(k, wk)| wk * row[*k]).sum::<f64>()
+            })
+            .sum()
+    }
+
+    /// Two presses side by side read as one elongated contact when the cover's blur fills the dip between them (on
+    /// the validation set, pairs 10 mm apart along oblique directions, which the cell map shows as one peak): a
+    /// contact is split in two when two point loads (free positions, amplitudes >= 0) explain its displacements
+    /// better than the best straight line load (a long contact) by more than [`SUPPORT_SIGMAS`]^2 times the noise
+    /// (the 3 sigma rule of the dips' test), lie at least [`ROUND_EXTENT_PITCHES`] apart (closer, the map shows
+    /// one round contact either way), and each half of its cells (split at the points' bisector) clears the floor
+    /// where it is.
+    fn split_pair(&self, region: &Region, observed: Observed, noise_mm: f64, min_force_n: f64) -> Option<[Region; 2]> {
+        let start = self.elongation(region)?;
+        let mut cells: Vec<usize> = region.cells.iter().map(|c| c.0).collect();
+        cells.sort_unstable();
+        let matched = self.matched_without(observed, &cells);
+        let (line, line_score) = self.fit_line_to(&matched, start);
+        let pitch = self.pad.pitch_x_mm().max(self.pad.pitch_y_mm());
+        let (c, s) = (line.angle_deg.to_radians().cos(), line.angle_deg.to_radians().sin());
+        let quarter = 0.25 * line.length_mm;
+        let (mut first, mut second) = (Vec::new(), Vec::new());
+        let mut score = |p: &[f64; 4]| -> f64 {
+            self.line_shape([p[0], p[1]], 0.0, 0.0, &mut first);
+            self.line_shape([p[2], p[3]], 0.0, 0.0, &mut second);
+            let correlation = |w: &[(usize, f64)]| w.iter().map(|(j, wj)| wj * matched[*j]).sum::<f64>();
+            let (c1, c2) = (correlation(&first), correlation(&second));
+            let (g11, g22, g12) = (
+                self.matched_product(&first, &first),
+                self.matched_product(&second, &second),
+                self.matched_product(&first, &second),
+            );
+            let det = g11 * g22 - g12 * g12;
+            let (a1, a2) = ((g22 * c1 - g12 * c2) / det, (g11 * c2 - g12 * c1) / det);
+            if det > 0.0 && a1 > 0.0 && a2 > 0.0 {
+                a1 * c1 + a2 * c2
+            } else {
+                let alone = |c: f64, g: f64| if c > 0.0 && g > 0.0 { c * c / g } else { 0.0 };
+                alone(c1, g11).max(alone(c2, g22))
+            }
+        };
+        let start = [
+            line.centre_mm[0] - quarter * c,
+            line.centre_mm[1] - quarter * s,
+            line.centre_mm[0] + quarter * c,
+            line.centre_mm[1] + quarter * s,
+        ];
+        let (p, pair_score) = pattern_search(start, [0.25 * pitch; 4], PAIR_FIT_TOLERANCE_MM, &mut score);
+        let (a, b) = ([p[0], p[1]], [p[2], p[3]]);
+        let axis = [b[0] - a[0], b[1] - a[1]];
+        let separation = axis[0].hypot(axis[1]);
+        if !(pair_score - line_score > SUPPORT_SIGMAS * SUPPORT_SIGMAS * noise_mm * noise_mm
+            && separation >= ROUND_EXTENT_PITCHES * pitch)
+        {
+            return None;
+        }
+        let middle = [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])];
+        let (near_a, near_b): (Vec<Traction>, Vec<Traction>) = region.cells.iter().partition(|(j, _)| {
+            let p = self.cells[*j].centre_mm;
+            (p[0] - middle[0]) * axis[0] + (p[1] - middle[1]) * axis[1] < 0.0
+        });
+        if near_a.is_empty() || near_b.is_empty() {
+            return None;
+        }
+        let halves = [self.region(near_a), self.region(near_b)];
+        halves
+            .iter()
+            .all(|h| h.force_vector_n[2] >= min_force_n * h.floor_scale)
+            .then_some(halves)
+    }
+
+    /// A unit line load (centre, degrees, length in mm) on the cells: each of points 0.5 mm apart along it shared
+    /// bilinearly among the four cell centres around it (clamped to the outermost cells' centres), as (cell,
+    /// share).
+    fn line_shape(&self, centre: Point2, angle_deg: f64, length_mm: f64, shape: &mut Vec<(usize, f64)>) {
+        let (cols, rows) = (usize::from(self.pad.cols), usize::from(self.pad.rows));
+        let origin = self.cells[0].centre_mm;
+        let (px, py) = (self.pad.pitch_x_mm(), self.pad.pitch_y_mm());
+        let points = (length_mm / LINE_SAMPLE_MM).ceil().max(2.0) as usize;
+        let (c, s) = (angle_deg.to_radians().cos(), angle_deg.to_radians().sin());
+        let weight = 1.0 / points as f64;
+        let split = |at: f64, n: usize| -> (usize, f64) {
+            let clamped = at.clamp(0.0, (n - 1) as f64);
+            let low = (clamped.floor() as usize).min(n.saturating_sub(2));
+            (low, clamped - low as f64)
+        };
+        let mut dense = vec![0.0; self.cells.len()];
+        for i in 0..points {
+            let t = ((i as f64 + 0.5) / points as f64 - 0.5) * length_mm;
+            let (col, fx) = split((centre[0] + t * c - origin[0]) / px, cols);
+            let (row, fy) = split((centre[1] + t * s - origin[1]) / py, rows);
+            dense[row * cols + col] += weight * (1.0 - fx) * (1.0 - fy);
+            dense[row * cols + col + 1] += weight * fx * (1.0 - fy);
+            dense[(row + 1) * cols + col] += weight * (1.0 - fx) * fy;
+            dense[(row + 1) * cols + col + 1] += weight * fx * fy;
+        }
+        shape.clear();
+        shape.extend(dense.into_iter().enumerate().filter(|&(_, w)| w > 0.0));
     }
 
     /// The contacts among stage 2's regions (strongest first), each group of loaded cells judged as a whole: a region
@@ -1450,6 +1686,7 @@ impl InverseModel {
             xy += w * dx * dy;
         }
         Some(SecondMoments {
+            centre,
             xx: xx / weight + self.pad.pitch_x_mm().powi(2) / 12.0,
             yy: yy / weight + self.pad.pitch_y_mm().powi(2) / 12.0,
             xy: xy / weight,
@@ -1463,6 +1700,39 @@ impl InverseModel {
             .map(|j| tractions[3 * j + 2] / area * 1e3)
             .collect()
     }
+}
+
+/// Maximises `score` from `start` by a pattern search: each parameter stepped both ways in turn, the steps halved
+/// when none improves, until every step is below `tolerance`.
+fn pattern_search<const N: usize>(
+    start: [f64; N],
+    mut steps: [f64; N],
+    tolerance: f64,
+    score: &mut impl FnMut(&[f64; N]) -> f64,
+) -> ([f64; N], f64) {
+    let mut best = start;
+    let mut best_score = score(&best);
+    for _ in 0..LINE_FIT_ROUNDS {
+        let mut improved = false;
+        for k in 0..N {
+            for sign in [1.0, -1.0] {
+                let mut trial = best;
+                trial[k] += sign * steps[k];
+                let trial_score = score(&trial);
+                if trial_score > best_score {
+                    (best, best_score, improved) = (trial, trial_score, true);
+                    break;
+                }
+            }
+        }
+        if !improved {
+            steps.iter_mut().for_each(|s| *s *= 0.5);
+            if steps.iter().all(|&s| s < tolerance) {
+                break;
+            }
+        }
+    }
+    (best, best_score)
 }
 
 /// Distance (mm) from a corner to a cell's centre, as [`InverseModel::near_loads`] compares it with its reach.
@@ -1858,6 +2128,48 @@ mod tests {
             "{angle} vs {truth}: {moments:?} {:?}",
             stage2.regions[0].cells
         );
+    }
+
+    /// A 6 N line load laid on the cells as [`InverseModel::line_shape`] lays it (so the model explains it exactly),
+    /// at angles off the grid's, under a camera motion: [`InverseModel::fit_line_to`] finds its direction and centre
+    /// to within its steps from a start 5 deg and 1 mm off, and stage 2 keeps it one contact (no pair of point loads
+    /// explains it better).
+    #[test]
+    fn a_line_load_is_fitted_at_angles_off_the_grid_and_not_split() {
+        let model = model();
+        let valid = vec![true; model.observations / 2];
+        let mut motion = [0.0; MOTION_PARAMETERS];
+        motion[0] = 0.05;
+        motion[3] = 0.002;
+        for (angle, centre) in [
+            (12.0, [-3.0, 2.0]),
+            (33.0, [4.0, -1.0]),
+            (71.0, [1.0, 1.5]),
+            (152.0, [-5.0, -2.0]),
+        ] {
+            let mut shape = Vec::new();
+            model.line_shape(centre, angle, 18.0, &mut shape);
+            // The bilinear shares keep the line's force and centre.
+            let total: f64 = shape.iter().map(|s| s.1).sum();
+            let mean_x: f64 = shape.iter().map(|(j, w)| w * model.cells[*j].centre_mm[0]).sum();
+            assert!((total - 1.0).abs() < 1e-12 && (mean_x - centre[0]).abs() < 1e-9);
+            let load: Vec<(usize, [f64; 3])> = shape.iter().map(|&(j, w)| (j, [0.0, 0.0, 6.0 * w])).collect();
+            let d = field(&model, &load, motion);
+            let start = LineLoad {
+                centre_mm: [centre[0] + 1.0, centre[1]],
+                angle_deg: angle + 5.0,
+                length_mm: 15.0,
+            };
+            let (line, _) = model.fit_line_to(&model.matched(&d, &valid), start);
+            assert!((line.angle_deg - angle).abs() < 0.2, "{angle} deg: found {line:?}");
+            assert!(
+                (line.centre_mm[0] - centre[0]).hypot(line.centre_mm[1] - centre[1]) < 0.2,
+                "{line:?}"
+            );
+            let stage = model.stage1(&d, &valid);
+            let stage2 = model.stage2(&d, &valid, &stage, 0.002, 0.1);
+            assert_eq!(stage2.regions.len(), 1, "{angle} deg: {:?}", stage2.regions);
+        }
     }
 
     #[test]
