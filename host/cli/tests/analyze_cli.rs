@@ -48,15 +48,16 @@ fn analyze_measures_the_real_press_in_the_same_default_mode_as_serve() {
     assert_eq!(touch["mode"], nusense_estimator::Mode::default().to_string());
     assert_eq!(touch["mode"], "inverse");
     assert_eq!(touch["contact"], true);
-    // The README's figures for this pair: contact about 3 mm left of and 2.3 mm below the pad's centre, a force
-    // vector along the normal from the uncalibrated pad model, no edge for a round tip.
+    // The README's figures for this pair: contact about 3 mm left of and 2.4 mm below the pad's centre, a force
+    // vector along the normal from the uncalibrated pad model, no edge for a round tip. (8.96 N at (-3.11, 2.32) mm
+    // before the model saw the parallax of the pattern's normal displacement.)
     let contact_mm = numbers(&touch["contact_mm"]);
     assert!(
-        (contact_mm[0] + 3.11).abs() < 0.05 && (contact_mm[1] - 2.32).abs() < 0.05,
+        (contact_mm[0] + 3.08).abs() < 0.05 && (contact_mm[1] - 2.39).abs() < 0.05,
         "{contact_mm:?}"
     );
     let force = numbers(&touch["force_vector_n"]);
-    assert!((force[2] - 8.96).abs() < 0.05, "{force:?}");
+    assert!((force[2] - 9.09).abs() < 0.05, "{force:?}");
     assert!(force[0].hypot(force[1]) < 0.05 * force[2], "a normal press: {force:?}");
     assert_eq!(touch["force_n"].as_f64().unwrap(), force[2]);
     assert!(touch["edge"].is_null());

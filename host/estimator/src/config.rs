@@ -220,6 +220,12 @@ pub struct ElasticConfig {
     pub bonded_border: bool,
     /// Distance from the pattern's edge to where the pad is bonded to its frame, mm.
     pub border_margin_mm: f64,
+    /// Refractive index of the gel between the pattern and the plate. A press pushes the pattern towards the camera,
+    /// and the camera sees it through the gel along oblique rays: it appears shifted away from the camera's foot by
+    /// its normal displacement times the ray's slope in the gel (0.2 at 20 mm from the foot of a camera 72 mm away
+    /// with 1.41), as much as a press's own in-plane displacement near the border. The inverse models it from the
+    /// rest frame's pose (see [`crate::elastic::parallax_shifts`]); 0 leaves it out. Default: silicone, 1.41.
+    pub gel_refractive_index: f64,
 }
 
 impl Default for ElasticConfig {
@@ -232,6 +238,7 @@ impl Default for ElasticConfig {
             gel_mm: 2.2,
             bonded_border: false,
             border_margin_mm: 3.0,
+            gel_refractive_index: 1.41,
         }
     }
 }
@@ -499,6 +506,13 @@ impl SensorConfig {
         }
         if !(e.border_margin_mm.is_finite() && (0.0..=50.0).contains(&e.border_margin_mm)) {
             return Err(invalid("elastic.border_margin_mm", e.border_margin_mm, "0 ..= 50 mm"));
+        }
+        if !(e.gel_refractive_index == 0.0 || (1.0..=3.0).contains(&e.gel_refractive_index)) {
+            return Err(invalid(
+                "elastic.gel_refractive_index",
+                e.gel_refractive_index,
+                "0 (no parallax) or 1 ..= 3",
+            ));
         }
         let i = &self.inverse;
         finite_positive("inverse.noise_mm", i.noise_mm)?;

@@ -68,6 +68,16 @@ pub struct PointKernel {
     depth_mm: f64,
     /// Bonded layer minus half-space, tabulated every `TABLE_STEP_MM` from 0 (layer model only).
     correction: Option<Vec<Radial>>,
+    /// The same for the pattern's normal displacement ([`Vertical`]).
+    vertical_correction: Option<Vec<Vertical>>,
+}
+
+/// The pattern's displacement along the normal (positive into the pad, towards the plate and the camera) at
+/// in-plane distance r from a point force: w = z(r) fz + t(r) r̂ · (fx, fy), mm per N.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Vertical {
+    pub z: f64,
+    pub t: f64,
 }
 
 impl PointKernel {
@@ -80,13 +90,17 @@ impl PointKernel {
                 "needs a positive modulus and depth and 0 <= nu <= 0.5",
             ));
         }
-        let correction = match config.model {
-            ElasticModel::HalfSpace => None,
+        let (correction, vertical_correction) = match config.model {
+            ElasticModel::HalfSpace => (None, None),
             ElasticModel::BondedLayer => {
                 if !(config.gel_mm > 0.0) {
                     return Err(ElasticError::Degenerate("a bonded layer needs gel below the pattern"));
                 }
-                Some(tabulate_layer_correction(mu, nu, depth, depth + config.gel_mm))
+                let h = depth + config.gel_mm;
+                (
+                    Some(tabulate_layer_correction(mu, nu, depth, h)),
+                    Some(tabulate_vertical_correction(mu, nu, depth, h)),
+                )
             }
         };
         Ok(Self {
@@ -94,7 +108,48 @@ impl PointKernel {
             poisson_ratio: nu,
             depth_mm: depth,
             correction,
+            vertical_correction,
         })
+    }
+
+    /// The normal displacement's radial functions at in-plane distance `r` (mm).
+    pub fn vertical_radial(&self, r: f64) -> Vertical {
+        let half = half_space_vertical(self.shear_modulus_n_per_mm2, self.poisson_ratio, self.depth_mm, r);
+        match &self.vertical_correction {
+            None => half,
+            Some(table) => {
+                let at = r / TABLE_STEP_MM;
+                if !(at < (table.len() - 2) as f64) {
+                    return Vertical::default();
+                }
+                let i = at.floor() as usize;
+                let p0 = if i == 0 {
+                    Vertical {
+                        z: table[1].z,
+                        t: -table[1].t,
+                    }
+                } else {
+                    table[i - 1]
+                };
+                let (p1, p2, p3) = (table[i], table[i + 1], table[i + 2]);
+                let t = at - i as f64;
+                Vertical {
+                    z: half.z + catmull_rom_1(t, p0.z, p1.z, p2.z, p3.z),
+                    t: half.t + catmull_rom_1(t, p0.t, p1.t, p2.t, p3.t),
+                }
+            }
+        }
+    }
+
+    /// Normal displacement (mm, into the pad) per N of (fx, fy, fz) at `offset` (mm) from the force.
+    pub fn vertical(&self, offset: Point2) -> [f64; 3] {
+        let r = offset[0].hypot(offset[1]);
+        let Vertical { z, t } = self.vertical_radial(r);
+        if r > 1e-12 {
+            [t * offset[0] / r, t * offset[1] / r, z]
+        } else {
+            [0.0, 0.0, z]
+        }
     }
 
     /// a, b, c at in-plane distance `r` (mm).
@@ -143,6 +198,41 @@ pub fn half_space_radial(mu: f64, nu: f64, z: f64, r: f64) -> Radial {
     }
 }
 
+/// Boussinesq's and Cerruti's normal displacement at depth z (Johnson eqs. 3.22, 3.86), as [`Vertical`].
+pub fn half_space_vertical(mu: f64, nu: f64, z: f64, r: f64) -> Vertical {
+    let k = 1.0 / (4.0 * std::f64::consts::PI * mu);
+    let rho = r.hypot(z);
+    let rho3 = rho * rho * rho;
+    Vertical {
+        z: k * (2.0 * (1.0 - nu) / rho + z * z / rho3),
+        t: k * (r * z / rho3 + (1.0 - 2.0 * nu) * r / (rho * (rho + z))),
+    }
+}
+
+/// The normal displacement's spectra at depth `d` for unit shear modulus: [from longitudinal traction, from normal
+/// pressure], of the half-space (the family decaying from the surface, as in [`half_space_spectra`]).
+pub fn half_space_vertical_spectra(k: f64, nu: f64, d: f64) -> [f64; 2] {
+    let e = (-k * d).exp();
+    [
+        (0.5 * (1.0 - 2.0 * nu) + 0.5 * k * d) * e,
+        ((1.0 - nu) + 0.5 * k * d) * e,
+    ]
+}
+
+/// The same for the bonded layer (thickness `h`), from the solution of [`layer_spectra`]'s system.
+pub fn layer_vertical_spectra(k: f64, nu: f64, d: f64, h: f64) -> [f64; 2] {
+    let kappa = 3.0 - 4.0 * nu;
+    let matrix = layer_matrix(k, nu, h);
+    let w_at_d = |x: [f64; 4]| {
+        let (s, kd) = (h - d, k * d);
+        (-x[0] - kappa * x[1] - x[1] * kd) * (-kd).exp() + (x[2] + kappa * x[3] + x[3] * k * s) * (-k * s).exp()
+    };
+    [
+        crate::linalg::solve_small(matrix, [1.0, 0.0, 0.0, 0.0]).map_or(f64::NAN, w_at_d),
+        crate::linalg::solve_small(matrix, [0.0, 1.0, 0.0, 0.0]).map_or(f64::NAN, w_at_d),
+    ]
+}
+
 /// k times the transfer functions (longitudinal from longitudinal traction, longitudinal from normal pressure,
 /// transverse from transverse traction) at depth `d`, for unit shear modulus.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -165,18 +255,8 @@ pub fn half_space_spectra(k: f64, nu: f64, d: f64) -> Spectra {
 
 /// The bonded layer's spectra (thickness `h`, observed at depth `d`): top loaded, bottom clamped.
 pub fn layer_spectra(k: f64, nu: f64, d: f64, h: f64) -> Spectra {
-    let kappa = 3.0 - 4.0 * nu;
-    let e = (-k * h).exp();
     let kh = k * h;
-    // Unknowns (a, b) of the family decaying from the top and (a2, b2) of the family decaying from the bottom,
-    // U2 = (a2 + b2 k s) e^(-ks), W2 = (a2 + kappa b2 + b2 k s) e^(-ks) with s = h - z, all multiplied by k.
-    // Rows: shear traction and normal traction at the top, U and W at the bottom.
-    let matrix = [
-        [2.0, kappa - 1.0, -2.0 * e, -(kappa - 1.0 + 2.0 * kh) * e],
-        [-2.0, -4.0 * (1.0 - nu), -2.0 * e, -(4.0 * (1.0 - nu) + 2.0 * kh) * e],
-        [e, kh * e, 1.0, 0.0],
-        [-e, (-kappa - kh) * e, 1.0, kappa],
-    ];
+    let matrix = layer_matrix(k, nu, h);
     let u_at_d = |x: [f64; 4]| {
         let (s, kd) = (h - d, k * d);
         (x[0] + x[1] * kd) * (-kd).exp() + (x[2] + x[3] * k * s) * (-k * s).exp()
@@ -186,6 +266,22 @@ pub fn layer_spectra(k: f64, nu: f64, d: f64, h: f64) -> Spectra {
     // Transverse: u = sinh(k(h - z)) / (k cosh(kh)) per unit traction, written with decaying exponentials.
     let tt = ((-k * d).exp() - (-k * (2.0 * h - d)).exp()) / (1.0 + (-2.0 * kh).exp());
     Spectra { ll, ln, tt }
+}
+
+/// The bonded layer's boundary conditions. Unknowns (a, b) of the family decaying from the top,
+/// U = (a + b k z) e^(-kz), W = (-a - kappa b - b k z) e^(-kz), and (a2, b2) of the family decaying from the bottom,
+/// U2 = (a2 + b2 k s) e^(-ks), W2 = (a2 + kappa b2 + b2 k s) e^(-ks) with s = h - z, all multiplied by k.
+/// Rows: shear traction and normal traction at the top, U and W at the bottom.
+fn layer_matrix(k: f64, nu: f64, h: f64) -> [[f64; 4]; 4] {
+    let kappa = 3.0 - 4.0 * nu;
+    let e = (-k * h).exp();
+    let kh = k * h;
+    [
+        [2.0, kappa - 1.0, -2.0 * e, -(kappa - 1.0 + 2.0 * kh) * e],
+        [-2.0, -4.0 * (1.0 - nu), -2.0 * e, -(4.0 * (1.0 - nu) + 2.0 * kh) * e],
+        [e, kh * e, 1.0, 0.0],
+        [-e, (-kappa - kh) * e, 1.0, kappa],
+    ]
 }
 
 /// Hankel transforms of k T(k) to a, b, c:
@@ -250,6 +346,57 @@ fn tabulate_layer_correction(mu: f64, nu: f64, d: f64, h: f64) -> Vec<Radial> {
             }
         })
         .collect()
+}
+
+/// The bonded layer's normal displacement less the half-space's, tabulated as [`tabulate_layer_correction`]:
+/// z = 1/(2 pi) ∫ kW_nn J0 dk, t = 1/(2 pi) ∫ kW_nl J1 dk (which give Boussinesq's and Cerruti's w for the
+/// half-space's spectra).
+fn tabulate_vertical_correction(mu: f64, nu: f64, d: f64, h: f64) -> Vec<Vertical> {
+    let k_max = SPECTRUM_DECAY / (2.0 * h - d);
+    let dk = std::f64::consts::TAU / TABLE_REACH_MM / POINTS_PER_PERIOD;
+    let mut n = (k_max / dk).ceil() as usize + 1;
+    if n.is_multiple_of(2) {
+        n += 1;
+    }
+    let spectra: Vec<[f64; 2]> = (0..n)
+        .map(|i| {
+            let k = i as f64 * dk;
+            let (layer, half) = (
+                layer_vertical_spectra(k, nu, d, h),
+                half_space_vertical_spectra(k, nu, d),
+            );
+            [layer[0] - half[0], layer[1] - half[1]]
+        })
+        .collect();
+    let steps = (TABLE_REACH_MM / TABLE_STEP_MM).ceil() as usize + 3;
+    (0..steps)
+        .map(|step| {
+            let r = step as f64 * TABLE_STEP_MM;
+            let (mut z, mut t) = (0.0, 0.0);
+            for (i, s) in spectra.iter().enumerate() {
+                let weight = if i == 0 || i == n - 1 {
+                    1.0
+                } else if i % 2 == 1 {
+                    4.0
+                } else {
+                    2.0
+                };
+                let x = i as f64 * dk * r;
+                z += weight * s[1] * libm::j0(x);
+                t += weight * s[0] * libm::j1(x);
+            }
+            let scale = dk / 3.0 / std::f64::consts::TAU / mu;
+            Vertical {
+                z: z * scale,
+                t: t * scale,
+            }
+        })
+        .collect()
+}
+
+/// One Catmull-Rom segment at `t` in [0, 1) between p1 and p2.
+fn catmull_rom_1(t: f64, p0: f64, p1: f64, p2: f64, p3: f64) -> f64 {
+    p1 + 0.5 * t * (p2 - p0 + t * (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3 + t * (3.0 * (p1 - p2) + p3 - p0)))
 }
 
 /// Cubic (Catmull-Rom) interpolation of a table at fractional index `at` (0 <= at < len - 2).
@@ -338,6 +485,67 @@ impl PadResponse {
         }
         Ok(Self { matrix })
     }
+
+    /// Adds what the camera sees of the pattern's normal displacement: a point that moves by w towards the camera
+    /// appears shifted in the pattern's plane by w times `shifts[i]` (its ray's in-plane slope where it moves, see
+    /// [`parallax_shifts`]). Cell-averaged like the in-plane response; the border's reactions (if any) are not
+    /// applied to it.
+    pub fn add_parallax(&mut self, kernel: &PointKernel, observations: &[Point2], cells: &[Cell], shifts: &[Point2]) {
+        for (j, cell) in cells.iter().enumerate() {
+            for (i, p) in observations.iter().enumerate() {
+                let s = shifts[i];
+                if s == [0.0, 0.0] {
+                    continue;
+                }
+                let mut w = [0.0; 3];
+                for &(gx, wx) in &GAUSS {
+                    for &(gy, wy) in &GAUSS {
+                        let q = [
+                            cell.centre_mm[0] + gx * cell.size_mm[0],
+                            cell.centre_mm[1] + gy * cell.size_mm[1],
+                        ];
+                        let v = kernel.vertical([p[0] - q[0], p[1] - q[1]]);
+                        for (sum, v) in w.iter_mut().zip(v) {
+                            *sum += wx * wy * v;
+                        }
+                    }
+                }
+                for (row, s) in s.iter().enumerate() {
+                    for (col, w) in w.iter().enumerate() {
+                        self.matrix[(2 * i + row, 3 * j + col)] += s * w;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Where the camera is, seen from the pattern: the foot of its centre on the pattern's plane (pad mm) and its
+/// height above that plane (mm, as the rest frame's homography sees it through the plate and the gel).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraView {
+    pub foot_mm: Point2,
+    pub height_mm: f64,
+}
+
+/// Per observation point, the in-plane shift (mm per mm) with which a point of the pattern that moves towards the
+/// camera appears to move along its ray: away from the camera's foot, by the tangent of the ray's angle in the gel
+/// it moves through (Snell: sin = sin in air / `refractive_index`).
+pub fn parallax_shifts(view: &CameraView, refractive_index: f64, observations: &[Point2]) -> Vec<Point2> {
+    observations
+        .iter()
+        .map(|p| {
+            let offset = [p[0] - view.foot_mm[0], p[1] - view.foot_mm[1]];
+            let r = offset[0].hypot(offset[1]);
+            if !(r > 1e-12 && view.height_mm > 0.0) {
+                return [0.0, 0.0];
+            }
+            let sin_air = r / r.hypot(view.height_mm);
+            let sin_gel = sin_air / refractive_index;
+            let tan_gel = sin_gel / (1.0 - sin_gel * sin_gel).sqrt();
+            [tan_gel * offset[0] / r, tan_gel * offset[1] / r]
+        })
+        .collect()
 }
 
 /// Points along the clamped rectangle, spaced about one pattern depth apart (closer adds nothing the kernel can
@@ -529,6 +737,58 @@ mod tests {
             );
             assert!(close(direct.c, table.c, 1e-5 * scale), "{r}");
         }
+    }
+
+    /// The normal displacement's spectra and transforms: the half-space's spectra transform to Boussinesq's and
+    /// Cerruti's closed forms (so the table's transform is the right one), the layer's spectra are the
+    /// half-space's for short waves, and an incompressible layer on its plate does not sink under a uniform load.
+    #[test]
+    fn the_normal_displacement_is_boussinesq_and_cerruti_and_the_layer_tends_to_them() {
+        for nu in [0.5, 0.3] {
+            let d = 2.8;
+            let dk = 1e-3;
+            let n = 40_001;
+            for r in [0.5, 2.0, 5.0, 10.0] {
+                let (mut z, mut t) = (0.0, 0.0);
+                for i in 0..n {
+                    let k = i as f64 * dk;
+                    let w = if i == 0 || i == n - 1 {
+                        1.0
+                    } else if i % 2 == 1 {
+                        4.0
+                    } else {
+                        2.0
+                    };
+                    let s = half_space_vertical_spectra(k, nu, d);
+                    z += w * s[1] * libm::j0(k * r);
+                    t += w * s[0] * libm::j1(k * r);
+                }
+                let scale = dk / 3.0 / std::f64::consts::TAU;
+                let exact = half_space_vertical(1.0, nu, d, r);
+                assert!(
+                    close(z * scale, exact.z, 1e-6 * exact.z),
+                    "nu {nu} r {r}: {} {}",
+                    z * scale,
+                    exact.z
+                );
+                assert!(
+                    close(t * scale, exact.t, 1e-6 * exact.t),
+                    "nu {nu} r {r}: {} {}",
+                    t * scale,
+                    exact.t
+                );
+            }
+            let (layer, half) = (
+                layer_vertical_spectra(30.0, nu, 0.5, 5.0),
+                half_space_vertical_spectra(30.0, nu, 0.5),
+            );
+            assert!(
+                close(layer[0], half[0], 1e-9) && close(layer[1], half[1], 1e-9),
+                "{layer:?} {half:?}"
+            );
+        }
+        let uniform = layer_vertical_spectra(1e-9, 0.5, 2.8, 5.0);
+        assert!(uniform[1].abs() < 1e-6, "{uniform:?}");
     }
 
     #[test]

@@ -159,8 +159,7 @@ impl Estimator {
             }
         };
         let camera = camera_for(&config, width, height)?;
-        let model = InverseModel::shared(&config)?;
-        let rest = Rest::new(&config, &model, camera, squares, &corners)?;
+        let (rest, model) = Rest::new(&config, camera, squares, &corners)?;
         let mut estimator = Self {
             config,
             mode,
@@ -842,13 +841,7 @@ impl Estimator {
                 Err(_) => tracker.adopt_last_frame_as_reference()?,
             }
         }
-        self.rest = Rest::new(
-            &self.config,
-            &self.model,
-            *self.rest.mapping.camera(),
-            squares,
-            &corners,
-        )?;
+        (self.rest, self.model) = Rest::new(&self.config, *self.rest.mapping.camera(), squares, &corners)?;
         self.rest.light_sensitive = self.light_sensitive_corners(frame);
         self.moved_frames = 0;
         self.retare_count += 1;
@@ -881,16 +874,19 @@ struct PaperField<'a> {
 }
 
 impl Rest {
+    /// The rest frame, and the inverse's model for it (the camera's place, which the model's parallax needs, comes
+    /// from the rest frame's map).
     fn new(
         config: &SensorConfig,
-        model: &InverseModel,
         camera: nusense_geometry::FisheyeCamera,
         squares: Vec<Option<Point2>>,
         corners: &[Option<Point2>],
-    ) -> Result<Self, EstimateError> {
+    ) -> Result<(Self, Arc<InverseModel>), EstimateError> {
         let pad = config.pad;
         let undistorted: Vec<Option<Point2>> = corners.iter().map(|c| c.and_then(|p| camera.undistort_px(p))).collect();
         let mapping = PadMapping::fit(camera, &pad, &undistorted, config.pad_map.as_ref())?;
+        let shared = InverseModel::shared(config, mapping.camera_view())?;
+        let model = &*shared;
         let lattice = build_lattice(config, &mapping, squares, corners);
         let needed = min_valid(config);
         if lattice.corners_found() < needed {
@@ -926,19 +922,22 @@ impl Rest {
         let noise_floor_mm = config.inverse.noise_floor_mm;
         let support_floor_mm = noise_floor_mm.max(floor_px_mm);
         let light_sensitive = vec![false; corners_mm.len()];
-        Ok(Self {
-            lattice,
-            mapping,
-            corners_mm,
-            corners_raw,
-            centre_raw,
-            paper_px,
-            sampler,
-            noise_floor_mm,
-            support_floor_mm,
-            gamma_per_n,
-            light_sensitive,
-        })
+        Ok((
+            Self {
+                lattice,
+                mapping,
+                corners_mm,
+                corners_raw,
+                centre_raw,
+                paper_px,
+                sampler,
+                noise_floor_mm,
+                support_floor_mm,
+                gamma_per_n,
+                light_sensitive,
+            },
+            shared,
+        ))
     }
 }
 

@@ -46,7 +46,7 @@ use nalgebra::{DMatrix, DVector};
 use nusense_geometry::{PadGeometry, Point2};
 
 use crate::config::{ElasticModel, SensorConfig};
-use crate::elastic::{Cell, ElasticError, PadResponse, PointKernel};
+use crate::elastic::{parallax_shifts, CameraView, Cell, ElasticError, PadResponse, PointKernel};
 use crate::linalg::{dot, gram, tr_mul_vec, Dense};
 
 /// Columns of the motion basis: translation (2), linear (4), perspective (2).
@@ -305,13 +305,15 @@ const CACHE_SIZE: usize = 4;
 
 impl InverseModel {
     /// The model for `config`, built once per distinct pad, elastic and inverse configuration in this process.
-    pub fn shared(config: &SensorConfig) -> Result<Arc<Self>, ElasticError> {
-        let key = format!("{:?}|{:?}|{:?}", config.pad, config.elastic, config.inverse);
+    /// `view`: where the camera is (from the rest frame's map), for the parallax of the pattern's normal
+    /// displacement; `None` leaves it out.
+    pub fn shared(config: &SensorConfig, view: Option<CameraView>) -> Result<Arc<Self>, ElasticError> {
+        let key = format!("{:?}|{:?}|{:?}|{:?}", config.pad, config.elastic, config.inverse, view);
         let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((_, model)) = cache.iter().find(|(k, _)| *k == key) {
             return Ok(model.clone());
         }
-        let model = Arc::new(Self::new(config)?);
+        let model = Arc::new(Self::new(config, view)?);
         if cache.len() >= CACHE_SIZE {
             cache.remove(0);
         }
@@ -319,7 +321,7 @@ impl InverseModel {
         Ok(model)
     }
 
-    pub fn new(config: &SensorConfig) -> Result<Self, ElasticError> {
+    pub fn new(config: &SensorConfig, view: Option<CameraView>) -> Result<Self, ElasticError> {
         let pad = config.pad;
         let kernel = PointKernel::new(&config.elastic)?;
         let corners: Vec<Point2> = pad.corners().map(|c| pad.corner_mm(c)).collect();
@@ -337,7 +339,12 @@ impl InverseModel {
                 pad.height_mm / 2.0 + config.elastic.border_margin_mm,
             ]
         });
-        let a = PadResponse::new(&kernel, &corners, &cells, border)?.matrix;
+        let mut response = PadResponse::new(&kernel, &corners, &cells, border)?;
+        let n = config.elastic.gel_refractive_index;
+        if let (Some(view), true) = (view, n > 0.0) {
+            response.add_parallax(&kernel, &corners, &cells, &parallax_shifts(&view, n, &corners));
+        }
+        let a = response.matrix;
         let observations = a.nrows();
         let motion_length_mm = (pad.width_mm.max(pad.height_mm)) / 2.0;
         let b = motion_basis(&corners, motion_length_mm);
@@ -1954,7 +1961,7 @@ mod tests {
     use super::*;
 
     fn model() -> Arc<InverseModel> {
-        InverseModel::shared(&SensorConfig::default()).unwrap()
+        InverseModel::shared(&SensorConfig::default(), None).unwrap()
     }
 
     /// Displacements of `forces` (per cell), plus a camera motion.

@@ -18,6 +18,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::config::SensorConfig;
+use crate::elastic::CameraView;
 use crate::error::EstimateError;
 use crate::homography::Homography;
 
@@ -304,6 +305,42 @@ impl PadMapping {
         (q[0].is_finite() && q[1].is_finite()).then_some(q)
     }
 
+    /// Where the camera is against the pattern's plane, from the pose part of the map (the homography of pad mm to
+    /// the corrected undistorted px) and the configured lens's pinhole: H = K [r1 r2 t] up to scale, and the
+    /// camera's centre is -Rᵀt. Through the plate and the gel the height is the apparent one (a few % short of the
+    /// true distance), and a lens whose focal length differs from the configured one scales it.
+    pub fn camera_view(&self) -> Option<CameraView> {
+        let h = self.to_corrected.matrix();
+        let k = self.camera.rectified();
+        // K^-1 applied to each column of H.
+        let column = |c: usize| {
+            let (x, y, w) = (h[c], h[3 + c], h[6 + c]);
+            [(x - k.cx * w) / k.fx, (y - k.cy * w) / k.fy, w]
+        };
+        let (m1, m2, m3) = (column(0), column(1), column(2));
+        let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let mut scale = 2.0 / (norm(m1) + norm(m2));
+        // The pattern lies in front of the camera.
+        if m3[2] * scale < 0.0 {
+            scale = -scale;
+        }
+        let r1 = m1.map(|v| v * scale);
+        let r2 = m2.map(|v| v * scale);
+        let t = m3.map(|v| v * scale);
+        let r3 = [
+            r1[1] * r2[2] - r1[2] * r2[1],
+            r1[2] * r2[0] - r1[0] * r2[2],
+            r1[0] * r2[1] - r1[1] * r2[0],
+        ];
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let view = CameraView {
+            foot_mm: [-dot(r1, t), -dot(r2, t)],
+            height_mm: dot(r3, t).abs(),
+        };
+        (view.foot_mm.iter().all(|v| v.is_finite()) && view.height_mm.is_finite() && view.height_mm > 0.0)
+            .then_some(view)
+    }
+
     /// Pad mm per raw px at the pad's centre (the mean of the two axes).
     pub fn mm_per_px_at_centre(&self) -> Option<f64> {
         let centre = self.mm_to_raw([0.0, 0.0])?;
@@ -535,6 +572,38 @@ mod tests {
             "{:?}",
             again.residual()
         );
+    }
+
+    /// The camera's place from the map's pose: the grid seen through the configured lens's pinhole from a camera
+    /// 72 mm below the pattern, tilted 3 and -2 deg, whose centre is over (4, -3) mm of the pad.
+    #[test]
+    fn the_camera_view_is_where_the_camera_is() {
+        let pad = PadGeometry::default();
+        let camera = FisheyeCamera::paper(1024, 768).unwrap();
+        let k = *camera.rectified();
+        let (a, b) = (3f64.to_radians(), (-2f64).to_radians());
+        // Rotation about x by a, then about y by b (camera frame from pad frame), and the camera's centre.
+        let rx = [[1.0, 0.0, 0.0], [0.0, a.cos(), -a.sin()], [0.0, a.sin(), a.cos()]];
+        let ry = [[b.cos(), 0.0, b.sin()], [0.0, 1.0, 0.0], [-b.sin(), 0.0, b.cos()]];
+        let r: Vec<[f64; 3]> = (0..3)
+            .map(|i| std::array::from_fn(|j| (0..3).map(|m| ry[i][m] * rx[m][j]).sum()))
+            .collect();
+        let centre = [4.0, -3.0, -72.0];
+        let observed: Vec<Option<Point2>> = grid(&pad)
+            .iter()
+            .map(|p| {
+                let v = [p[0] - centre[0], p[1] - centre[1], -centre[2]];
+                let c: Vec<f64> = (0..3).map(|i| (0..3).map(|j| r[i][j] * v[j]).sum()).collect();
+                Some([k.fx * c[0] / c[2] + k.cx, k.fy * c[1] / c[2] + k.cy])
+            })
+            .collect();
+        let map = PadMapping::fit(camera, &pad, &observed, None).unwrap();
+        let view = map.camera_view().unwrap();
+        assert!(
+            (view.foot_mm[0] - 4.0).abs() < 0.05 && (view.foot_mm[1] + 3.0).abs() < 0.05,
+            "{view:?}"
+        );
+        assert!((view.height_mm - 72.0).abs() < 0.05, "{view:?}");
     }
 
     #[test]
