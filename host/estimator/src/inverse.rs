@@ -299,29 +299,47 @@ impl SecondMoments {
     }
 }
 
-static CACHE: Mutex<Vec<(String, Arc<InverseModel>)>> = Mutex::new(Vec::new());
 /// Models kept for reuse (a daemon re-tares often; tests build many estimators of a few configs).
+static MODELS: Mutex<Vec<(String, Arc<InverseModel>)>> = Mutex::new(Vec::new());
+/// What a model needs that does not depend on where the camera is: the layer's kernel (its spectral tables take
+/// most of a model's build) and the in-plane response. A re-tare after the camera moved builds a model for a new
+/// view, and only the parallax and the solve's matrices are made again.
+static VIEW_FREE_PARTS: Mutex<Vec<(String, Arc<ViewFreeParts>)>> = Mutex::new(Vec::new());
 const CACHE_SIZE: usize = 4;
 
-impl InverseModel {
-    /// The model for `config`, built once per distinct pad, elastic and inverse configuration in this process.
-    /// `view`: where the camera is (from the rest frame's map), for the parallax of the pattern's normal
-    /// displacement; `None` leaves it out.
-    pub fn shared(config: &SensorConfig, view: Option<CameraView>) -> Result<Arc<Self>, ElasticError> {
-        let key = format!("{:?}|{:?}|{:?}|{:?}", config.pad, config.elastic, config.inverse, view);
-        let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((_, model)) = cache.iter().find(|(k, _)| *k == key) {
-            return Ok(model.clone());
-        }
-        let model = Arc::new(Self::new(config, view)?);
-        if cache.len() >= CACHE_SIZE {
-            cache.remove(0);
-        }
-        cache.push((key, model.clone()));
-        Ok(model)
+/// The entry of `cache` under `key`, built by `build` if absent; the oldest entry goes when the cache is full.
+fn cached<T, E>(
+    cache: &Mutex<Vec<(String, Arc<T>)>>,
+    key: String,
+    build: impl FnOnce() -> Result<T, E>,
+) -> Result<Arc<T>, E> {
+    let mut cache = cache.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, value)) = cache.iter().find(|(k, _)| *k == key) {
+        return Ok(value.clone());
+    }
+    let value = Arc::new(build()?);
+    if cache.len() >= CACHE_SIZE {
+        cache.remove(0);
+    }
+    cache.push((key, value.clone()));
+    Ok(value)
+}
+
+struct ViewFreeParts {
+    kernel: PointKernel,
+    corners: Vec<Point2>,
+    cells: Vec<Cell>,
+    /// The in-plane response without the parallax.
+    response: PadResponse,
+}
+
+impl ViewFreeParts {
+    fn shared(config: &SensorConfig) -> Result<Arc<Self>, ElasticError> {
+        let key = format!("{:?}|{:?}", config.pad, config.elastic);
+        cached(&VIEW_FREE_PARTS, key, || Self::new(config))
     }
 
-    pub fn new(config: &SensorConfig, view: Option<CameraView>) -> Result<Self, ElasticError> {
+    fn new(config: &SensorConfig) -> Result<Self, ElasticError> {
         let pad = config.pad;
         let kernel = PointKernel::new(&config.elastic)?;
         let corners: Vec<Point2> = pad.corners().map(|c| pad.corner_mm(c)).collect();
@@ -339,15 +357,41 @@ impl InverseModel {
                 pad.height_mm / 2.0 + config.elastic.border_margin_mm,
             ]
         });
-        let mut response = PadResponse::new(&kernel, &corners, &cells, border)?;
+        let response = PadResponse::new(&kernel, &corners, &cells, border)?;
+        Ok(Self {
+            kernel,
+            corners,
+            cells,
+            response,
+        })
+    }
+}
+
+impl InverseModel {
+    /// The model for `config`, built once per distinct pad, elastic and inverse configuration and camera view in
+    /// this process.
+    /// `view`: where the camera is (from the rest frame's map), for the parallax of the pattern's normal
+    /// displacement; `None` leaves it out.
+    pub fn shared(config: &SensorConfig, view: Option<CameraView>) -> Result<Arc<Self>, ElasticError> {
+        let key = format!("{:?}|{:?}|{:?}|{:?}", config.pad, config.elastic, config.inverse, view);
+        cached(&MODELS, key, || Self::new(config, view))
+    }
+
+    pub fn new(config: &SensorConfig, view: Option<CameraView>) -> Result<Self, ElasticError> {
+        let pad = config.pad;
+        let parts = ViewFreeParts::shared(config)?;
+        let ViewFreeParts {
+            kernel, corners, cells, ..
+        } = &*parts;
+        let mut response = parts.response.clone();
         let n = config.elastic.gel_refractive_index;
         if let (Some(view), true) = (view, n > 0.0) {
-            response.add_parallax(&kernel, &corners, &cells, &parallax_shifts(&view, n, &corners));
+            response.add_parallax(kernel, corners, cells, &parallax_shifts(&view, n, corners));
         }
         let a = response.matrix;
         let observations = a.nrows();
         let motion_length_mm = (pad.width_mm.max(pad.height_mm)) / 2.0;
-        let b = motion_basis(&corners, motion_length_mm);
+        let b = motion_basis(corners, motion_length_mm);
         let lambda = (config.inverse.noise_mm / config.inverse.traction_prior_n).powi(2);
 
         let mut k = DMatrix::zeros(observations + MOTION_PARAMETERS, observations + MOTION_PARAMETERS);
@@ -426,7 +470,7 @@ impl InverseModel {
             s: Dense::from_nalgebra(&s),
             s_t: Dense::from_nalgebra(&s.transpose()),
             a_t_pressure: Dense::from_nalgebra(&DMatrix::from_fn(cells.len(), observations, |j, r| a[(r, 3 * j + 2)])),
-            cells,
+            cells: cells.clone(),
             observations,
             lambda,
             residual_share,
