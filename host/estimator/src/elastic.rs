@@ -291,13 +291,7 @@ pub fn hankel(spectra: &[Spectra], dk: f64, r: f64) -> Radial {
     let n = spectra.len();
     let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
     for (i, s) in spectra.iter().enumerate() {
-        let weight = if i == 0 || i == n - 1 {
-            1.0
-        } else if i % 2 == 1 {
-            4.0
-        } else {
-            2.0
-        };
+        let weight = simpson_weight(i, n);
         let x = i as f64 * dk * r;
         let (j0, j1) = (libm::j0(x), libm::j1(x));
         // J2 by the recurrence, with the series where 2 J1 / x - J0 cancels.
@@ -315,8 +309,19 @@ pub fn hankel(spectra: &[Spectra], dk: f64, r: f64) -> Radial {
     }
 }
 
+/// Simpson's weight of sample `i` of `n` (n odd): 1 at the ends, then 4 and 2 by turns.
+fn simpson_weight(i: usize, n: usize) -> f64 {
+    if i == 0 || i == n - 1 {
+        1.0
+    } else if i % 2 == 1 {
+        4.0
+    } else {
+        2.0
+    }
+}
+
 /// Samples `f` every `dk` over [0, k_max] with an odd number of points (Simpson).
-pub fn sample_spectra(k_max: f64, dk: f64, f: impl Fn(f64) -> Spectra) -> Vec<Spectra> {
+pub fn sample_spectra<T>(k_max: f64, dk: f64, f: impl Fn(f64) -> T) -> Vec<T> {
     let mut n = (k_max / dk).ceil() as usize + 1;
     if n.is_multiple_of(2) {
         n += 1;
@@ -354,33 +359,21 @@ fn tabulate_layer_correction(mu: f64, nu: f64, d: f64, h: f64) -> Vec<Radial> {
 fn tabulate_vertical_correction(mu: f64, nu: f64, d: f64, h: f64) -> Vec<Vertical> {
     let k_max = SPECTRUM_DECAY / (2.0 * h - d);
     let dk = std::f64::consts::TAU / TABLE_REACH_MM / POINTS_PER_PERIOD;
-    let mut n = (k_max / dk).ceil() as usize + 1;
-    if n.is_multiple_of(2) {
-        n += 1;
-    }
-    let spectra: Vec<[f64; 2]> = (0..n)
-        .map(|i| {
-            let k = i as f64 * dk;
-            let (layer, half) = (
-                layer_vertical_spectra(k, nu, d, h),
-                half_space_vertical_spectra(k, nu, d),
-            );
-            [layer[0] - half[0], layer[1] - half[1]]
-        })
-        .collect();
+    let spectra = sample_spectra(k_max, dk, |k| {
+        let (layer, half) = (
+            layer_vertical_spectra(k, nu, d, h),
+            half_space_vertical_spectra(k, nu, d),
+        );
+        [layer[0] - half[0], layer[1] - half[1]]
+    });
+    let n = spectra.len();
     let steps = (TABLE_REACH_MM / TABLE_STEP_MM).ceil() as usize + 3;
     (0..steps)
         .map(|step| {
             let r = step as f64 * TABLE_STEP_MM;
             let (mut z, mut t) = (0.0, 0.0);
             for (i, s) in spectra.iter().enumerate() {
-                let weight = if i == 0 || i == n - 1 {
-                    1.0
-                } else if i % 2 == 1 {
-                    4.0
-                } else {
-                    2.0
-                };
+                let weight = simpson_weight(i, n);
                 let x = i as f64 * dk * r;
                 z += weight * s[1] * libm::j0(x);
                 t += weight * s[0] * libm::j1(x);

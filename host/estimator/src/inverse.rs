@@ -973,31 +973,14 @@ impl InverseModel {
                 0.0
             }
         };
-        // A pattern search: each parameter stepped both ways, the steps halved when none improves.
-        let mut best = [start.centre_mm[0], start.centre_mm[1], start.angle_deg, start.length_mm];
-        let mut best_score = score(&best);
-        let mut steps = [0.25 * pitch, 0.25 * pitch, 4.0, 0.5 * pitch];
-        for _ in 0..LINE_FIT_ROUNDS {
-            let mut improved = false;
-            for k in 0..4 {
-                for sign in [1.0, -1.0] {
-                    let mut trial = best;
-                    trial[k] += sign * steps[k];
-                    trial[3] = trial[3].clamp(pitch, self.pad.width_mm.max(self.pad.height_mm));
-                    let trial_score = score(&trial);
-                    if trial_score > best_score {
-                        (best, best_score, improved) = (trial, trial_score, true);
-                        break;
-                    }
-                }
-            }
-            if !improved {
-                steps.iter_mut().for_each(|s| *s *= 0.5);
-                if steps[2] < LINE_FIT_ANGLE_TOLERANCE_DEG {
-                    break;
-                }
-            }
-        }
+        let longest = self.pad.width_mm.max(self.pad.height_mm);
+        let (best, best_score) = pattern_search(
+            [start.centre_mm[0], start.centre_mm[1], start.angle_deg, start.length_mm],
+            [0.25 * pitch, 0.25 * pitch, 4.0, 0.5 * pitch],
+            |steps| steps[2] < LINE_FIT_ANGLE_TOLERANCE_DEG,
+            |trial| trial[3] = trial[3].clamp(pitch, longest),
+            &mut score,
+        );
         let line = LineLoad {
             centre_mm: [best[0], best[1]],
             angle_deg: best[2].rem_euclid(180.0) % 180.0,
@@ -1058,7 +1041,13 @@ impl InverseModel {
             line.centre_mm[0] + quarter * c,
             line.centre_mm[1] + quarter * s,
         ];
-        let (p, pair_score) = pattern_search(start, [0.25 * pitch; 4], PAIR_FIT_TOLERANCE_MM, &mut score);
+        let (p, pair_score) = pattern_search(
+            start,
+            [0.25 * pitch; 4],
+            |steps| steps.iter().all(|&s| s < PAIR_FIT_TOLERANCE_MM),
+            |_| {},
+            &mut score,
+        );
         let (a, b) = ([p[0], p[1]], [p[2], p[3]]);
         let axis = [b[0] - a[0], b[1] - a[1]];
         let separation = axis[0].hypot(axis[1]);
@@ -1753,12 +1742,14 @@ impl InverseModel {
     }
 }
 
-/// Maximises `score` from `start` by a pattern search: each parameter stepped both ways in turn, the steps halved
-/// when none improves, until every step is below `tolerance`.
+/// Maximises `score` from `start` by a pattern search: each parameter stepped both ways in turn (each trial put back
+/// in its domain by `constrain`), the steps halved when none improves, until `converged` says the steps are small
+/// enough.
 fn pattern_search<const N: usize>(
     start: [f64; N],
     mut steps: [f64; N],
-    tolerance: f64,
+    converged: impl Fn(&[f64; N]) -> bool,
+    constrain: impl Fn(&mut [f64; N]),
     score: &mut impl FnMut(&[f64; N]) -> f64,
 ) -> ([f64; N], f64) {
     let mut best = start;
@@ -1769,6 +1760,7 @@ fn pattern_search<const N: usize>(
             for sign in [1.0, -1.0] {
                 let mut trial = best;
                 trial[k] += sign * steps[k];
+                constrain(&mut trial);
                 let trial_score = score(&trial);
                 if trial_score > best_score {
                     (best, best_score, improved) = (trial, trial_score, true);
@@ -1778,7 +1770,7 @@ fn pattern_search<const N: usize>(
         }
         if !improved {
             steps.iter_mut().for_each(|s| *s *= 0.5);
-            if steps.iter().all(|&s| s < tolerance) {
+            if converged(&steps) {
                 break;
             }
         }
