@@ -198,8 +198,6 @@ fn held_out_force_rms(config: &SensorConfig, frames: &Frames) -> f64 {
 
 /// Issue 12's target for force over the whole pad: 0.3 N RMS on 1-8 N presses with one calibration.
 #[test]
-#[ignore = "known failure (issue 12): 0.31 N RMS on the held-out presses at 640x480 after calibration (the 7.5 N \
-            press at (-3, -11) mm reads 8.1 N); target 0.3 N"]
 fn one_calibration_reads_unseen_presses_within_the_issue_target() {
     let frames = render();
     let dir = tempfile::tempdir().unwrap();
