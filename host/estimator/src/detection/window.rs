@@ -344,17 +344,7 @@ impl WindowTotals {
             *xk = span.x0 as f32;
         }
         let step = stride as f32;
-        // The rows lie a frame's width apart, and at large sizes most of them are not in the cache: read one byte
-        // per cache line of every row first, so that the memory fetches them all at once (the independent loads
-        // overlap) rather than one line at a time as the lookups below reach them.
-        let mut touched = 0u8;
-        for span in spans {
-            for byte in span.pixels.iter().step_by(CACHE_LINE) {
-                touched ^= byte;
-            }
-            touched ^= span.pixels.last().copied().unwrap_or(0);
-        }
-        std::hint::black_box(touched);
+        touch_rows(spans);
         let mut looked_up = [[0f32; ROWS_AT_ONCE]; PIXELS_AT_ONCE];
         let mut start = 0;
         while start < longest {
@@ -392,6 +382,11 @@ impl WindowTotals {
             }
             start += piece;
         }
+        self.add_lanes(spans, &w, &wx);
+    }
+
+    /// Each row's sums (lane k is `spans[k]`) into the window's.
+    fn add_lanes(&mut self, spans: &[RowSpan], w: &[f32; ROWS_AT_ONCE], wx: &[f32; ROWS_AT_ONCE]) {
         for (k, span) in spans.iter().enumerate() {
             self.sum_w += f64::from(w[k]);
             self.sum_x += f64::from(wx[k]);
@@ -399,6 +394,20 @@ impl WindowTotals {
             self.visited += span.count;
         }
     }
+}
+
+/// The rows lie a frame's width apart, and at large sizes most of them are not in the cache: reading one byte per
+/// cache line of every row first lets the memory fetch them all at once (the independent loads overlap) rather than
+/// one line at a time as a window's lookups reach them.
+fn touch_rows(spans: &[RowSpan]) {
+    let mut touched = 0u8;
+    for span in spans {
+        for byte in span.pixels.iter().step_by(CACHE_LINE) {
+            touched ^= byte;
+        }
+        touched ^= span.pixels.last().copied().unwrap_or(0);
+    }
+    std::hint::black_box(touched);
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -442,15 +451,7 @@ impl WindowTotals {
             count[k] = span.count as i32;
             x0[k] = span.x0 as f32;
         }
-        // The same prefetch as the plain loop's.
-        let mut touched = 0u8;
-        for span in spans {
-            for byte in span.pixels.iter().step_by(CACHE_LINE) {
-                touched ^= byte;
-            }
-            touched ^= span.pixels.last().copied().unwrap_or(0);
-        }
-        std::hint::black_box(touched);
+        touch_rows(spans);
         let longest = spans.iter().map(|s| s.count).max().unwrap_or(0);
         // SAFETY (the loads and gathers below): the arrays are ROWS_AT_ONCE = 8 lanes of 32 bits, a vector's width;
         // every word gathered from `raw` starts at `min(first + i * pixel_bytes, last)` for a lane, between the byte
@@ -497,13 +498,8 @@ impl WindowTotals {
             _mm256_storeu_ps(wx_lanes.as_mut_ptr(), wx);
             _mm256_storeu_si256(clipped_lanes.as_mut_ptr().cast(), clipped);
         }
-        for (k, span) in spans.iter().enumerate() {
-            self.sum_w += f64::from(w_lanes[k]);
-            self.sum_x += f64::from(wx_lanes[k]);
-            self.sum_y += f64::from(w_lanes[k]) * span.y as f64;
-            self.visited += span.count;
-            self.clipped += clipped_lanes[k] as usize;
-        }
+        self.add_lanes(spans, &w_lanes, &wx_lanes);
+        self.clipped += clipped_lanes[..spans.len()].iter().map(|&c| c as usize).sum::<usize>();
         true
     }
 }
