@@ -117,26 +117,12 @@ impl PointKernel {
         let half = half_space_vertical(self.shear_modulus_n_per_mm2, self.poisson_ratio, self.depth_mm, r);
         match &self.vertical_correction {
             None => half,
+            // Beyond the table the layer's response has decayed: the correction cancels the half-space.
             Some(table) => {
-                let at = r / TABLE_STEP_MM;
-                if !(at < (table.len() - 2) as f64) {
-                    return Vertical::default();
-                }
-                let i = at.floor() as usize;
-                let p0 = if i == 0 {
-                    Vertical {
-                        z: table[1].z,
-                        t: -table[1].t,
-                    }
-                } else {
-                    table[i - 1]
-                };
-                let (p1, p2, p3) = (table[i], table[i + 1], table[i + 2]);
-                let t = at - i as f64;
-                Vertical {
-                    z: half.z + catmull_rom_1(t, p0.z, p1.z, p2.z, p3.z),
-                    t: half.t + catmull_rom_1(t, p0.t, p1.t, p2.t, p3.t),
-                }
+                catmull_rom(table, r / TABLE_STEP_MM).map_or_else(Vertical::default, |correction| Vertical {
+                    z: half.z + correction.z,
+                    t: half.t + correction.t,
+                })
             }
         }
     }
@@ -157,13 +143,9 @@ impl PointKernel {
         let half = half_space_radial(self.shear_modulus_n_per_mm2, self.poisson_ratio, self.depth_mm, r);
         match &self.correction {
             None => half,
+            // Beyond the table the layer's response has decayed: the correction cancels the half-space.
             Some(table) => {
-                let at = r / TABLE_STEP_MM;
-                if !(at < (table.len() - 2) as f64) {
-                    // Beyond the table the layer's response has decayed: the correction cancels the half-space.
-                    return Radial::default();
-                }
-                half + catmull_rom(table, at)
+                catmull_rom(table, r / TABLE_STEP_MM).map_or_else(Radial::default, |correction| half + correction)
             }
         }
     }
@@ -392,31 +374,52 @@ fn catmull_rom_1(t: f64, p0: f64, p1: f64, p2: f64, p3: f64) -> f64 {
     p1 + 0.5 * t * (p2 - p0 + t * (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3 + t * (3.0 * (p1 - p2) + p3 - p0)))
 }
 
-/// Cubic (Catmull-Rom) interpolation of a table at fractional index `at` (0 <= at < len - 2).
-fn catmull_rom(table: &[Radial], at: f64) -> Radial {
-    let i = at.floor() as usize;
-    let t = at - i as f64;
-    let p1 = table[i];
-    let p2 = table[i + 1];
-    let p3 = table[i + 2];
-    // Mirror at r = 0: a is even in r, b and c vanish there with even / odd symmetry.
-    let p0 = if i == 0 {
-        Radial {
-            a: table[1].a,
-            b: table[1].b,
-            c: -table[1].c,
-        }
-    } else {
-        table[i - 1]
-    };
-    let cubic = |p0: f64, p1: f64, p2: f64, p3: f64| {
-        p1 + 0.5 * t * (p2 - p0 + t * (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3 + t * (3.0 * (p1 - p2) + p3 - p0)))
-    };
-    Radial {
-        a: cubic(p0.a, p1.a, p2.a, p3.a),
-        b: cubic(p0.b, p1.b, p2.b, p3.b),
-        c: cubic(p0.c, p1.c, p2.c, p3.c),
+/// A table of radial functions that [`catmull_rom`] interpolates: each field on its own, mirrored at r = 0.
+trait RadialTable: Copy {
+    /// The value at -r from the value at r (each field even or odd in r).
+    fn mirrored(self) -> Self;
+    /// [`catmull_rom_1`] on every field.
+    fn segment(t: f64, p: [Self; 4]) -> Self;
+}
+
+impl RadialTable for Radial {
+    /// a is even in r, b and c vanish there with even / odd symmetry.
+    fn mirrored(self) -> Self {
+        Radial { c: -self.c, ..self }
     }
+
+    fn segment(t: f64, [p0, p1, p2, p3]: [Self; 4]) -> Self {
+        Radial {
+            a: catmull_rom_1(t, p0.a, p1.a, p2.a, p3.a),
+            b: catmull_rom_1(t, p0.b, p1.b, p2.b, p3.b),
+            c: catmull_rom_1(t, p0.c, p1.c, p2.c, p3.c),
+        }
+    }
+}
+
+impl RadialTable for Vertical {
+    /// z is even in r, t odd.
+    fn mirrored(self) -> Self {
+        Vertical { t: -self.t, ..self }
+    }
+
+    fn segment(t: f64, [p0, p1, p2, p3]: [Self; 4]) -> Self {
+        Vertical {
+            z: catmull_rom_1(t, p0.z, p1.z, p2.z, p3.z),
+            t: catmull_rom_1(t, p0.t, p1.t, p2.t, p3.t),
+        }
+    }
+}
+
+/// Cubic (Catmull-Rom) interpolation of a table at fractional index `at`; `None` past the table's reach
+/// (at >= len - 2), where it has no neighbours to interpolate with.
+fn catmull_rom<T: RadialTable>(table: &[T], at: f64) -> Option<T> {
+    if !(at < (table.len() - 2) as f64) {
+        return None;
+    }
+    let i = at.floor() as usize;
+    let p0 = if i == 0 { table[1].mirrored() } else { table[i - 1] };
+    Some(T::segment(at - i as f64, [p0, table[i], table[i + 1], table[i + 2]]))
 }
 
 /// A rectangular cell of uniform traction.
