@@ -959,14 +959,8 @@ impl InverseModel {
         let mut shape = Vec::new();
         let mut score = |p: &[f64; 4]| -> f64 {
             self.line_shape([p[0], p[1]], p[2], p[3], &mut shape);
-            let correlation: f64 = shape.iter().map(|(j, w)| w * matched[*j]).sum();
-            let energy: f64 = shape
-                .iter()
-                .map(|(j, wj)| {
-                    let row = self.matched_gram.row(*j);
-                    wj * shape.iter().map(|(k, wk)| wk * row[*k]).sum::<f64>()
-                })
-                .sum();
+            let correlation = shape_correlation(&shape, matched);
+            let energy = self.matched_product(&shape, &shape);
             if correlation > 0.0 && energy > 0.0 {
                 correlation * correlation / energy
             } else {
@@ -1019,8 +1013,10 @@ impl InverseModel {
         let mut score = |p: &[f64; 4]| -> f64 {
             self.line_shape([p[0], p[1]], 0.0, 0.0, &mut first);
             self.line_shape([p[2], p[3]], 0.0, 0.0, &mut second);
-            let correlation = |w: &[(usize, f64)]| w.iter().map(|(j, wj)| wj * matched[*j]).sum::<f64>();
-            let (c1, c2) = (correlation(&first), correlation(&second));
+            let (c1, c2) = (
+                shape_correlation(&first, &matched),
+                shape_correlation(&second, &matched),
+            );
             let (g11, g22, g12) = (
                 self.matched_product(&first, &first),
                 self.matched_product(&second, &second),
@@ -1260,11 +1256,8 @@ impl InverseModel {
             return (0.0, f64::INFINITY);
         }
         let w: Vec<(usize, f64)> = cells.iter().map(|(j, f)| (*j, f[2].max(0.0) / total)).collect();
-        let correlation: f64 = w.iter().map(|(j, wj)| wj * matched[*j]).sum();
-        let energy: f64 = w
-            .iter()
-            .map(|(j, wj)| wj * w.iter().map(|(k, wk)| wk * self.matched_gram.at(*j, *k)).sum::<f64>())
-            .sum();
+        let correlation = shape_correlation(&w, matched);
+        let energy = self.matched_product(&w, &w);
         if energy > 0.0 {
             (correlation / energy, energy.sqrt().recip())
         } else {
@@ -1740,6 +1733,11 @@ impl InverseModel {
             .map(|j| tractions[3 * j + 2] / area * 1e3)
             .collect()
     }
+}
+
+/// A load shape's (cell, share) correlation with the matched filter's `matched` correlations of the frame.
+fn shape_correlation(shape: &[(usize, f64)], matched: &[f64]) -> f64 {
+    shape.iter().map(|(j, w)| w * matched[*j]).sum()
 }
 
 /// Maximises `score` from `start` by a pattern search: each parameter stepped both ways in turn (each trial put back
