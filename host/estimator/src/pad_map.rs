@@ -12,7 +12,7 @@
 //! 2048 / frame width. At full resolution paper px and undistorted px coincide, and at 1/2 or 1/4 resolution the
 //! same touch gives the same gamma and force.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, Vector3};
 use nusense_geometry::{FisheyeCamera, PadGeometry, Point2};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -315,27 +315,18 @@ impl PadMapping {
         // K^-1 applied to each column of H.
         let column = |c: usize| {
             let (x, y, w) = (h[c], h[3 + c], h[6 + c]);
-            [(x - k.cx * w) / k.fx, (y - k.cy * w) / k.fy, w]
+            Vector3::new((x - k.cx * w) / k.fx, (y - k.cy * w) / k.fy, w)
         };
         let (m1, m2, m3) = (column(0), column(1), column(2));
-        let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-        let mut scale = 2.0 / (norm(m1) + norm(m2));
+        let mut scale = 2.0 / (m1.norm() + m2.norm());
         // The pattern lies in front of the camera.
-        if m3[2] * scale < 0.0 {
+        if m3.z * scale < 0.0 {
             scale = -scale;
         }
-        let r1 = m1.map(|v| v * scale);
-        let r2 = m2.map(|v| v * scale);
-        let t = m3.map(|v| v * scale);
-        let r3 = [
-            r1[1] * r2[2] - r1[2] * r2[1],
-            r1[2] * r2[0] - r1[0] * r2[2],
-            r1[0] * r2[1] - r1[1] * r2[0],
-        ];
-        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let (r1, r2, t) = (m1 * scale, m2 * scale, m3 * scale);
         let view = CameraView {
-            foot_mm: [-dot(r1, t), -dot(r2, t)],
-            height_mm: dot(r3, t).abs(),
+            foot_mm: [-r1.dot(&t), -r2.dot(&t)],
+            height_mm: r1.cross(&r2).dot(&t).abs(),
         };
         (view.foot_mm.iter().all(|v| v.is_finite()) && view.height_mm.is_finite() && view.height_mm > 0.0)
             .then_some(view)
