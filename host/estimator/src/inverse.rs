@@ -22,7 +22,10 @@
 //! motion-only fit, the median corner's ([`InverseModel::rigid_scatter_mm`]). That scatter holds every error the
 //! motion does not explain, the smooth ones from lighting and JPEG included, which the traction fit's own residuals
 //! cannot show (it explains them away); a contact moves a minority of the corners, so the median corner stays
-//! noise. The corners that a change of light alone moves (glare: found once per rest frame, see the estimator) are
+//! noise. A load heavy enough to move most of the corners breaks that (its far field is no noise): the scatter is then
+//! measured again on the corners away from the cells stage 1 finds loaded at it, and when none clears it, at the
+//! scatter about the motion and one compact load (which explains such a load's far field). The corners that a
+//! change of light alone moves (glare: found once per rest frame, see the estimator) are
 //! left out of the test. The detection floor in N follows from the same threshold: the force of a press at the
 //! pad's centre whose expected E equals it.
 //!
@@ -757,7 +760,21 @@ impl InverseModel {
         // A heavy load moves more than half the corners: its far field is no noise. The scatter is measured again
         // without the corners near the cells stage 1 finds loaded at that first estimate (with the motion fitted to
         // the others).
-        let near = self.near_loads(stage, scatter, MEASURED_NOISE_REACH_CELLS);
+        let mut near = self.near_loads(stage, scatter, MEASURED_NOISE_REACH_CELLS);
+        if near.is_empty() && !self.test(stage, scatter).contact {
+            // A load heavy enough to move most of the corners inflates that first estimate so much that none of its
+            // cells clears it, and the test finds no contact (a 30 N press with 12 N of shear: 0.40 mm). Its cells
+            // are looked for again at the scatter left once the motion and one compact load are fitted
+            // ([`Self::compact_scatter_mm`]), which explains such a load's far field; a rest frame's errors, spread
+            // over the pad, barely lower it.
+            if let Some(compact) = self
+                .compact_scatter_mm(stage, d, valid)
+                .map(|c| c.max(floor_mm))
+                .filter(|&c| c < scatter)
+            {
+                near = self.near_loads(stage, compact, MEASURED_NOISE_REACH_CELLS);
+            }
+        }
         if near.is_empty() {
             return (self.test(stage, scatter), near);
         }
@@ -770,6 +787,64 @@ impl InverseModel {
             scatter
         };
         (self.test(stage, noise), near)
+    }
+
+    /// The corners' scatter about the motion and one compact load, mm per axis: tractions (all three components) on
+    /// the 3 x 3 cells around where stage 1 finds its most significant pressure are fitted jointly with the motion
+    /// to every corner `valid`, and the scatter is the median residual of the corners farther than
+    /// [`MEASURED_NOISE_REACH_CELLS`] from that load. `None` with too few such corners or a singular fit.
+    fn compact_scatter_mm(&self, stage: &Stage1, d: &[f64], valid: &[bool]) -> Option<f64> {
+        let (cols, rows) = (usize::from(self.pad.cols), usize::from(self.pad.rows));
+        let peak = (0..self.cells.len())
+            .filter(|&j| self.pressure_noise[j] > 0.0)
+            .max_by(|&a, &b| {
+                (stage.tractions[3 * a + 2] / self.pressure_noise[a])
+                    .total_cmp(&(stage.tractions[3 * b + 2] / self.pressure_noise[b]))
+            })?;
+        let support: Vec<usize> = neighbourhood((peak / cols) as isize, (peak % cols) as isize, rows, cols)
+            .map(|(r, c)| r * cols + c)
+            .collect();
+        let unknowns = MOTION_PARAMETERS + 3 * support.len();
+        let corners: Vec<usize> = (0..valid.len()).filter(|&i| valid[i]).collect();
+        // The design matrix over the valid corners' rows: the motion basis, then each support cell's three columns.
+        let mut design = DMatrix::<f64>::zeros(2 * corners.len(), unknowns);
+        let mut observed = DVector::<f64>::zeros(2 * corners.len());
+        for (k, r) in corners.iter().flat_map(|&i| [2 * i, 2 * i + 1]).enumerate() {
+            for (c, &v) in self.b.row(r).iter().enumerate() {
+                design[(k, c)] = v;
+            }
+            let a = self.a.row(r);
+            for (m, &j) in support.iter().enumerate() {
+                for axis in 0..3 {
+                    design[(k, MOTION_PARAMETERS + 3 * m + axis)] = a[3 * j + axis];
+                }
+            }
+            observed[k] = d[r];
+        }
+        let mut normal = design.tr_mul(&design);
+        for i in MOTION_PARAMETERS..unknowns {
+            normal[(i, i)] += self.lambda;
+        }
+        let solution = normal.cholesky()?.solve(&design.tr_mul(&observed));
+        let residuals = observed - &design * solution;
+        let reach = MEASURED_NOISE_REACH_CELLS * self.pad.pitch_x_mm().max(self.pad.pitch_y_mm());
+        let mut near = vec![false; valid.len()];
+        for &(i, distance) in &self.corners_near_cell[peak] {
+            near[i] |= distance <= reach;
+        }
+        let mut squares: Vec<f64> = corners
+            .iter()
+            .enumerate()
+            .filter(|&(_, &i)| !near[i])
+            .map(|(k, _)| residuals[2 * k].powi(2) + residuals[2 * k + 1].powi(2))
+            .collect();
+        if squares.len() < 2 * MIN_NOISE_CORNERS {
+            return None;
+        }
+        let middle = squares.len() / 2;
+        let (_, median, _) = squares.select_nth_unstable_by(middle, f64::total_cmp);
+        let scatter = (*median / (2.0 * std::f64::consts::LN_2)).sqrt();
+        scatter.is_finite().then_some(scatter)
     }
 
     /// The corners' scatter about the motion-only fit, mm per axis: the median corner's, so that a contact (a
@@ -2135,6 +2210,48 @@ mod tests {
             (quieter.detection_floor_n * 5.0 / outcome.detection_floor_n - 1.0).abs() < 1e-9,
             "{outcome:?}"
         );
+    }
+
+    #[test]
+    fn a_heavy_press_does_not_pass_for_noise_about_the_motion_and_one_compact_load() {
+        let model = model();
+        let motion = [1.0, -0.5, 0.02, 0.08, -0.08, 0.02, 0.004, 0.003];
+        let mut state = 777u64;
+        let mut gauss = || {
+            let mut sum = 0.0;
+            for _ in 0..12 {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                sum += (state >> 11) as f64 / (1u64 << 53) as f64;
+            }
+            sum - 6.0
+        };
+        let noise: Vec<f64> = (0..model.observations).map(|_| 0.01 * gauss()).collect();
+        let valid = vec![true; model.observations / 2];
+        let noisy = |forces: &[(usize, [f64; 3])]| -> Vec<f64> {
+            field(&model, forces, motion)
+                .iter()
+                .zip(&noise)
+                .map(|(d, e)| d + e)
+                .collect()
+        };
+        // Motion and noise only: the compact load explains nothing of it, so both scatters are the noise.
+        let rest = noisy(&[]);
+        let stage = model.stage1(&rest, &valid);
+        let compact = model.compact_scatter_mm(&stage, &rest, &valid).unwrap();
+        assert!((compact / 0.01 - 1.0).abs() < 0.25, "{compact}");
+        assert!(!model.measured_test(&rest, &valid, 0.0).contact);
+        // A 30 N press with 12 N of shear moves every corner far beyond the noise; about the motion and that
+        // one load the far corners scatter as the noise does.
+        let (row, col) = node_at(&model, [0.0, 0.0]);
+        let heavy = noisy(&node_press(&model, row, col, [12.0, 0.0, 30.0]));
+        let stage = model.stage1(&heavy, &valid);
+        let scatter = model.rigid_scatter_mm(&heavy, &valid);
+        let compact = model.compact_scatter_mm(&stage, &heavy, &valid).unwrap();
+        assert!(scatter > 5.0 * 0.01, "{scatter}");
+        assert!(compact < 2.0 * 0.01, "{compact} against a rigid scatter of {scatter}");
+        assert!(model.measured_test(&heavy, &valid, 0.0).contact);
     }
 
     #[test]

@@ -494,9 +494,9 @@ fn a_press_with_a_tangential_push_reports_its_direction() {
 }
 
 #[test]
-#[ignore = "known failure: a 30 N press with 12 N of shear reads as no contact: the motion-only fit takes its far \
-            field for an 11 px camera shift and a 0.40 mm noise, so the test's floor is 20.7 N and its statistic 344 \
-            against 457"]
+#[ignore = "known failure: the 30 N press with 12 N of shear is found (26 N calibrated, pushed along +x), but its \
+            strongest contact lies 3.3 mm from it: the tracker loses the 13 corners over the contact, and stage 2 \
+            places the load on a ring around them, cut in three"]
 fn force_so_large_that_corners_move_more_than_half_a_cell() {
     let truth = [0.0, 0.0];
     let mut contact = Contact::sphere(8.0, truth, 30.0);
