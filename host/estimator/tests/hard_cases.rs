@@ -247,8 +247,10 @@ fn pad_torn_before_the_reference_still_measures_the_rest() {
 }
 
 #[test]
-#[ignore = "known failure: corners next to ink lost after the reference are biased, not masked, and read as a \
-            press of about the detection floor"]
+#[ignore = "known failure: the squares ink lost or smeared after the reference leaves partly inked have their \
+            centroids, and so their corners, biased, not masked (the tracker flags such squares only once the camera \
+            has moved): each damage alone reads as a contact far above the test's threshold (missing ink: statistic \
+            39273 against 457, 0.52 N calibrated at (8.3, 5.0) mm; the smear: 23277, 0.47 N at (-11.9, -6.3) mm)"]
 fn ink_lost_after_the_reference_is_not_a_press() {
     let scene = Scene {
         damage: vec![
