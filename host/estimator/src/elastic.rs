@@ -439,31 +439,87 @@ const GAUSS: [(f64, f64); 5] = [
     (0.453_089_922_969_332_3, 0.118_463_442_528_094_54),
 ];
 
+/// Where the pad ends (bonded layer only).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Border {
+    /// An unbounded layer.
+    None,
+    /// Bonded to its frame along a rectangle of these half-extents (mm): held still there.
+    Clamped(Point2),
+    /// Held in a frame whose walls, at these half-extents (mm), stop the gel moving through them and let it slide
+    /// along them (no shear on them): each wall is a plane of symmetry of the field, which mirror images of the load
+    /// across it give exactly (its tangential traction normal to the wall flipped). Only the images across each wall
+    /// and across both walls at each corner are kept; images of images lie more than twice the pad's size away, where
+    /// the layer's response has decayed.
+    Sliding(Point2),
+}
+
+/// A load at `q` and its images across the sliding walls `walls` (half-extents, mm), if any: each image's place
+/// and the sign of its tangential traction (x, y).
+fn with_images(q: Point2, walls: Option<Point2>) -> impl Iterator<Item = (Point2, [f64; 2])> {
+    let reflections: &[(i8, i8)] = if walls.is_some() {
+        &[
+            (0, 0),
+            (1, 0),
+            (-1, 0),
+            (0, 1),
+            (0, -1),
+            (1, 1),
+            (1, -1),
+            (-1, 1),
+            (-1, -1),
+        ]
+    } else {
+        &[(0, 0)]
+    };
+    let [half_x, half_y] = walls.unwrap_or([0.0, 0.0]);
+    reflections.iter().map(move |&(ix, iy)| {
+        let x = if ix == 0 {
+            q[0]
+        } else {
+            2.0 * f64::from(ix) * half_x - q[0]
+        };
+        let y = if iy == 0 {
+            q[1]
+        } else {
+            2.0 * f64::from(iy) * half_y - q[1]
+        };
+        let flip = |i: i8| if i == 0 { 1.0 } else { -1.0 };
+        ([x, y], [flip(ix), flip(iy)])
+    })
+}
+
 /// The matrix of cell forces (N; fx, fy, fz per cell) to in-plane displacements (mm; x, y per observation point),
-/// with the pad clamped along a rectangle when asked.
+/// with the pad clamped along a rectangle or held between sliding walls when asked.
 #[derive(Clone, Debug)]
 pub struct PadResponse {
     /// (2 * observations) x (3 * cells).
     pub matrix: DMatrix<f64>,
+    /// The sliding walls' half-extents, if any (the parallax's images too).
+    walls: Option<Point2>,
 }
 
 impl PadResponse {
-    /// `border`: half-extents (mm) of the rectangle along which the pad is bonded to its frame, if it is.
+    /// `border`: where and how the pad is held at its edge.
     pub fn new(
         kernel: &PointKernel,
         observations: &[Point2],
         cells: &[Cell],
-        border: Option<Point2>,
+        border: Border,
     ) -> Result<Self, ElasticError> {
-        let mut matrix = cell_matrix(kernel, observations, cells);
-        if let Some(half) = border {
+        let walls = match border {
+            Border::Sliding(half) => Some(half),
+            _ => None,
+        };
+        let mut matrix = cell_matrix(kernel, observations, cells, walls);
+        if let Border::Clamped(half) = border {
             // The frame holds the pattern still along the border: reaction forces there cancel the displacement
             // that the cell tractions would cause at the border. A displacement field u = A t becomes
             // u - G_ob G_bb^-1 G_bt t, with G the point responses between observation, border and cell points.
             let points = border_points(half, kernel.depth_mm);
             let g_bb = point_matrix(kernel, &points, &points);
             let g_ob = point_matrix(kernel, observations, &points);
-            let g_bt = cell_matrix(kernel, &points, cells);
+            let g_bt = cell_matrix(kernel, &points, cells, None);
             // The reactions' own response is positive definite; a tiny ridge keeps the factorisation stable.
             let ridge = 1e-9 * g_bb.diagonal().iter().map(|v| v.abs()).fold(0.0, f64::max);
             let mut regularised = g_bb;
@@ -479,7 +535,7 @@ impl PadResponse {
         if matrix.iter().any(|v| !v.is_finite()) {
             return Err(ElasticError::Degenerate("the response matrix is not finite"));
         }
-        Ok(Self { matrix })
+        Ok(Self { matrix, walls })
     }
 
     /// Adds what the camera sees of the pattern's normal displacement: a point that moves by w towards the camera
@@ -500,9 +556,12 @@ impl PadResponse {
                             cell.centre_mm[0] + gx * cell.size_mm[0],
                             cell.centre_mm[1] + gy * cell.size_mm[1],
                         ];
-                        let v = kernel.vertical([p[0] - q[0], p[1] - q[1]]);
-                        for (sum, v) in w.iter_mut().zip(v) {
-                            *sum += wx * wy * v;
+                        for (q, flip) in with_images(q, self.walls) {
+                            let v = kernel.vertical([p[0] - q[0], p[1] - q[1]]);
+                            let flip = [flip[0], flip[1], 1.0];
+                            for ((sum, v), f) in w.iter_mut().zip(v).zip(flip) {
+                                *sum += wx * wy * v * f;
+                            }
                         }
                     }
                 }
@@ -580,8 +639,15 @@ fn point_matrix(kernel: &PointKernel, to: &[Point2], from: &[Point2]) -> DMatrix
     m
 }
 
-/// Cell-averaged responses: (2 * to) x (3 * cells).
-fn cell_matrix(kernel: &PointKernel, to: &[Point2], cells: &[Cell]) -> DMatrix<f64> {
+/// What sliding walls at half-extents `walls` (mm) add to the in-plane response of `cells` at `observations`: the
+/// cell-averaged responses of the loads' images alone, (2 * observations) x (3 * cells). How much a load's far field
+/// depends on how the pad is held at its edge (see `InverseModel::border_doubt`).
+pub fn image_matrix(kernel: &PointKernel, observations: &[Point2], cells: &[Cell], walls: Point2) -> DMatrix<f64> {
+    cell_matrix(kernel, observations, cells, Some(walls)) - cell_matrix(kernel, observations, cells, None)
+}
+
+/// Cell-averaged responses: (2 * to) x (3 * cells), with the loads' images across sliding `walls` if any.
+fn cell_matrix(kernel: &PointKernel, to: &[Point2], cells: &[Cell], walls: Option<Point2>) -> DMatrix<f64> {
     let mut m = DMatrix::zeros(2 * to.len(), 3 * cells.len());
     for (j, cell) in cells.iter().enumerate() {
         for (i, p) in to.iter().enumerate() {
@@ -592,10 +658,13 @@ fn cell_matrix(kernel: &PointKernel, to: &[Point2], cells: &[Cell]) -> DMatrix<f
                         cell.centre_mm[0] + gx * cell.size_mm[0],
                         cell.centre_mm[1] + gy * cell.size_mm[1],
                     ];
-                    let r = kernel.response([p[0] - q[0], p[1] - q[1]]);
-                    for row in 0..2 {
-                        for col in 0..3 {
-                            sum[row][col] += wx * wy * r[row][col];
+                    for (q, flip) in with_images(q, walls) {
+                        let r = kernel.response([p[0] - q[0], p[1] - q[1]]);
+                        let flip = [flip[0], flip[1], 1.0];
+                        for row in 0..2 {
+                            for col in 0..3 {
+                                sum[row][col] += wx * wy * r[row][col] * flip[col];
+                            }
                         }
                     }
                 }
@@ -788,6 +857,54 @@ mod tests {
     }
 
     #[test]
+    fn sliding_walls_stop_the_pattern_moving_through_them() {
+        let kernel = PointKernel::new(&ElasticConfig::default()).unwrap();
+        let walls = [29.5, 23.0];
+        let cells = [Cell {
+            centre_mm: [22.0, 15.0],
+            size_mm: [3.3, 3.3],
+        }];
+        // Points on the right wall and on the bottom one, near the load.
+        let on_right: Vec<Point2> = (0..7).map(|i| [walls[0], 6.0 + 3.0 * i as f64]).collect();
+        let on_bottom: Vec<Point2> = (0..7).map(|i| [12.0 + 3.0 * i as f64, walls[1]]).collect();
+        for (points, across) in [(on_right, 0), (on_bottom, 1)] {
+            let free = PadResponse::new(&kernel, &points, &cells, Border::None).unwrap();
+            let held = PadResponse::new(&kernel, &points, &cells, Border::Sliding(walls)).unwrap();
+            for col in 0..3 {
+                let largest = (0..points.len())
+                    .map(|i| free.matrix[(2 * i + across, col)].abs())
+                    .fold(0.0, f64::max);
+                for (i, point) in points.iter().enumerate() {
+                    let through = held.matrix[(2 * i + across, col)];
+                    assert!(
+                        through.abs() < 1e-5 * largest,
+                        "force {col} moves {point:?} through the wall by {through} ({largest} free)"
+                    );
+                }
+                // Along the wall the pattern still moves (it slides), more than without the wall for a normal load.
+                if col == 2 {
+                    let along =
+                        |m: &DMatrix<f64>| (0..points.len()).map(|i| m[(2 * i + 1 - across, 2)].abs()).sum::<f64>();
+                    assert!(
+                        along(&held.matrix) > along(&free.matrix),
+                        "the wall does not let it slide"
+                    );
+                }
+            }
+        }
+        // Far from the walls they change little.
+        let centre = [Cell {
+            centre_mm: [0.0, 0.0],
+            size_mm: [3.3, 3.3],
+        }];
+        let inside = [[0.0, 3.0], [4.0, 0.0]];
+        let free = PadResponse::new(&kernel, &inside, &centre, Border::None).unwrap();
+        let held = PadResponse::new(&kernel, &inside, &centre, Border::Sliding(walls)).unwrap();
+        let change = (&free.matrix - &held.matrix).abs().max();
+        assert!(change < 1e-3 * free.matrix.abs().max(), "{change}");
+    }
+
+    #[test]
     #[ignore = "known failure: 13 mm from the clamp the response changes by 1.3 %, above the 1 % this test asks"]
     fn a_clamped_border_holds_the_border_still() {
         let config = ElasticConfig {
@@ -802,8 +919,8 @@ mod tests {
             centre_mm: [0.0, 12.0],
             size_mm: [3.0, 3.0],
         }];
-        let free = PadResponse::new(&kernel, &on_border, &cells, None).unwrap();
-        let clamped = PadResponse::new(&kernel, &on_border, &cells, Some(half)).unwrap();
+        let free = PadResponse::new(&kernel, &on_border, &cells, Border::None).unwrap();
+        let clamped = PadResponse::new(&kernel, &on_border, &cells, Border::Clamped(half)).unwrap();
         let largest = |m: &DMatrix<f64>| m.iter().map(|v| v.abs()).fold(0.0, f64::max);
         assert!(
             largest(&clamped.matrix) < 0.1 * largest(&free.matrix),
@@ -817,8 +934,8 @@ mod tests {
             centre_mm: [0.0, 0.0],
             size_mm: [3.0, 3.0],
         }];
-        let free = PadResponse::new(&kernel, &inside, &centre, None).unwrap();
-        let clamped = PadResponse::new(&kernel, &inside, &centre, Some(half)).unwrap();
+        let free = PadResponse::new(&kernel, &inside, &centre, Border::None).unwrap();
+        let clamped = PadResponse::new(&kernel, &inside, &centre, Border::Clamped(half)).unwrap();
         let change = (&free.matrix - &clamped.matrix).abs().max();
         assert!(
             change < 0.01 * largest(&free.matrix),
