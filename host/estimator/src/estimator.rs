@@ -79,8 +79,8 @@ struct FrameLattice {
     /// Squares the detector found (paper mode: quadrilaterals accepted, indexed or not).
     squares_found: usize,
     recovered: bool,
-    /// Per corner: built from a square the camera's motion moved under a change of light (see
-    /// [`crate::detection::Detection::relit`]); the contact test leaves these corners out.
+    /// Per corner: built from a square seen under another light than in the rest frame (the camera moved, or the
+    /// LEDs changed unevenly: see [`crate::detection::Detection::relit`]); the contact test leaves these corners out.
     relit_corners: Vec<bool>,
 }
 

@@ -22,7 +22,7 @@ use crate::config::Thresholds;
 use crate::error::EstimateError;
 use blobs::find_square_blobs;
 use indexing::index_lattice;
-use window::{add_to_histogram, centroid, mean_membership, CellFrame, Pixels};
+use window::{add_to_histogram, centroid, mean_brightness, mean_membership, CellFrame, Pixels};
 use yellowness::{otsu, Histogram, MembershipTable, YellownessMap};
 
 /// Every square's sub-pixel centroid (raw px) and area (px^2), in the pad's square order; `None` where the square
@@ -44,10 +44,14 @@ const MAX_PASSES: usize = 5;
 const RELOCK_CELLS: f64 = 0.35;
 /// The camera jumped when its rigid motion moved some square this many cells since the last frame.
 const JUMP_CELLS: f64 = 0.1;
-/// After the camera moved, a square whose yellow area changed by more than this many robust standard deviations
-/// (over the frame's squares) beyond what its lattice neighbours' spacing explains is not trusted: see
-/// `FastTracker::relit_squares`.
+/// A square whose yellow area changed by more than this many robust standard deviations (over the frame's squares)
+/// beyond what its lattice neighbours' spacing explains is not trusted: see `FastTracker::relit_squares`.
 const RELIT_SIGMAS: f64 = 5.0;
+/// With the camera still, a square's light changed when the brightness of its middle (the patch within
+/// [`CENTRE_HALF`] cells of its centroid, all yellow ink) departs from the rest frame's by more than this fraction. The
+/// patch's mean over its pixels moves by well under 0.1 % with the sensor's noise, and a press moves the patch with the
+/// ink, so only the light changes it; a change this small clips nothing that was not clipped already.
+const LIGHT_CHANGE: f64 = 0.02;
 /// MAD to standard deviation for a normal distribution.
 pub(crate) const MAD_TO_SIGMA: f64 = 1.4826;
 /// Samples across a cell the centroid needs; more pixels than this add time, not precision.
@@ -76,6 +80,8 @@ struct SquareModel {
     index: SquareIndex,
     reference: Option<Point2>,
     reference_area: f64,
+    /// Mean R + G + B of the square's middle in the rest frame (see [`LIGHT_CHANGE`]); 0 where unknown.
+    reference_brightness: f64,
     cell: CellFrame,
 }
 
@@ -91,8 +97,9 @@ pub struct Detection {
     /// Times the squares were measured in this frame: 1 in a steady scene, 2 when the tracker re-measured them
     /// from the lattice's rigid motion (the camera jumped or a square slipped), one more after a full search.
     pub measurement_passes: u32,
-    /// Per square (the order of `squares`): found, but the camera's motion moved it into or out of a change of
-    /// light (glare, vignetting), which biases its centroid by an amount no motion model predicts.
+    /// Per square (the order of `squares`): found, but under another light than in the rest frame (the camera's
+    /// motion moved it into or out of the glare or the vignetting, or the LEDs changed and it clips), which biases its
+    /// centroid by an amount no motion model predicts.
     pub relit: Vec<bool>,
 }
 
@@ -162,6 +169,7 @@ impl FastTracker {
                 index,
                 reference: None,
                 reference_area: 0.0,
+                reference_brightness: 0.0,
                 cell: cell.unwrap_or(any_cell),
             })
             .collect();
@@ -203,6 +211,16 @@ impl FastTracker {
             }
             squares_px.push(model.reference);
         }
+        let px = Pixels {
+            raw: frame.as_raw(),
+            width: width as usize,
+            height: height as usize,
+        };
+        for model in &mut tracker.squares {
+            if let Some(p) = model.reference {
+                model.reference_brightness = mean_brightness(&px, p, &model.cell, CENTRE_HALF, tracker.stride);
+            }
+        }
         tracker.previous = squares_px.clone();
         tracker.previous_area = measured.iter().map(|m| m.map(|(_, a)| a)).collect();
         let corners = corners_from_squares(&pad, &squares_px);
@@ -220,7 +238,8 @@ impl FastTracker {
     }
 
     /// Makes the last tracked frame the reference: squares found there keep their new position and area (and the
-    /// cells follow them); squares it missed keep the old reference.
+    /// cells follow them); squares it missed keep the old reference. The frame is not kept, so the squares' light in
+    /// it is unknown: until the next rest frame, only the camera's motion flags relit squares.
     pub fn adopt_last_frame_as_reference(&mut self) -> Result<(), EstimateError> {
         self.last_motion = Similarity::IDENTITY;
         for ((model, p), a) in self.squares.iter_mut().zip(&self.previous).zip(&self.previous_area) {
@@ -228,6 +247,7 @@ impl FastTracker {
                 model.reference = Some(*p);
                 model.reference_area = *a;
             }
+            model.reference_brightness = 0.0;
         }
         let squares: Vec<Option<Point2>> = self.squares.iter().map(|m| m.reference).collect();
         for (model, cell) in self.squares.iter_mut().zip(local_cells(&self.pad, &squares)?) {
@@ -261,7 +281,7 @@ impl FastTracker {
                 }
             }
         }
-        let relit = self.relit_squares(&measured);
+        let relit = self.relit_squares(frame, &measured);
         let squares: Vec<Option<Point2>> = measured.iter().map(|m| m.map(|(p, _)| p)).collect();
         self.previous = squares.clone();
         self.previous_area = measured.iter().map(|m| m.map(|(_, a)| a)).collect();
@@ -275,16 +295,24 @@ impl FastTracker {
         })
     }
 
-    /// The squares the camera's motion moved into or out of a change of light. Glare and vignetting belong to the
-    /// camera, not the pad: once the camera has moved against the pad, a square seen through another part of the
-    /// light than in the rest frame has its yellow area, and with it its centroid, biased, and the bias differs from
-    /// square to square, so no motion model removes it. The area shows it: the pad's deformation changes a square's
-    /// area together with its spacing to its diagonal neighbours, a change of light changes the area alone. A
-    /// square whose area change departs from its neighbours' spacing by more than [`RELIT_SIGMAS`] robust standard
-    /// deviations over the frame is flagged. A press changes areas as well (the pattern sinks towards the camera
+    /// The squares seen under another light than in the rest frame. Glare and vignetting belong to the camera, not
+    /// the pad: once the camera has moved against the pad, a square seen through another part of the light than in
+    /// the rest frame has its yellow area, and with it its centroid, biased, and the bias differs from square to
+    /// square, so no motion model removes it. A still camera sees the same when the light itself changes unevenly:
+    /// with one LED side brighter, the yellow on that side clips in red and green while its blue still grows, so
+    /// those squares pale towards white (more where the glare adds to the light), lose yellow membership unevenly and
+    /// their centroids move by up to a few px (validation sensor at 1024x768, one side at 150 %: rest frames read as
+    /// contacts of 0.8 N while only a camera's motion flagged squares). The area shows both: the pad's deformation
+    /// changes a square's area together with its spacing to its diagonal neighbours, a change of light changes the
+    /// area alone. A square whose area change departs from its neighbours' spacing by more than [`RELIT_SIGMAS`]
+    /// robust standard deviations over the frame is flagged, if the camera moved or the light on the square's middle
+    /// changed by more than [`LIGHT_CHANGE`]. The light's condition keeps a press under a still camera and steady
+    /// light from being flagged: the spacing explains a press's area change only to first order, which is beyond the
+    /// few hundredths of a still frame's robust spread (a 5 N press at the validation pad's centre then went
+    /// undetected). A change of light that is even over the pattern (all LEDs alike, the exposure) changes every
+    /// square's area alike and flags nothing. A press changes areas as well (the pattern sinks towards the camera
     /// under it), so a flag does not drop the square: the contact test leaves it out (see [`Detection::relit`]).
-    /// A still camera flags nothing: the light over the pattern is the rest frame's.
-    fn relit_squares(&self, measured: &[Option<(Point2, f64)>]) -> Vec<bool> {
+    fn relit_squares(&self, frame: &RgbImage, measured: &[Option<(Point2, f64)>]) -> Vec<bool> {
         let moved = self.squares.iter().any(|model| {
             model.reference.is_some_and(|r| {
                 sub(self.last_motion.apply(r), r)[0].hypot(sub(self.last_motion.apply(r), r)[1]) / model.cell.min_step()
@@ -292,9 +320,6 @@ impl FastTracker {
             })
         });
         let mut relit = vec![false; measured.len()];
-        if !moved {
-            return relit;
-        }
         let slot_of = |row: i32, col: i32| -> Option<usize> {
             let index = SquareIndex {
                 row: u16::try_from(row).ok()?,
@@ -335,8 +360,20 @@ impl FastTracker {
         let centre = median(&mut values);
         let mut deviations: Vec<f64> = values.iter().map(|v| (v - centre).abs()).collect();
         let limit = RELIT_SIGMAS * MAD_TO_SIGMA * median(&mut deviations);
-        for (flag, u) in relit.iter_mut().zip(&unexplained) {
-            *flag = u.is_some_and(|u| (u - centre).abs() > limit);
+        let px = Pixels {
+            raw: frame.as_raw(),
+            width: frame.width() as usize,
+            height: frame.height() as usize,
+        };
+        let light_changed = |model: &SquareModel, at: Point2| {
+            model.reference_brightness > 0.0
+                && (mean_brightness(&px, at, &model.cell, CENTRE_HALF, self.stride) / model.reference_brightness - 1.0)
+                    .abs()
+                    > LIGHT_CHANGE
+        };
+        for (((flag, u), model), m) in relit.iter_mut().zip(&unexplained).zip(&self.squares).zip(measured) {
+            *flag = u.is_some_and(|u| (u - centre).abs() > limit)
+                && m.is_some_and(|(at, _)| moved || light_changed(model, at));
         }
         relit
     }
