@@ -248,9 +248,11 @@ fn pad_torn_before_the_reference_still_measures_the_rest() {
 
 #[test]
 #[ignore = "known failure: the squares ink lost or smeared after the reference leaves partly inked have their \
-            centroids, and so their corners, biased, not masked (the tracker flags such squares only once the camera \
-            has moved): each damage alone reads as a contact far above the test's threshold (missing ink: statistic \
-            39273 against 457, 0.52 N calibrated at (8.3, 5.0) mm; the smear: 23277, 0.47 N at (-11.9, -6.3) mm)"]
+            centroids, and so their corners, biased, not masked (with a still camera the tracker flags a square's \
+            unexplained area change only where the light on its middle changed, and ink lost at a square's edge leaves \
+            its middle as it was): each damage alone reads as a contact far above the test's threshold (missing ink: \
+            statistic 39273 against 457, 0.52 N calibrated at (8.3, 5.0) mm; the smear: 23277, 0.47 N at (-11.9, \
+            -6.3) mm, measured on 1eb76fe); both together, with the still camera's flags: 55964 at (8.3, 5.0) mm"]
 fn ink_lost_after_the_reference_is_not_a_press() {
     let scene = Scene {
         damage: vec![
@@ -315,7 +317,14 @@ fn one_led_side_much_brighter_is_not_a_press_and_a_press_under_it_is_measured() 
     }
     for (k, truth) in [[6.0, -4.0], [14.0, 6.0]].into_iter().enumerate() {
         let (frame, _) = render_with(renderer(), &press(truth, 6.0), leds, 40 + k as u64);
-        expect_press(&mut estimator, &frame, truth, 6.0, LOCATION_MM, &format!("LEDs {leds:?}, press at {truth:?}"));
+        expect_press(
+            &mut estimator,
+            &frame,
+            truth,
+            6.0,
+            LOCATION_MM,
+            &format!("LEDs {leds:?}, press at {truth:?}"),
+        );
     }
 }
 
