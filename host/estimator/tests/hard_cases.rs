@@ -524,9 +524,6 @@ fn a_press_with_a_tangential_push_reports_its_direction() {
 }
 
 #[test]
-#[ignore = "known failure: the 30 N press with 12 N of shear is found (26 N calibrated, pushed along +x), but its \
-            strongest contact lies 3.3 mm from it: the tracker loses the 13 corners over the contact, and stage 2 \
-            places the load on a ring around them, cut in three"]
 fn force_so_large_that_corners_move_more_than_half_a_cell() {
     let truth = [0.0, 0.0];
     let mut contact = Contact::sphere(8.0, truth, 30.0);

@@ -74,6 +74,14 @@ const NEIGHBOUR_ROUNDS: usize = 3;
 const NEIGHBOUR_REACH: u32 = 2;
 /// ...and at least this many must have been found.
 const MIN_NEIGHBOURS: usize = 3;
+/// A square lies within this many cells (along each lattice direction) of where its neighbours' motion, continued
+/// into it, puts it, even under a press that moves the pad by two cells (a 30 N press with 12 N of shear: 0.35 at
+/// most); a window settled on a diagonal neighbour instead lies 0.6 to 1.2 cells off (the same press). See
+/// `FastTracker::settle_large_moves`.
+const TREND_CELLS: f64 = 0.6;
+/// Two squares' centroids are at least this many cells apart: diagonal neighbours in the checkerboard lie a cell
+/// apart along both lattice directions, 0.7 where that press compresses the pad most.
+const TAKEN_CELLS: f64 = 0.5;
 
 #[derive(Clone, Debug)]
 struct SquareModel {
@@ -627,7 +635,100 @@ impl FastTracker {
                 break;
             }
         }
+        if check_area && retry.iter().zip(&result).any(|(&lost, m)| lost && m.is_none()) {
+            self.settle_large_moves(&px, &membership, &retry, &mut result);
+        }
         Ok(result)
+    }
+
+    /// Squares a press moved much further than their neighbours predicted (a heavy press with shear moves the pad
+    /// under it by two cells, its neighbours by one to one and a half): their windows, started where the rest of
+    /// the lattice put them, either lose them (more than [`WINDOW_HALF`] from the start) or settle on a diagonal
+    /// neighbour. The pad's motion is smooth on the scale of a cell, so continued from the neighbours' motion
+    /// (`trend_prediction`) it puts a square within [`TREND_CELLS`] of where it is: a found square further than
+    /// that is another square (it is dropped), and a lost square is searched again from there, and kept when it
+    /// lands within that distance and on no square already found (within [`TAKEN_CELLS`]). Runs only when some
+    /// square was lost (a damaged pad loses squares too, but its neighbours agree with each other: nothing is
+    /// dropped there, and each lost square costs at most [`NEIGHBOUR_ROUNDS`] more windows).
+    fn settle_large_moves(&self, px: &Pixels, membership: &MembershipTable, lost: &[bool], result: &mut Measurements) {
+        let mut search: Vec<bool> = lost.iter().zip(result.iter()).map(|(&l, m)| l && m.is_none()).collect();
+        let snapshot = result.clone();
+        for slot in 0..result.len() {
+            let Some((at, _)) = snapshot[slot] else { continue };
+            let Some(trend) = self.trend_prediction(slot, &snapshot) else {
+                continue;
+            };
+            let miss = self.squares[slot].cell.to_cell(sub(at, trend));
+            if miss[0].abs().max(miss[1].abs()) > TREND_CELLS {
+                result[slot] = None;
+                search[slot] = true;
+            }
+        }
+        for _ in 0..NEIGHBOUR_ROUNDS {
+            let snapshot = result.clone();
+            let mut progress = false;
+            for (slot, model) in self.squares.iter().enumerate() {
+                if !search[slot] || result[slot].is_some() {
+                    continue;
+                }
+                let Some(start) = self.trend_prediction(slot, &snapshot) else {
+                    continue;
+                };
+                let SquareOutcome::Found(at, area) =
+                    self.measure_square_within(px, model, start, membership, true, TREND_CELLS)
+                else {
+                    continue;
+                };
+                let taken = result.iter().flatten().any(|(other, _)| {
+                    let gap = model.cell.to_cell(sub(*other, at));
+                    gap[0].abs().max(gap[1].abs()) < TAKEN_CELLS
+                });
+                if !taken {
+                    result[slot] = Some((at, area));
+                    progress = true;
+                }
+            }
+            if !progress {
+                break;
+            }
+        }
+    }
+
+    /// Where a square is if the pad's motion continues smoothly into it from its nearest found lattice neighbours
+    /// (the diagonal ones and those two cells along its row and column): along each of those eight directions, the
+    /// motion of the neighbour one step away extrapolated linearly with the one two steps away (the neighbour's own
+    /// motion alone when that one is not found), and the square's reference moved by the median of those. A
+    /// straight extrapolation follows the motion up towards its peak under a press, where the neighbours' plain
+    /// motion falls short of it. `None` with fewer than [`MIN_NEIGHBOURS`] directions.
+    fn trend_prediction(&self, slot: usize, measured: &[Option<(Point2, f64)>]) -> Option<Point2> {
+        let model = &self.squares[slot];
+        let own = model.reference?;
+        let (row, col) = (i32::from(model.index.row), i32::from(model.index.col));
+        let motion = |steps: i32, (dr, dc): (i32, i32)| -> Option<Point2> {
+            let (r, c) = (
+                u16::try_from(row + steps * dr).ok()?,
+                u16::try_from(col + steps * dc).ok()?,
+            );
+            let n = self
+                .squares
+                .binary_search_by_key(&SquareIndex { row: r, col: c }, |m| m.index)
+                .ok()?;
+            Some(sub(measured[n]?.0, self.squares[n].reference?))
+        };
+        let (mut dx, mut dy) = (Vec::with_capacity(8), Vec::with_capacity(8));
+        for direction in [(-1, -1), (-1, 1), (1, -1), (1, 1), (0, -2), (0, 2), (-2, 0), (2, 0)] {
+            let Some(near) = motion(1, direction) else { continue };
+            let d = match motion(2, direction) {
+                Some(far) => [2.0 * near[0] - far[0], 2.0 * near[1] - far[1]],
+                None => near,
+            };
+            dx.push(d[0]);
+            dy.push(d[1]);
+        }
+        if dx.len() < MIN_NEIGHBOURS {
+            return None;
+        }
+        Some([own[0] + median(&mut dx), own[1] + median(&mut dy)])
     }
 
     /// One square's centroid from a window starting at `start` (raw px).
@@ -638,6 +739,19 @@ impl FastTracker {
         start: Point2,
         membership: &MembershipTable,
         check_area: bool,
+    ) -> SquareOutcome {
+        self.measure_square_within(px, model, start, membership, check_area, WINDOW_HALF)
+    }
+
+    /// [`Self::measure_square`], accepting a centroid up to `reach` cells from `start`.
+    fn measure_square_within(
+        &self,
+        px: &Pixels,
+        model: &SquareModel,
+        start: Point2,
+        membership: &MembershipTable,
+        check_area: bool,
+        reach: f64,
     ) -> SquareOutcome {
         // The window holds the whole square with room to spare, but a square that moved since the last frame may
         // be clipped by it: re-centre on the pixel nearest the centroid until that pixel stops changing. In a
@@ -668,7 +782,7 @@ impl FastTracker {
             return SquareOutcome::Clipped;
         }
         let offset = model.cell.to_cell(sub(found.at, start));
-        if offset[0].abs() > WINDOW_HALF || offset[1].abs() > WINDOW_HALF {
+        if offset[0].abs() > reach || offset[1].abs() > reach {
             return SquareOutcome::Lost;
         }
         if mean_membership(px, found.at, &model.cell, CENTRE_HALF, self.stride, membership) < MIN_CENTRE_MEMBERSHIP {
