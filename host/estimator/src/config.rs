@@ -87,7 +87,9 @@ impl Default for Roi {
 pub struct Thresholds {
     /// Contact when the local (non-affine) displacement of some corner exceeds this, in pad mm.
     pub contact_shear_mm: f64,
-    /// A tracked point that moved more than this many cells since the reference is implausible (masked).
+    /// A tracked point that moved more than this many cells since the reference is implausible (masked). The tracker
+    /// follows a heavy press's motion (a 40 N press with 15 N of shear moves corners 7.8 mm, 2.4 cells), and a point
+    /// on the wrong square moves about a cell differently from its neighbours, which registration masks on its own.
     pub max_displacement_cells: f64,
     /// Tracking is abandoned for a full-frame search when more than this fraction of squares is lost.
     pub recovery_lost_fraction: f64,
@@ -101,7 +103,7 @@ impl Default for Thresholds {
     fn default() -> Self {
         Self {
             contact_shear_mm: 0.12,
-            max_displacement_cells: 1.5,
+            max_displacement_cells: 2.5,
             recovery_lost_fraction: 0.25,
             edge_sample_fraction: 0.5,
             edge_min_confidence: 0.35,
