@@ -2148,6 +2148,21 @@ mod tests {
     }
 
     /// Displacements of `forces` (per cell), plus a camera motion.
+    /// Deterministic unit-variance pseudo-Gaussian draws (xorshift, sum of 12 uniforms), the same on every run.
+    fn pseudo_gauss(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
+            let mut sum = 0.0;
+            for _ in 0..12 {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                sum += (state >> 11) as f64 / (1u64 << 53) as f64;
+            }
+            sum - 6.0
+        }
+    }
+
     fn field(model: &InverseModel, forces: &[(usize, [f64; 3])], motion: [f64; MOTION_PARAMETERS]) -> Vec<f64> {
         let mut t = vec![0.0; 3 * model.cells.len()];
         for (j, f) in forces {
@@ -2257,17 +2272,7 @@ mod tests {
         let motion = [1.0, -0.5, 0.02, 0.08, -0.08, 0.02, 0.004, 0.003];
         let mut d = field(&model, &[], motion);
         // Deterministic pseudo-noise, sigma 0.01 mm.
-        let mut state = 12345u64;
-        let mut gauss = || {
-            let mut sum = 0.0;
-            for _ in 0..12 {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                sum += (state >> 11) as f64 / (1u64 << 53) as f64;
-            }
-            sum - 6.0
-        };
+        let mut gauss = pseudo_gauss(12345);
         for v in d.iter_mut() {
             *v += 0.01 * gauss();
         }
@@ -2290,17 +2295,7 @@ mod tests {
     fn a_heavy_press_does_not_pass_for_noise_about_the_motion_and_one_compact_load() {
         let model = model();
         let motion = [1.0, -0.5, 0.02, 0.08, -0.08, 0.02, 0.004, 0.003];
-        let mut state = 777u64;
-        let mut gauss = || {
-            let mut sum = 0.0;
-            for _ in 0..12 {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                sum += (state >> 11) as f64 / (1u64 << 53) as f64;
-            }
-            sum - 6.0
-        };
+        let mut gauss = pseudo_gauss(777);
         let noise: Vec<f64> = (0..model.observations).map(|_| 0.01 * gauss()).collect();
         let valid = vec![true; model.observations / 2];
         let noisy = |forces: &[(usize, [f64; 3])]| -> Vec<f64> {
