@@ -90,6 +90,7 @@ pub struct Thresholds {
     /// A tracked point that moved more than this many cells since the reference is implausible (masked). The tracker
     /// follows a heavy press's motion (a 40 N press with 15 N of shear moves corners 7.8 mm, 2.4 cells), and a point
     /// on the wrong square moves about a cell differently from its neighbours, which registration masks on its own.
+    /// The paper mode's detector, which indexes each frame afresh, is held to 1.5 cells at most.
     pub max_displacement_cells: f64,
     /// Tracking is abandoned for a full-frame search when more than this fraction of squares is lost.
     pub recovery_lost_fraction: f64,

@@ -134,6 +134,9 @@ const MIN_VALID_CORNERS: usize = 2 * MOTION_PARAMETERS;
 /// A contact moves many corners; one mis-tracked square moves at most a few (an edge square two). The contact
 /// score is the local shear of the corner ranked this high.
 const CONTACT_SUPPORT: usize = 3;
+/// The published (paper) detector's corners further than this many cells from their rest position are masked as
+/// implausible, whatever `thresholds.max_displacement_cells` allows the tracker (see `Estimator::estimate`).
+const PAPER_MAX_DISPLACEMENT_CELLS: f64 = 1.5;
 /// An edge direction (fast and paper modes) needs at least this fraction of the corners around the sheared region.
 const MIN_EDGE_COVERAGE: f64 = 0.9;
 
@@ -264,11 +267,20 @@ impl Estimator {
             recovered,
             relit_corners,
         } = self.detect_frame(frame)?;
-        let registration = register(
-            &self.rest.lattice,
-            &lattice,
-            self.config.thresholds.max_displacement_cells,
-        );
+        // The tracker carries each square's identity from frame to frame, so a corner it finds 2.5 cells away has
+        // moved that far (a heavy press). The published detector indexes every frame's lattice afresh: when the
+        // camera has moved, a corner it puts more than PAPER_MAX_DISPLACEMENT_CELLS away is more likely given
+        // another square's index than moved (allowed to 2.5 cells, it measured six more camera-moved frames of the
+        // full validation set, each with its rotation wrong by up to 4 deg).
+        let max_displacement_cells = match self.mode {
+            Mode::Paper => self
+                .config
+                .thresholds
+                .max_displacement_cells
+                .min(PAPER_MAX_DISPLACEMENT_CELLS),
+            Mode::Fast | Mode::Inverse => self.config.thresholds.max_displacement_cells,
+        };
+        let registration = register(&self.rest.lattice, &lattice, max_displacement_cells);
         let needed = min_valid(&self.config);
         if registration.valid_count() < needed {
             return Err(EstimateError::TooFewPoints {
