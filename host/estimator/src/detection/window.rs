@@ -515,13 +515,7 @@ pub fn mean_membership(
     stride: usize,
     membership: &MembershipTable,
 ) -> f32 {
-    let (mut sum, mut visited) = (0f32, 0usize);
-    for_each_row(px, centre, cell, half, stride, |_, line, x0, x1| {
-        for_each_pixel(line, x0, x1, stride, |p| {
-            sum += member(membership, p);
-            visited += 1;
-        });
-    });
+    let (sum, visited) = window_sum(px, centre, cell, half, stride, |p| member(membership, p));
     if visited == 0 {
         0.0
     } else {
@@ -532,18 +526,33 @@ pub fn mean_membership(
 /// Mean of R + G + B over the window of half-size `half` (cell units) around `centre`; 0 for an empty window. Over
 /// a patch in a square's middle (all yellow ink, whatever the pad's deformation) it changes with the light alone.
 pub fn mean_brightness(px: &Pixels, centre: Point2, cell: &CellFrame, half: f64, stride: usize) -> f64 {
-    let (mut sum, mut visited) = (0u64, 0u64);
-    for_each_row(px, centre, cell, half, stride, |_, line, x0, x1| {
-        for_each_pixel(line, x0, x1, stride, |p| {
-            sum += u64::from(p[0]) + u64::from(p[1]) + u64::from(p[2]);
-            visited += 1;
-        });
+    let (sum, visited) = window_sum(px, centre, cell, half, stride, |p| {
+        u64::from(p[0]) + u64::from(p[1]) + u64::from(p[2])
     });
     if visited == 0 {
         0.0
     } else {
         sum as f64 / visited as f64
     }
+}
+
+/// The sum of `value` over the window's pixels (in row order) and how many it visited.
+fn window_sum<T: Default + std::ops::AddAssign>(
+    px: &Pixels,
+    centre: Point2,
+    cell: &CellFrame,
+    half: f64,
+    stride: usize,
+    mut value: impl FnMut([u8; 3]) -> T,
+) -> (T, usize) {
+    let (mut sum, mut visited) = (T::default(), 0usize);
+    for_each_row(px, centre, cell, half, stride, |_, line, x0, x1| {
+        for_each_pixel(line, x0, x1, stride, |p| {
+            sum += value(p);
+            visited += 1;
+        });
+    });
+    (sum, visited)
 }
 
 #[cfg(test)]
