@@ -71,3 +71,48 @@ fn a_press_near_the_border_reads_as_at_the_centre_with_no_tangential_force() {
         );
     }
 }
+
+/// Each contact (centre in pad mm, normal force in the pad model's newtons) a 6.5 N press of a 3 mm flat punch at
+/// `at` reads as.
+fn flat_press_contacts(renderer: &ValidationRenderer, estimator: &mut Estimator, at: [f64; 2]) -> Vec<([f64; 2], f64)> {
+    let case = Case {
+        name: "flat press".into(),
+        kind: CaseKind::Press,
+        size: SIZE,
+        scene: Scene::with_contact(Contact::flat_punch(3.0, at, 6.5)),
+        camera_motion: None,
+        led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
+        seed: 31,
+    };
+    let (frame, _) = renderer.render(&case).unwrap();
+    let reading = estimator.estimate(&frame).unwrap();
+    reading.contacts().iter().map(|c| (c.centre_mm, c.force_n)).collect()
+}
+
+/// A heavy press two or three cells from the border moves the pattern's outermost corners less than the layer model
+/// says (the validation pad's stack and frame are not the model's), and a load on the outermost cells, beyond every
+/// corner, pushes them back as that would: the inverse listed such a load as a second contact of 0.3-1.2 N beside
+/// 9 of the full validation set's 80 presses (most of their force error), here 0.82 N beside the first (at 5.73 N).
+/// One press is one contact, with the force it has at the centre.
+#[test]
+fn a_heavy_press_near_the_border_is_one_contact_with_its_force() {
+    let renderer = ValidationRenderer::new(SIZE).unwrap();
+    let reference = renderer.reference(7).unwrap();
+    let mut estimator = Estimator::new(SensorConfig::default(), Mode::Inverse, &reference).unwrap();
+    let centre = flat_press_contacts(&renderer, &mut estimator, [0.0, 0.0]);
+    assert_eq!(centre.len(), 1, "a press at the centre: {centre:?}");
+    for at in [[-17.4, 10.6], [-14.3, -16.4], [-16.4, -0.1], [20.1, -8.2]] {
+        let contacts = flat_press_contacts(&renderer, &mut estimator, at);
+        assert_eq!(contacts.len(), 1, "{at:?}: one press, one contact: {contacts:?}");
+        let (found, force) = contacts[0];
+        assert!(
+            (found[0] - at[0]).hypot(found[1] - at[1]) <= 2.0,
+            "{at:?}: read at {found:?}"
+        );
+        assert!(
+            (force / centre[0].1 - 1.0).abs() <= 0.25,
+            "{at:?}: {force:.3} N against {:.3} N at the centre",
+            centre[0].1
+        );
+    }
+}
