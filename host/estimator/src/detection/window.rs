@@ -74,6 +74,51 @@ pub struct Pixels<'a> {
     pub height: usize,
 }
 
+/// Below this magnitude an f64 converts to i64 and back exactly once truncated (the fraction goes, nothing else).
+const EXACT_INTEGERS: f64 = 4.5e15;
+
+/// `x.floor()` as a comparison sees it (a -0.0 may come out as 0.0). The build targets any x86-64, whose baseline
+/// has no rounding instruction, so `f64::floor` is a call into the C library; a window's every row takes one floor
+/// and one ceil.
+#[inline(always)]
+fn floor(x: f64) -> f64 {
+    if x.abs() < EXACT_INTEGERS {
+        let t = x as i64 as f64;
+        if t > x {
+            t - 1.0
+        } else {
+            t
+        }
+    } else {
+        x.floor()
+    }
+}
+
+/// `x.ceil()` as a comparison sees it (a -0.0 may come out as 0.0): see [`floor`].
+#[inline(always)]
+fn ceil(x: f64) -> f64 {
+    if x.abs() < EXACT_INTEGERS {
+        let t = x as i64 as f64;
+        if t < x {
+            t + 1.0
+        } else {
+            t
+        }
+    } else {
+        x.ceil()
+    }
+}
+
+/// The first multiple of `stride` from `x` on: an integer division (a row's first pixel), but for the common stride 1.
+#[inline(always)]
+fn on_grid(x: usize, stride: usize) -> usize {
+    if stride == 1 {
+        x
+    } else {
+        x.div_ceil(stride) * stride
+    }
+}
+
 /// Visits the pixels of the window (every `stride`-th row and column of the frame's global grid).
 #[inline(always)]
 fn for_each_row<'a>(
@@ -85,19 +130,19 @@ fn for_each_row<'a>(
     mut row: impl FnMut(usize, &'a [u8], usize, usize),
 ) {
     let reach = half * (cell.col_step[1].abs() + cell.row_step[1].abs());
-    let y_lo = (centre[1] - reach - 0.5).ceil().max(0.0) as usize;
-    let y_hi = (centre[1] + reach - 0.5).floor().min(px.height as f64 - 1.0);
+    let y_lo = ceil(centre[1] - reach - 0.5).max(0.0) as usize;
+    let y_hi = floor(centre[1] + reach - 0.5).min(px.height as f64 - 1.0);
     if !(y_hi >= 0.0) || !centre[0].is_finite() {
         return;
     }
-    let y_start = y_lo.div_ceil(stride) * stride;
+    let y_start = on_grid(y_lo, stride);
     let mut y = y_start;
     while y as f64 <= y_hi {
         if let Some((lo, hi)) = cell.row_span(y as f64 + 0.5 - centre[1], half) {
-            let x_lo = (centre[0] + lo - 0.5).ceil().max(0.0);
-            let x_hi = (centre[0] + hi - 0.5).floor().min(px.width as f64 - 1.0);
+            let x_lo = ceil(centre[0] + lo - 0.5).max(0.0);
+            let x_hi = floor(centre[0] + hi - 0.5).min(px.width as f64 - 1.0);
             if x_hi >= x_lo {
-                let x0 = (x_lo as usize).div_ceil(stride) * stride;
+                let x0 = on_grid(x_lo as usize, stride);
                 let x1 = x_hi as usize;
                 if x0 <= x1 {
                     let line = &px.raw[y * px.width * 3..(y + 1) * px.width * 3];
@@ -631,6 +676,44 @@ mod tests {
             }
         }
         assert!(compared > 100, "{compared} windows held yellow");
+    }
+
+    #[test]
+    fn floor_and_ceil_are_the_libraries() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut values = vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            2.5,
+            -2.5,
+            1e15 + 0.5,
+            -1e15 - 0.5,
+            4.5e15,
+            1e300,
+            -1e300,
+            f64::MAX,
+            f64::MIN_POSITIVE,
+            -f64::MIN_POSITIVE,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        for _ in 0..10_000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            values.push((state >> 11) as f64 / (1u64 << 53) as f64 * 8000.0 - 4000.0);
+            values.push(((state >> 20) % 4000) as f64 - 2000.0);
+        }
+        for x in values {
+            let same = |a: f64, b: f64| a == b || (a.is_nan() && b.is_nan());
+            assert!(same(floor(x), x.floor()), "floor {x}");
+            assert!(same(ceil(x), x.ceil()), "ceil {x}");
+        }
     }
 
     #[test]
