@@ -23,7 +23,7 @@ use crate::force::force;
 use crate::homography::Homography;
 use crate::inverse::{InverseModel, Stage1, Stage2, TestOutcome, MOTION_PARAMETERS};
 use crate::lattice::{CornerObservation, Lattice, SquareObservation};
-use crate::motion::{camera_motion, fit_raw_similarity, homography_of};
+use crate::motion::camera_motion;
 use crate::pad_map::{camera_for, PadMapping};
 use crate::paper::PaperDetector;
 use crate::reading::{
@@ -444,11 +444,10 @@ impl Estimator {
         Ok((reading, motion.largest_mm))
     }
 
-    /// Camera motion removed in two steps (see [`crate::motion`]): a robust similarity of the raw image brings the
-    /// frame's corners back near their rest positions, they are mapped to pad mm there, and a homography of the pad
-    /// plane fitted jointly with the tractions takes the rest (the deformation is then measured in the rest frame's
-    /// pad axes, not turned with the camera). Also returns stage 1 on the same data over the corners `tested`
-    /// (the contact test's), solved with the motion's.
+    /// Camera motion removed (see [`crate::motion`]): the frame's corners are mapped to pad mm through the rest
+    /// frame's pad map, and a homography of the pad plane fitted jointly with the tractions takes the motion (the
+    /// deformation is then measured in the rest frame's pad axes, not turned with the camera). Also returns stage 1
+    /// on the same data over the corners `tested` (the contact test's), solved with the motion's.
     fn remove_motion(
         &self,
         lattice: &Lattice,
@@ -461,16 +460,8 @@ impl Estimator {
             reason: "the pad's motion is degenerate".into(),
         };
         let rest_raw = &self.rest.corners_raw;
-        let pairs: Vec<(Point2, Point2)> = lattice
-            .corners
-            .iter()
-            .zip(rest_raw)
-            .zip(valid)
-            .filter_map(|((c, r), &ok)| if ok { r.zip(c.raw_px) } else { None })
-            .collect();
-        let coarse = fit_raw_similarity(&pairs).ok_or_else(degenerate)?;
-        let forward = homography_of(&coarse).ok_or_else(degenerate)?;
-        let back = forward.inverse().ok_or_else(degenerate)?;
+        // Each corner through the rest frame's pad map as it is, the camera's motion left whole to stage 1's homography
+        // of the pad plane (see crate::motion).
         let compensated: Vec<f64> = lattice
             .corners
             .iter()
@@ -478,7 +469,7 @@ impl Estimator {
             .zip(valid)
             .flat_map(|((c, r), &ok)| {
                 let at = if ok {
-                    c.raw_px.and_then(|p| back.apply(p)).and_then(|p| mapping.raw_to_mm(p))
+                    c.raw_px.and_then(|p| mapping.raw_to_mm(p))
                 } else {
                     None
                 };
@@ -493,12 +484,8 @@ impl Estimator {
             displacement[2 * i] -= m[0];
             displacement[2 * i + 1] -= m[1];
         }
-        // Where the whole motion (pad-plane homography, then the raw similarity) puts each rest corner.
-        let moved_raw = |mm: Point2| {
-            fine.apply(mm)
-                .and_then(|q| mapping.mm_to_raw(q))
-                .and_then(|q| forward.apply(q))
-        };
+        // Where the motion puts each rest corner.
+        let moved_raw = |mm: Point2| fine.apply(mm).and_then(|q| mapping.mm_to_raw(q));
         let mut reported_pairs = Vec::with_capacity(rest.len());
         let mut largest_mm: f64 = 0.0;
         for (&r, from) in rest.iter().zip(rest_raw) {

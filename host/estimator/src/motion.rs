@@ -1,16 +1,16 @@
 //! Camera and pad motion between the rest frame and a frame: what it is, how it is removed, and how it is reported.
 //!
-//! It is removed in two steps. First a similarity of the raw image: a camera's roll about its optical axis rotates
-//! the raw image exactly (whatever the lens, the plate's refraction or the pattern's depth), and removing it there
-//! brings every corner back near its rest position, where the pad map was fitted. Mapping the moved corners through
-//! the pad map instead and fitting the motion in pad mm would lean on the map far from where it was fitted, and
-//! would turn the map's own error into a smooth non-rigid field that the contact test takes for tractions. Then a
-//! homography of the pad plane, fitted jointly with the tractions by [`crate::inverse`], takes what is left (the
-//! camera's tilt and shift, the pad's own motion).
+//! A camera that moves against a flat pattern sees it through a homography of the pattern's plane, whatever its
+//! motion (roll, tilt, shift, or a change of distance or focus), once the lens is undone. So every corner is mapped
+//! to pad mm through the rest frame's pad map (lens and pose), and a homography of the pad plane, fitted jointly
+//! with the tractions by [`crate::inverse`], takes the motion. A similarity of the raw image, removed first, would be
+//! exact for a roll about the optical axis alone: a fisheye's raw image does not scale or shift as a whole, and a
+//! change of distance of 1 mm then read a 5 N press 10 % off, 3 mm missed it, and a 2 mm shift missed presses (the
+//! corners' scatter about the motion 5-10 times a still camera's). The raw similarity stays the tracker's, to find
+//! the squares again after a jump ([`fit_raw_similarity`]).
 
 use nusense_geometry::{Point2, Similarity};
 
-use crate::homography::Homography;
 use crate::reading::CameraMotion;
 
 /// Rounds of the robust similarity fit (each leaves out the pairs the previous fit explains worst).
@@ -28,11 +28,6 @@ fn fit_kept(pairs: &[(Point2, Point2)], keep: &[bool]) -> Option<Similarity> {
     }
     let fitted = Similarity::fit(kept.iter())?;
     (fitted.scale > 0.0 && fitted.matrix().iter().all(|v| v.is_finite())).then_some(fitted)
-}
-
-/// The similarity as a homography (for composing with the pad-plane motion).
-pub fn homography_of(similarity: &Similarity) -> Option<Homography> {
-    Homography::from_matrix(similarity.matrix())
 }
 
 /// The similarity of raw px that moves the rest frame's corners (`pairs.0`) onto this frame's (`pairs.1`), fitted on
