@@ -183,6 +183,16 @@ pub struct TestOutcome {
     pub contact: bool,
 }
 
+/// A contact's neighbours as [`InverseModel::others_and_shape`] gives them.
+struct OthersAndShape {
+    /// Stage 2's tractions with the contact's cells' zeroed: 3 per cell, N.
+    tractions: Vec<f64>,
+    /// The displacements those tractions make: 2 per corner, mm.
+    field: Vec<f64>,
+    /// The contact's pressure shape's displacements per newton: 2 per corner, mm.
+    shape: Vec<f64>,
+}
+
 /// One contact region from stage 2.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Region {
@@ -1299,43 +1309,14 @@ impl InverseModel {
     /// the model's error, not a contact (on the validation set: contacts of 0.3-1.7 N on the outermost cells, 8-38
     /// mm from a press, in 14 of the full set's 80 presses). `d`: 2 per corner, mm; `valid`: per corner.
     pub fn border_doubt(&self, d: &[f64], valid: &[bool], tractions: &[f64], region: &Region) -> f64 {
-        let total: f64 = region.cells.iter().map(|(_, f)| f[2].max(0.0)).sum();
-        if !(total > 0.0) {
+        let Some(others) = self.others_and_shape(tractions, region) else {
             return 0.0;
-        }
-        let mut others = tractions.to_vec();
-        for (j, _) in &region.cells {
-            others[3 * j..3 * j + 3].fill(0.0);
-        }
-        let rows = self.observations;
-        let mut rest = vec![0.0; rows];
-        self.a.mul_vec(&others, &mut rest);
-        let mut border = vec![0.0; rows];
-        self.images_t.mul_transposed_vec(&others, &mut border);
-        let mut shape = vec![0.0; rows];
-        for (j, f) in &region.cells {
-            let w = f[2].max(0.0) / total;
-            for (s, a) in shape.iter_mut().zip(self.a_t.row(3 * j + 2)) {
-                *s += w * a;
-            }
-        }
+        };
+        let mut border = vec![0.0; self.observations];
+        self.images_t.mul_transposed_vec(&others.tractions, &mut border);
         // Columns: the motion, the border's share of the others' far field, the region's shape.
+        let (h, g) = self.motion_free_normal_equations(valid, &[&border, &others.shape], |r| d[r] - others.field[r]);
         let n = MOTION_PARAMETERS + 2;
-        let mut h = DMatrix::<f64>::zeros(n, n);
-        let mut g = DVector::<f64>::zeros(n);
-        let mut column = [0.0; MOTION_PARAMETERS + 2];
-        for r in (0..rows).filter(|&r| valid[r / 2]) {
-            column[..MOTION_PARAMETERS].copy_from_slice(self.b.row(r));
-            column[MOTION_PARAMETERS] = border[r];
-            column[MOTION_PARAMETERS + 1] = shape[r];
-            let y = d[r] - rest[r];
-            for i in 0..n {
-                g[i] += column[i] * y;
-                for k in 0..n {
-                    h[(i, k)] += column[i] * column[k];
-                }
-            }
-        }
         // A region far from every border leaves the border's column all but empty: then it is the fit without it.
         let scale = h[(MOTION_PARAMETERS, MOTION_PARAMETERS)];
         let keep: Vec<usize> = (0..n)
@@ -1361,9 +1342,21 @@ impl InverseModel {
     /// force or less), which is what a second contact beside a heavy press now needs on top of the floor. `valid`: per
     /// corner.
     pub fn far_field_shadow(&self, valid: &[bool], tractions: &[f64], region: &Region) -> f64 {
+        let Some(others) = self.others_and_shape(tractions, region) else {
+            return 0.0;
+        };
+        // Columns: the motion, the region's shape.
+        let (h, g) = self.motion_free_normal_equations(valid, &[&others.shape], |r| others.field[r]);
+        h.cholesky().map_or(0.0, |c| c.solve(&g)[MOTION_PARAMETERS])
+    }
+
+    /// What [`Self::border_doubt`] and [`Self::far_field_shadow`] fit a contact's force in: stage 2's `tractions` off
+    /// `region`, the displacements they make, and the region's pressure shape (its cells' normal responses weighted
+    /// by their share of its force). `None` when the region holds no pressure.
+    fn others_and_shape(&self, tractions: &[f64], region: &Region) -> Option<OthersAndShape> {
         let total: f64 = region.cells.iter().map(|(_, f)| f[2].max(0.0)).sum();
         if !(total > 0.0) {
-            return 0.0;
+            return None;
         }
         let mut others = tractions.to_vec();
         for (j, _) in &region.cells {
@@ -1379,22 +1372,39 @@ impl InverseModel {
                 *s += w * a;
             }
         }
-        // Columns: the motion, the region's shape.
-        let n = MOTION_PARAMETERS + 1;
+        Some(OthersAndShape {
+            tractions: others,
+            field,
+            shape,
+        })
+    }
+
+    /// The normal equations of least squares in the motion's columns and `extra` columns (one value per observation
+    /// each), over the valid corners' rows, against `y` (per row).
+    fn motion_free_normal_equations(
+        &self,
+        valid: &[bool],
+        extra: &[&[f64]],
+        y: impl Fn(usize) -> f64,
+    ) -> (DMatrix<f64>, DVector<f64>) {
+        let n = MOTION_PARAMETERS + extra.len();
         let mut h = DMatrix::<f64>::zeros(n, n);
         let mut g = DVector::<f64>::zeros(n);
-        let mut column = [0.0; MOTION_PARAMETERS + 1];
-        for r in (0..rows).filter(|&r| valid[r / 2]) {
+        let mut column = vec![0.0; n];
+        for r in (0..self.observations).filter(|&r| valid[r / 2]) {
             column[..MOTION_PARAMETERS].copy_from_slice(self.b.row(r));
-            column[MOTION_PARAMETERS] = shape[r];
+            for (c, e) in column[MOTION_PARAMETERS..].iter_mut().zip(extra) {
+                *c = e[r];
+            }
+            let y = y(r);
             for i in 0..n {
-                g[i] += column[i] * field[r];
+                g[i] += column[i] * y;
                 for k in 0..n {
                     h[(i, k)] += column[i] * column[k];
                 }
             }
         }
-        h.cholesky().map_or(0.0, |c| c.solve(&g)[MOTION_PARAMETERS])
+        (h, g)
     }
 
     /// Whether two regions have neighbouring cells (8-connected).
