@@ -6,7 +6,7 @@
 //! with the tractions by [`crate::inverse`], takes the motion. A similarity of the raw image, removed first, would be
 //! exact for a roll about the optical axis alone: a fisheye's raw image does not scale or shift as a whole, and a
 //! change of distance of 1 mm then read a 5 N press 10 % off, 3 mm missed it, and a 2 mm shift missed presses (the
-//! corners' scatter about the motion 5-10 times a still camera's). The raw similarity stays the tracker's, to find
+//! corners' scatter about the motion 3-10 times a still camera's). The raw similarity stays the tracker's, to find
 //! the squares again after a jump ([`fit_raw_similarity`]).
 
 use nusense_geometry::{Point2, Similarity};

@@ -83,7 +83,7 @@ fn a_press_reads_the_same_with_the_camera_rolled_5_degrees() {
 
 /// The camera nearer the pad or farther from it than at the tare (a mount that settles along its axis, or a focus
 /// that drifts): the pattern's image grows or shrinks, which a fisheye does not do as a whole, so a similarity of the
-/// raw image (removed first before the fix) left the corners scattered 5-10 times a still camera's about the motion.
+/// raw image (removed first before the fix) left the corners scattered 3-10 times a still camera's about the motion.
 /// Measured before the fix (N, still: 3.83, 3.59, 3.43): 1 mm nearer 3.44, 4.02, 3.36; 3 mm nearer 2.72, none,
 /// 3.32; 3 mm farther 4.43, 2.67, none. After: within 6 % of the still reading each. The bounds: 10 % of the still
 /// reading, one contact, within 1 mm, and the reported scale on the right side of 1.
