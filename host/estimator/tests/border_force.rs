@@ -10,25 +10,30 @@
 //! validation set, each with a tangential force of up to 10 % of the normal one pointing away from the pad's
 //! centre.
 
-use nusense_estimator::{Estimator, Mode, SensorConfig};
+use nusense_estimator::{Estimator, Mode, Reading, SensorConfig};
 use nusense_sim::validation::{Case, CaseKind, ValidationRenderer};
 use nusense_sim::{Contact, Scene, NOMINAL_LED_CURRENT_MA};
 
 const SIZE: (u32, u32) = (1024, 768);
 
-/// (fx, fy, fz) of a 5 N press of a 5 mm sphere at `at`, in the pad model's newtons.
-fn read(renderer: &ValidationRenderer, estimator: &mut Estimator, at: [f64; 2]) -> [f64; 3] {
+/// The reading of a press of `contact`, nominal LEDs, no camera motion.
+fn read_press(renderer: &ValidationRenderer, estimator: &mut Estimator, contact: Contact) -> Reading {
     let case = Case {
-        name: "border press".into(),
+        name: "press near the border".into(),
         kind: CaseKind::Press,
         size: SIZE,
-        scene: Scene::with_contact(Contact::sphere(5.0, at, 5.0)),
+        scene: Scene::with_contact(contact),
         camera_motion: None,
         led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
         seed: 31,
     };
     let (frame, _) = renderer.render(&case).unwrap();
-    let reading = estimator.estimate(&frame).unwrap();
+    estimator.estimate(&frame).unwrap()
+}
+
+/// (fx, fy, fz) of a 5 N press of a 5 mm sphere at `at`, in the pad model's newtons.
+fn read(renderer: &ValidationRenderer, estimator: &mut Estimator, at: [f64; 2]) -> [f64; 3] {
+    let reading = read_press(renderer, estimator, Contact::sphere(5.0, at, 5.0));
     let touch = reading.touch.expect("a 5 N press is a contact");
     assert_eq!(touch.contacts().count(), 1, "{at:?}: one press, one contact");
     touch.force_vector_n.expect("the inverse reports a force vector")
@@ -75,18 +80,11 @@ fn a_press_near_the_border_reads_as_at_the_centre_with_no_tangential_force() {
 /// Each contact (centre in pad mm, normal force in the pad model's newtons) a 6.5 N press of a 3 mm flat punch at
 /// `at` reads as.
 fn flat_press_contacts(renderer: &ValidationRenderer, estimator: &mut Estimator, at: [f64; 2]) -> Vec<([f64; 2], f64)> {
-    let case = Case {
-        name: "flat press".into(),
-        kind: CaseKind::Press,
-        size: SIZE,
-        scene: Scene::with_contact(Contact::flat_punch(3.0, at, 6.5)),
-        camera_motion: None,
-        led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
-        seed: 31,
-    };
-    let (frame, _) = renderer.render(&case).unwrap();
-    let reading = estimator.estimate(&frame).unwrap();
-    reading.contacts().iter().map(|c| (c.centre_mm, c.force_n)).collect()
+    read_press(renderer, estimator, Contact::flat_punch(3.0, at, 6.5))
+        .contacts()
+        .iter()
+        .map(|c| (c.centre_mm, c.force_n))
+        .collect()
 }
 
 /// A heavy press two or three cells from the border moves the pattern's outermost corners less than the layer model
