@@ -420,6 +420,20 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
             within(m.tangential_direction_max_deg, 5.0),
         )
     });
+    row(
+        "tangential force RMS, N (read / true, median): pushes, one calibration".into(),
+        "",
+        &|m| {
+            (
+                format!(
+                    "{} ({})",
+                    opt(m.tangential_force_rms_n, 2),
+                    m.tangential_force_ratio.map_or("–".into(), |r| format!("{r:.2}x"))
+                ),
+                None,
+            )
+        },
+    );
     row("torque RMS, N mm".into(), "", &|m| (opt(m.torque_rms_nmm, 2), None));
     row("presses on damaged pads detected".into(), "", &|m| {
         (format!("{}/{}", m.damaged_detected, m.damaged_frames), None)

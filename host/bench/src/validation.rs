@@ -131,6 +131,10 @@ pub struct ModeFigures {
     pub two_contact_frames: usize,
     pub tangential_direction_mae_deg: Option<f64>,
     pub tangential_direction_max_deg: Option<f64>,
+    /// The pushes' tangential force (fx, fy) against the truth's, the force calibration's scale applied: RMS of the
+    /// vector error (a miss reads 0 N), N, and the median of read / true magnitudes.
+    pub tangential_force_rms_n: Option<f64>,
+    pub tangential_force_ratio: Option<f64>,
     pub torque_rms_nmm: Option<f64>,
     pub camera_rotation_rms_deg: Option<f64>,
     pub camera_rotation_max_deg: Option<f64>,
@@ -557,6 +561,35 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
         all
     };
 
+    // The calibration is fitted on normal presses only: whether the model's shear compliance against its normal
+    // compliance is the pad's shows here, not in the normal force's figures.
+    let tangential: Vec<([f64; 2], Option<[f64; 2]>)> = of(CaseKind::Tangential)
+        .map(|s| {
+            let truth = s.truth.frame.force_vector_n;
+            let scale = calibration.as_ref().map_or(1.0, ForceCalibration::scale);
+            let found = s
+                .observed
+                .as_ref()
+                .filter(|o| o.contact)
+                .and_then(|o| o.force_vector_n)
+                .map(|f| [f[0] * scale, f[1] * scale]);
+            ([truth[0], truth[1]], found)
+        })
+        .collect();
+    let reports_vectors = tangential.iter().any(|(_, found)| found.is_some());
+    let tangential_force_errors: Vec<f64> = if reports_vectors {
+        tangential
+            .iter()
+            .map(|(truth, found)| distance(found.unwrap_or([0.0, 0.0]), *truth))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let tangential_force_ratios: Vec<f64> = tangential
+        .iter()
+        .filter_map(|(truth, found)| found.map(|f| f[0].hypot(f[1]) / truth[0].hypot(truth[1])))
+        .collect();
+
     let torque_errors: Vec<f64> = of(CaseKind::Twist)
         .filter_map(|s| {
             let scale = calibration.as_ref().map_or(1.0, ForceCalibration::scale);
@@ -610,6 +643,8 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
         two_contact_frames: two.len(),
         tangential_direction_mae_deg: nusense_estimator::stats::mean(&direction_errors),
         tangential_direction_max_deg: direction_errors.iter().copied().reduce(f64::max),
+        tangential_force_rms_n: rms(&tangential_force_errors),
+        tangential_force_ratio: quantile(&tangential_force_ratios, 0.5),
         torque_rms_nmm: rms(&torque_errors),
         camera_rotation_rms_deg: rms(&rotation_errors),
         camera_rotation_max_deg: rotation_errors.iter().map(|e| e.abs()).reduce(f64::max),
@@ -795,6 +830,9 @@ mod tests {
         assert_eq!((f.false_contacts, f.rest_frames), (1, 2));
         assert_eq!((f.two_contacts_ok, f.two_contact_frames), (Some(1), 2));
         assert!((f.tangential_direction_mae_deg.unwrap() - 10.0).abs() < 1e-9);
+        // The push reads 1 N (2 N at scale 0.5) turned by 10 degrees: a chord of 2 sin 5 degrees.
+        assert!((f.tangential_force_rms_n.unwrap() - 2.0 * 5f64.to_radians().sin()).abs() < 1e-12);
+        assert!((f.tangential_force_ratio.unwrap() - 1.0).abs() < 1e-12);
         assert!((f.camera_rotation_rms_deg.unwrap() - 0.1).abs() < 1e-9);
         assert_eq!(f.refused, 0);
         assert_eq!(f.median_ms, Some(1.0));
