@@ -175,10 +175,33 @@ fn for_each_pixel(line: &[u8], x0: usize, x1: usize, stride: usize, mut f: impl 
     }
 }
 
-/// Membership of one pixel: the table's entry for its yellowness (in -255..=255, so the index is in bounds).
+/// Membership of one pixel: the table's entry for its yellowness (in -255..=255, so the index is in bounds), but
+/// for a pixel whose red and green both clip ([`CLIPPED_LEVEL`]), which is yellow ink: see [`yellow_bin`].
 #[inline(always)]
 fn member(table: &MembershipTable, [r, g, b]: [u8; 3]) -> f32 {
-    table[usize::from(r.min(g)) + 255 - usize::from(b)]
+    table[yellow_bin(r.min(g), b)]
+}
+
+/// The membership table's index of a pixel of `min(R, G) = low` and blue `b`: its yellowness (bin = value + 255),
+/// except that a pixel whose red and green both clip takes the last bin, the yellowest there is.
+///
+/// Such a pixel is yellow ink: the red squares and the lines between cells have little green (see
+/// [`super::yellowness`]), so their green clips only under light that has long clipped their red and blue and the
+/// yellow's every channel, where nothing is measured. Its yellowness, though, says nothing: with red and green held
+/// at the clip, it is `255 - B` and falls as the light rises, while the blue grows. The yellow sits near the clip at
+/// nominal light, so when one LED side is brighter than in the rest frame (or glare adds to it) the squares on that
+/// side clip, their yellowness falls with the light across each square, and with it their membership: the centroid
+/// moves away from the light by up to several px (validation sensor at 1024x768, a rest frame with the right side at
+/// 150 %: 0.64 px RMS over the squares, 4.7 px at most), read as a contact of about a newton. Counted as the yellow
+/// they are, clipped pixels weigh as in any light, and only the pixels across a square's edge that clip under the
+/// brighter light but not in the rest frame still weigh differently.
+#[inline(always)]
+fn yellow_bin(low: u8, b: u8) -> usize {
+    if low >= CLIPPED_LEVEL {
+        super::yellowness::YELLOWNESS_BINS - 1
+    } else {
+        usize::from(low) + 255 - usize::from(b)
+    }
 }
 
 /// Adds the window's yellowness values to a histogram; returns how many pixels it visited and how many of them
@@ -501,7 +524,7 @@ impl WindowTotals {
         // SAFETY (the loads and gathers below): the arrays are ROWS_AT_ONCE = 8 lanes of 32 bits, a vector's width;
         // every word gathered from `raw` starts at `min(first + i * pixel_bytes, last)` for a lane, between the byte
         // before its row's first pixel (which exists: no row starts at 0) and the byte before its last pixel, so its
-        // four bytes lie in the row's span; every table index is min(R, G) + 255 - B, in 0..=510, the table's range.
+        // four bytes lie in the row's span; every table index is min(R, G) + 255 - B or 510 (`yellow_bin`), in 0..=510, the table's range.
         let (mut offset, last, count) = unsafe {
             (
                 _mm256_loadu_si256(first.as_ptr().cast()),
@@ -515,6 +538,7 @@ impl WindowTotals {
         let byte = _mm256_set1_epi32(0xff);
         let bin_zero = _mm256_set1_epi32(255);
         let below_clipped = _mm256_set1_epi32(i32::from(CLIPPED_LEVEL) - 1);
+        let last_bin = _mm256_set1_epi32(super::yellowness::YELLOWNESS_BINS as i32 - 1);
         let (mut w, mut wx) = (_mm256_setzero_ps(), _mm256_setzero_ps());
         let mut clipped = _mm256_setzero_si256();
         let table = membership.as_ptr();
@@ -525,7 +549,10 @@ impl WindowTotals {
             let g = _mm256_and_si256(_mm256_srli_epi32::<16>(words), byte);
             let b = _mm256_srli_epi32::<24>(words);
             let low = _mm256_min_epi32(r, g);
+            // `yellow_bin`: a pixel whose red and green clip takes the last bin.
+            let low_clipped = _mm256_cmpgt_epi32(low, below_clipped);
             let bin = _mm256_sub_epi32(_mm256_add_epi32(low, bin_zero), b);
+            let bin = _mm256_max_epi32(bin, _mm256_and_si256(low_clipped, last_bin));
             let m = unsafe { _mm256_i32gather_ps::<4>(table, bin) };
             let live = _mm256_cmpgt_epi32(count, _mm256_set1_epi32(i as i32));
             let m = _mm256_and_ps(m, _mm256_castsi256_ps(live));
