@@ -303,8 +303,9 @@ fn one_led_side_drifting_is_not_a_press() {
 }
 
 /// One LED side at 150 %, the others nominal (the rest frame's): that side's yellow clips in red and green while
-/// its blue still grows, so the squares there pale towards white, lose yellow area unevenly and their centroids move,
-/// more where the glare adds to the light. Before the tracker flagged such squares on a still camera too, rest frames
+/// its blue still grows, so the squares there pale towards white (the tracker counts such pixels as the yellow they
+/// are: see tests/uneven_light.rs), more where the glare adds to the light. Before the tracker flagged such squares
+/// on a still camera too, rest frames
 /// under this light read as contacts of 0.5-0.8 N on the validation sensor. The light is no press, and a press under
 /// it is still found where it is, with its force.
 #[test]
