@@ -8,11 +8,15 @@
 //! tractions.
 
 use nusense_estimator::detection::FastTracker;
+use nusense_estimator::motion::fit_raw_similarity;
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use nusense_sim::validation::{CameraMotion, Case, CaseKind, ValidationRenderer};
 use nusense_sim::{Scene, NOMINAL_LED_CURRENT_MA};
 
 const SIZE: (u32, u32) = (1024, 768);
+/// A square the tracker does not flag follows the camera's rigid motion this closely, px: the squares away from the
+/// glare miss it by 0.29 px at most after a 4.5 deg roll (the lens is not a similarity), those near it by 0.59.
+const RIGID_MISS_PX: f64 = 0.7;
 
 fn rest_case(name: &str, roll_deg: f64, seed: u64) -> Case {
     Case {
@@ -74,14 +78,18 @@ fn a_turned_camera_at_rest_is_no_contact() {
     assert!(!reading.is_contact(), "phantom contact {:?}", reading.test);
 }
 
-/// The same jumps seen by the tracker alone: every square followed; after a roll the squares moved under a change of
-/// light (near the validation sensor's two glare spots, fixed in the image) are flagged, and back home none is.
+/// The same jumps seen by the tracker alone: every square followed, and each on the camera's rigid motion (a robust
+/// similarity of the raw image over the squares) within [`RIGID_MISS_PX`] unless flagged as relit, with at most an
+/// eighth of the squares flagged; back home none is. The glare stays fixed in the image while the squares turn under
+/// it: while a clipped pixel's yellowness counted rather than its being yellow ink (before the tracker's
+/// `yellow_bin`), the squares near the glare missed the motion by 0.7-9.3 px after these rolls (all of them flagged,
+/// 8 squares a roll); since, they miss it by 0.07-0.59 px (the others by 0.29 px at most), and 0 or 2 are flagged.
 #[test]
-fn squares_moved_under_the_glare_are_flagged_and_only_those() {
+fn squares_moved_under_the_glare_follow_the_camera_or_are_flagged() {
     let renderer = ValidationRenderer::new(SIZE).unwrap();
     let reference = renderer.reference(7).unwrap();
     let config = SensorConfig::default();
-    let (mut tracker, _) = FastTracker::from_reference(&reference, config.pad, config.thresholds).unwrap();
+    let (mut tracker, rest) = FastTracker::from_reference(&reference, config.pad, config.thresholds).unwrap();
     for (k, roll) in [4.5, 0.0, -4.5, 0.0].into_iter().enumerate() {
         let (frame, _) = renderer
             .render(&rest_case(&format!("roll {roll}"), roll, 20 + k as u64))
@@ -92,13 +100,37 @@ fn squares_moved_under_the_glare_are_flagged_and_only_those() {
             config.pad.yellow_count(),
             "roll {roll}: every square followed"
         );
+        let pairs: Vec<_> = rest
+            .squares
+            .iter()
+            .zip(&detection.squares)
+            .filter_map(|(a, b)| Some(((*a)?, (*b)?)))
+            .collect();
+        let motion = fit_raw_similarity(&pairs).expect("a rigid motion");
+        for (slot, ((at_rest, now), relit)) in rest
+            .squares
+            .iter()
+            .zip(&detection.squares)
+            .zip(&detection.relit)
+            .enumerate()
+        {
+            let (Some(at_rest), Some(now)) = (at_rest, now) else {
+                continue;
+            };
+            let expected = motion.apply(*at_rest);
+            let miss = (now[0] - expected[0]).hypot(now[1] - expected[1]);
+            assert!(
+                *relit || miss <= RIGID_MISS_PX,
+                "roll {roll}: square {slot} at {at_rest:.1?} misses the camera's motion by {miss:.2} px, unflagged"
+            );
+        }
         let relit = detection.relit.iter().filter(|&&r| r).count();
         if roll == 0.0 {
             assert_eq!(relit, 0, "roll {roll}: back under the rest frame's light");
         } else {
             assert!(
-                (1..=config.pad.yellow_count() / 8).contains(&relit),
-                "roll {roll}: {relit} squares flagged; those near the two glare spots should be, and only they"
+                relit <= config.pad.yellow_count() / 8,
+                "roll {roll}: {relit} squares flagged; at most those near the two glare spots should be"
             );
         }
     }
