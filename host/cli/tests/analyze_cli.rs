@@ -51,14 +51,15 @@ fn analyze_measures_the_real_press_in_the_same_default_mode_as_serve() {
     // The README's figures for this pair: contact about 3 mm left of and 2.4 mm below the pad's centre, a force
     // vector along the normal from the uncalibrated pad model, no edge for a round tip. (8.96 N at (-3.11, 2.32) mm
     // before the model saw the parallax of the pattern's normal displacement; 9.09 N, gamma 0.753, before 64b24df left
-    // the camera's motion (a 0.9 px shift and a scale of 1.003 here) to stage 1's homography of the pad plane.)
+    // the camera's motion (a 0.9 px shift and a scale of 1.003 here) to stage 1's homography of the pad plane; 9.00 N
+    // at (-3.08, 2.39) mm, gamma 0.744, before the tracker counted a pixel clipped in red and green as yellow ink.)
     let contact_mm = numbers(&touch["contact_mm"]);
     assert!(
-        (contact_mm[0] + 3.08).abs() < 0.05 && (contact_mm[1] - 2.39).abs() < 0.05,
+        (contact_mm[0] + 3.00).abs() < 0.05 && (contact_mm[1] - 2.40).abs() < 0.05,
         "{contact_mm:?}"
     );
     let force = numbers(&touch["force_vector_n"]);
-    assert!((force[2] - 9.00).abs() < 0.05, "{force:?}");
+    assert!((force[2] - 8.98).abs() < 0.05, "{force:?}");
     assert!(force[0].hypot(force[1]) < 0.05 * force[2], "a normal press: {force:?}");
     assert_eq!(touch["force_n"].as_f64().unwrap(), force[2]);
     assert!(touch["edge"].is_null());
@@ -70,7 +71,7 @@ fn analyze_in_fast_mode_gives_the_papers_line_on_gamma() {
     let touch = &readings[0];
     assert_eq!(touch["mode"], "fast");
     let gamma = touch["gamma"].as_f64().unwrap();
-    assert!((gamma - 0.744).abs() < 0.005, "{gamma}");
+    assert!((gamma - 0.731).abs() < 0.005, "{gamma}");
     let force = touch["force_n"].as_f64().unwrap();
     assert!(
         (force - (3.09 * gamma - 1.14)).abs() < 1e-9,
