@@ -58,7 +58,8 @@ fn one_led_side_at_150_percent_is_no_contact_and_moves_no_light_press() {
             let off = (c[0] - at[0]).hypot(c[1] - at[1]);
             assert!(off <= 1.0, "{case}: the strongest contact at {c:.2?}, {off:.2} mm off");
             let others: Vec<_> = touch.others.iter().map(|o| (o.centre_mm, o.force_n)).collect();
-            eprintln!("{case}: {:.3} N at {c:.2?} ({off:.2} mm off), {nominal_n:.3} N under the nominal light, others {others:.2?}", touch.force_n);
+            let force_n = touch.force_n;
+            eprintln!("{case}: {force_n:.3} N at {c:.2?} ({off:.2} mm off), {nominal_n:.3} N under the nominal light");
             assert!(others.is_empty(), "{case}: other contacts {others:.2?}");
             assert!(
                 (touch.force_n / nominal_n - 1.0).abs() <= 0.15,

@@ -58,8 +58,9 @@ pub(crate) const MAD_TO_SIGMA: f64 = 1.4826;
 const SAMPLES_PER_CELL: f64 = 36.0;
 /// A found centroid must sit on yellow: the mean membership within CENTRE_HALF cells of it at least this. The
 /// patch lies well inside a square (about 0.4 cell each side), so a true centroid's patch is all ink (where the LEDs'
-/// glare clips a square's middle white, its pixels still count as yellow: see `window::yellow_bin`); a blend of two diagonal squares
-/// sits on the lines and red between them, where only the patch's far corners (a few percent) reach any yellow.
+/// glare clips a square's middle white, its pixels still count as yellow: see `window::yellow_bin`); a blend of two
+/// diagonal squares sits on the lines and red between them, where only the patch's far corners (a few percent) reach
+/// any yellow.
 const MIN_CENTRE_MEMBERSHIP: f32 = 0.25;
 const CENTRE_HALF: f64 = 0.15;
 /// A square's window with more of its pixels clipped white than this holds no square: the yellow and the
@@ -303,24 +304,24 @@ impl FastTracker {
         })
     }
 
-    /// The squares seen under another light than in the rest frame. Glare and vignetting belong to the camera, not
-    /// the pad: once the camera has moved against the pad, a square seen through another part of the light than in
-    /// the rest frame has its yellow area, and with it its centroid, biased, and the bias differs from square to
-    /// square, so no motion model removes it. A still camera sees the same when the light itself changes unevenly:
-    /// with one LED side brighter, the yellow on that side clips in red and green while its blue still grows, and the
-    /// pixels across a square's edge that clip then but not in the rest frame weigh differently (while a clipped
-    /// pixel's yellowness counted, rather than its being yellow ink, see `window::yellow_bin`, whole squares lost
-    /// membership unevenly and their centroids moved by up to a few px: validation sensor at 1024x768, one side at
-    /// 150 %, rest frames read as contacts of 0.8 N while only a camera's motion flagged squares). The area shows both: the pad's deformation
-    /// changes a square's area together with its spacing to its diagonal neighbours, a change of light changes the
-    /// area alone. A square whose area change departs from its neighbours' spacing by more than [`RELIT_SIGMAS`]
-    /// robust standard deviations over the frame is flagged, if the camera moved or the light on the square's middle
-    /// changed by more than [`LIGHT_CHANGE`]. The light's condition keeps a press under a still camera and steady
-    /// light from being flagged: the spacing explains a press's area change only to first order, which is beyond the
-    /// few hundredths of a still frame's robust spread (a 5 N press at the validation pad's centre then went
-    /// undetected). A change of light that is even over the pattern (all LEDs alike, the exposure) changes every
-    /// square's area alike and flags nothing. A press changes areas as well (the pattern sinks towards the camera
-    /// under it), so a flag does not drop the square: the contact test leaves it out (see [`Detection::relit`]).
+    /// The squares seen under another light than in the rest frame. Glare and vignetting belong to the camera, not the
+    /// pad: once the camera has moved against the pad, a square seen through another part of the light than in the rest
+    /// frame has its yellow area, and with it its centroid, biased, and the bias differs from square to square, so no
+    /// motion model removes it. A still camera sees the same when the light itself changes unevenly: with one LED side
+    /// brighter, the yellow on that side clips in red and green while its blue still grows, and the pixels across a
+    /// square's edge that clip then but not in the rest frame weigh differently (while a clipped pixel's yellowness
+    /// counted, rather than its being yellow ink, see `window::yellow_bin`, whole squares lost membership unevenly and
+    /// their centroids moved by up to a few px: validation sensor at 1024x768, one side at 150 %, rest frames read as
+    /// contacts of 0.8 N while only a camera's motion flagged squares). The area shows both: the pad's deformation
+    /// changes a square's area together with its spacing to its diagonal neighbours, a change of light changes the area
+    /// alone. A square whose area change departs from its neighbours' spacing by more than [`RELIT_SIGMAS`] robust
+    /// standard deviations over the frame is flagged, if the camera moved or the light on the square's middle changed
+    /// by more than [`LIGHT_CHANGE`]. The light's condition keeps a press under a still camera and steady light from
+    /// being flagged: the spacing explains a press's area change only to first order, which is beyond the few
+    /// hundredths of a still frame's robust spread (a 5 N press at the validation pad's centre then went undetected). A
+    /// change of light that is even over the pattern (all LEDs alike, the exposure) changes every square's area alike
+    /// and flags nothing. A press changes areas as well (the pattern sinks towards the camera under it), so a flag does
+    /// not drop the square: the contact test leaves it out (see [`Detection::relit`]).
     fn relit_squares(&self, frame: &RgbImage, measured: &[Option<(Point2, f64)>]) -> Vec<bool> {
         let moved = self.squares.iter().any(|model| {
             model.reference.is_some_and(|r| {

@@ -524,7 +524,8 @@ impl WindowTotals {
         // SAFETY (the loads and gathers below): the arrays are ROWS_AT_ONCE = 8 lanes of 32 bits, a vector's width;
         // every word gathered from `raw` starts at `min(first + i * pixel_bytes, last)` for a lane, between the byte
         // before its row's first pixel (which exists: no row starts at 0) and the byte before its last pixel, so its
-        // four bytes lie in the row's span; every table index is min(R, G) + 255 - B or 510 (`yellow_bin`), in 0..=510, the table's range.
+        // four bytes lie in the row's span; every table index is min(R, G) + 255 - B or 510 (`yellow_bin`), in
+        // 0..=510, the table's range.
         let (mut offset, last, count) = unsafe {
             (
                 _mm256_loadu_si256(first.as_ptr().cast()),
