@@ -379,8 +379,8 @@ impl ViewFreeParts {
             config.elastic.bonded_border,
             config.elastic.sliding_walls,
         ) {
-            (ElasticModel::BondedLayer, true, _) => Border::Clamped(frame),
-            (ElasticModel::BondedLayer, false, true) => Border::Sliding(frame),
+            (ElasticModel::BondedLayer | ElasticModel::Layered, true, _) => Border::Clamped(frame),
+            (ElasticModel::BondedLayer | ElasticModel::Layered, false, true) => Border::Sliding(frame),
             _ => Border::None,
         };
         let response = PadResponse::new(&kernel, &corners, &cells, border)?;
