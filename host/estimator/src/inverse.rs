@@ -1642,19 +1642,18 @@ impl InverseModel {
         // Columns of the reduced design matrix, masked rows zeroed.
         let rows = self.observations;
         let mut design = DMatrix::zeros(rows, n);
+        // Column by column over contiguous slices (the design is column-major); the same sums in the same order.
+        let columns = design.as_mut_slice();
         for (k, combination) in unknowns.iter().enumerate() {
+            let out = &mut columns[k * rows..(k + 1) * rows];
             for &(component, weight) in combination {
-                let column = self.a_t.row(component);
-                for r in 0..rows {
-                    design[(r, k)] += weight * column[r];
+                for (o, &a) in out.iter_mut().zip(self.a_t.row(component)) {
+                    *o += weight * a;
                 }
             }
         }
         for p in 0..MOTION_PARAMETERS {
-            let column = self.b_t.row(p);
-            for r in 0..rows {
-                design[(r, nt + p)] = column[r];
-            }
+            columns[(nt + p) * rows..(nt + p + 1) * rows].copy_from_slice(self.b_t.row(p));
         }
         let mut data = DVector::from_column_slice(d);
         for r in (0..rows).filter(|&r| !valid[r / 2]) {
