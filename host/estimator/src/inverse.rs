@@ -1666,7 +1666,8 @@ impl InverseModel {
         }
         let g = tr_mul_vec(&design, data.as_slice());
         let constrained: Vec<bool> = (0..n).map(|i| i < pressures).collect();
-        let x = active_set(&h, &g, &constrained)?;
+        let whole = UpdatedCholesky::new(&h, (0..n).collect())?;
+        let x = active_set(&h, &g, &constrained, &whole)?;
         let mut tractions = vec![0.0; 3 * cells];
         for (k, combination) in unknowns.iter().enumerate() {
             for &(component, weight) in combination {
@@ -1681,11 +1682,10 @@ impl InverseModel {
             for (k, combination) in unknowns.iter().take(pressures).enumerate() {
                 unknown_of[combination[0].0 / 3] = Some(k);
             }
-            let inverse = h
-                .clone()
-                .cholesky()
-                .map(|c| c.inverse().view((0, 0), (pressures, pressures)).into_owned());
-            PressureCovariance { unknown_of, inverse }
+            PressureCovariance {
+                unknown_of,
+                inverse: Some(whole.inverse_block(pressures)),
+            }
         } else {
             PressureCovariance {
                 unknown_of: Vec::new(),
@@ -2077,9 +2077,15 @@ fn motion_basis(points: &[Point2], length: f64) -> DMatrix<f64> {
     b
 }
 
-/// min ½ xᵀ H x - gᵀ x with x_i >= 0 where `constrained[i]`. The free set's Cholesky factor is factorised once and
-/// then updated as pressures join and leave it ([`UpdatedCholesky`]), not refactorised at every step.
-fn active_set(h: &DMatrix<f64>, g: &DVector<f64>, constrained: &[bool]) -> Option<DVector<f64>> {
+/// min ½ xᵀ H x - gᵀ x with x_i >= 0 where `constrained[i]`, given `whole`, H's factor over all of its indices in
+/// order. The free set's Cholesky factor is factorised once and then updated as pressures join and leave it
+/// ([`UpdatedCholesky`]), not refactorised at every step.
+fn active_set(
+    h: &DMatrix<f64>,
+    g: &DVector<f64>,
+    constrained: &[bool],
+    whole: &UpdatedCholesky,
+) -> Option<DVector<f64>> {
     let n = g.len();
     let solve = |factor: &UpdatedCholesky| -> DVector<f64> {
         let mut xf: Vec<f64> = factor.index().iter().map(|&i| g[i]).collect();
@@ -2090,7 +2096,7 @@ fn active_set(h: &DMatrix<f64>, g: &DVector<f64>, constrained: &[bool]) -> Optio
         }
         x
     };
-    let unconstrained = solve(&UpdatedCholesky::new(h, (0..n).collect())?);
+    let unconstrained = solve(whole);
     if (0..n).all(|i| !constrained[i] || unconstrained[i] >= 0.0) {
         return Some(unconstrained);
     }
@@ -2371,7 +2377,8 @@ mod tests {
                 h[(i, i)] += 1e-6;
             }
             let g = a.tr_mul(&b);
-            let x = active_set(&h, &g, &constrained).unwrap();
+            let whole = UpdatedCholesky::new(&h, (0..n).collect()).unwrap();
+            let x = active_set(&h, &g, &constrained, &whole).unwrap();
             let reference = active_set_from_scratch(&h, &g, &constrained).unwrap();
             let unconstrained = h.clone().cholesky().unwrap().solve(&g);
             if (0..n).any(|i| constrained[i] && unconstrained[i] < 0.0) {

@@ -447,6 +447,22 @@ impl UpdatedCholesky {
         self.index.remove(p);
     }
 
+    /// The leading `k` x `k` block of `H_SS⁻¹`: its first `k` columns solved for, each bit for bit that column of
+    /// nalgebra's `Cholesky::inverse` (which solves for every column of the identity the same way).
+    pub fn inverse_block(&self, k: usize) -> nalgebra::DMatrix<f64> {
+        let m = self.index.len();
+        assert!(k <= m, "a block of {k} from a factor of {m}");
+        let mut out = nalgebra::DMatrix::zeros(k, k);
+        let mut column = vec![0.0; m];
+        for c in 0..k {
+            column.iter_mut().for_each(|x| *x = 0.0);
+            column[c] = 1.0;
+            self.solve_mut(&mut column);
+            out.column_mut(c).copy_from_slice(&column[..k]);
+        }
+        out
+    }
+
     /// Solves `H_SS x = b` in place (`b` and `x` in the order of `S`), as nalgebra's `Cholesky::solve_mut` does.
     pub fn solve_mut(&self, b: &mut [f64]) {
         let (n, m) = (self.n, self.index.len());
@@ -628,6 +644,12 @@ mod tests {
         assert!(found
             .iter()
             .zip(expected.iter())
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
+        let inverse = fresh.inverse();
+        let block = factor.inverse_block(5);
+        assert!(block
+            .iter()
+            .zip(inverse.view((0, 0), (5, 5)).iter())
             .all(|(a, b)| a.to_bits() == b.to_bits()));
         // An index that makes the set indefinite (column 2 again, with half its diagonal) is refused, as nalgebra's
         // factorisation refuses it, and leaves the factor as it was.
