@@ -307,6 +307,44 @@ pub fn tr_mul_vec(m: &nalgebra::DMatrix<f64>, v: &[f64]) -> nalgebra::DVector<f6
     nalgebra::DVector::from_fn(n, |k, _| dot_nalgebra_order(&data[k * rows..(k + 1) * rows], v))
 }
 
+/// Cholesky in place of the leading m x m lower triangle of column-major `l` (column stride `n`), in nalgebra's
+/// order: column j updated by each column k < j in increasing k (`l_ij += (-l_jk) l_ik`), then the square root of
+/// its diagonal and the division of the rest by it. `false` where a diagonal is not positive (nalgebra's `None`).
+#[inline(always)]
+fn factorise(l: &mut [f64], n: usize, m: usize) -> bool {
+    for j in 0..m {
+        let (done, rest) = l.split_at_mut(j * n);
+        let column = &mut rest[j..m];
+        for k in 0..j {
+            let factor = -done[k * n + j];
+            for (x, &y) in column.iter_mut().zip(&done[k * n + j..k * n + m]) {
+                *x += factor * y;
+            }
+        }
+        let diagonal = column[0];
+        if !(diagonal > 0.0) {
+            return false;
+        }
+        let denom = diagonal.sqrt();
+        column[0] = denom;
+        for x in &mut column[1..] {
+            *x /= denom;
+        }
+    }
+    true
+}
+
+/// [`factorise`] compiled for AVX2: its loops are element-wise (no sum reordered, no fused multiply-add), so the
+/// wider vectors give the same bits.
+///
+/// # Safety
+/// The processor has AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn factorise_avx2(l: &mut [f64], n: usize, m: usize) -> bool {
+    factorise(l, n, m)
+}
+
 /// The Cholesky factor `L` (`L Lᵀ = H_SS`) of a symmetric positive definite matrix `H` restricted to an ordered set
 /// `S` of its indices, kept up to date as `S` changes, for an active-set solve that would otherwise factorise
 /// `H_SS` from scratch (O(m³)) at every step: an index joins at the end of `S` (one forward substitution, O(m²)) and
@@ -341,28 +379,23 @@ impl UpdatedCholesky {
         let m = index.len();
         let mut l = vec![0.0; n * n];
         for (j, &c) in index.iter().enumerate() {
-            for (i, &r) in index.iter().enumerate().skip(j) {
-                l[j * n + i] = h[(r, c)];
+            let source = h.column(c);
+            let source = source.as_slice();
+            for (x, &r) in l[j * n + j..j * n + m].iter_mut().zip(&index[j..]) {
+                *x = source[r];
             }
         }
-        for j in 0..m {
-            let (done, rest) = l.split_at_mut(j * n);
-            let column = &mut rest[j..m];
-            for k in 0..j {
-                let factor = -done[k * n + j];
-                for (x, &y) in column.iter_mut().zip(&done[k * n + j..k * n + m]) {
-                    *x += factor * y;
-                }
-            }
-            let diagonal = column[0];
-            if !(diagonal > 0.0) {
-                return None;
-            }
-            let denom = diagonal.sqrt();
-            column[0] = denom;
-            for x in &mut column[1..] {
-                *x /= denom;
-            }
+        #[cfg(target_arch = "x86_64")]
+        let factorised = if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2.
+            unsafe { factorise_avx2(&mut l, n, m) }
+        } else {
+            factorise(&mut l, n, m)
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let factorised = factorise(&mut l, n, m);
+        if !factorised {
+            return None;
         }
         Some(Self {
             n,
