@@ -427,14 +427,7 @@ impl UpdatedCholesky {
         // The new row y solves L y = H_Sv, column by column as nalgebra's factorisation builds it:
         // y_k = (H_kv + Σ_{j<k} (-y_j) L_kj) / L_kk, the sum in increasing j.
         let mut y: Vec<f64> = self.index.iter().map(|&i| h[(i, v)]).collect();
-        for j in 0..m {
-            let yj = y[j] / self.l[j * n + j];
-            y[j] = yj;
-            let column = &self.l[j * n + j + 1..j * n + m];
-            for (t, &ljr) in y[j + 1..].iter_mut().zip(column) {
-                *t += -yj * ljr;
-            }
-        }
+        self.forward_substitute(&mut y);
         let mut diagonal = h[(v, v)];
         for &yj in &y {
             diagonal += -yj * yj;
@@ -496,10 +489,10 @@ impl UpdatedCholesky {
         out
     }
 
-    /// Solves `H_SS x = b` in place (`b` and `x` in the order of `S`), as nalgebra's `Cholesky::solve_mut` does.
-    pub fn solve_mut(&self, b: &mut [f64]) {
+    /// Solves `L y = b` in place, column by column (`y_i = b_i / L_ii`, then `b_r += (-y_i) L_ri` below it), as
+    /// nalgebra's solve and factorisation both do.
+    fn forward_substitute(&self, b: &mut [f64]) {
         let (n, m) = (self.n, self.index.len());
-        assert_eq!(b.len(), m, "right-hand side of the wrong length");
         for i in 0..m {
             let bi = b[i] / self.l[i * n + i];
             b[i] = bi;
@@ -507,6 +500,13 @@ impl UpdatedCholesky {
                 *t += -bi * lri;
             }
         }
+    }
+
+    /// Solves `H_SS x = b` in place (`b` and `x` in the order of `S`), as nalgebra's `Cholesky::solve_mut` does.
+    pub fn solve_mut(&self, b: &mut [f64]) {
+        let (n, m) = (self.n, self.index.len());
+        assert_eq!(b.len(), m, "right-hand side of the wrong length");
+        self.forward_substitute(b);
         for i in (0..m).rev() {
             let dot = dot_nalgebra_order(&self.l[i * n + i + 1..i * n + m], &b[i + 1..]);
             b[i] = (b[i] - dot) / self.l[i * n + i];
