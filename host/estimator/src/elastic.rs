@@ -215,7 +215,9 @@ pub fn half_space_vertical_spectra(k: f64, nu: f64, d: f64) -> [f64; 2] {
     ]
 }
 
-/// The same for the bonded layer (thickness `h`), from the solution of [`layer_spectra`]'s system.
+/// The same for the bonded layer (thickness `h`), from the solution of [`layer_spectra`]'s system. Test only: the
+/// closed form [`stack_spectra`] is held to.
+#[cfg(test)]
 pub fn layer_vertical_spectra(k: f64, nu: f64, d: f64, h: f64) -> [f64; 2] {
     let kappa = 3.0 - 4.0 * nu;
     let matrix = layer_matrix(k, nu, h);
@@ -249,7 +251,9 @@ pub fn half_space_spectra(k: f64, nu: f64, d: f64) -> Spectra {
     }
 }
 
-/// The bonded layer's spectra (thickness `h`, observed at depth `d`): top loaded, bottom clamped.
+/// The bonded layer's spectra (thickness `h`, observed at depth `d`): top loaded, bottom clamped. Test only: the
+/// closed form [`stack_spectra`] is held to.
+#[cfg(test)]
 pub fn layer_spectra(k: f64, nu: f64, d: f64, h: f64) -> Spectra {
     let kh = k * h;
     let matrix = layer_matrix(k, nu, h);
@@ -268,6 +272,7 @@ pub fn layer_spectra(k: f64, nu: f64, d: f64, h: f64) -> Spectra {
 /// U = (a + b k z) e^(-kz), W = (-a - kappa b - b k z) e^(-kz), and (a2, b2) of the family decaying from the bottom,
 /// U2 = (a2 + b2 k s) e^(-ks), W2 = (a2 + kappa b2 + b2 k s) e^(-ks) with s = h - z, all multiplied by k.
 /// Rows: shear traction and normal traction at the top, U and W at the bottom.
+#[cfg(test)]
 fn layer_matrix(k: f64, nu: f64, h: f64) -> [[f64; 4]; 4] {
     let kappa = 3.0 - 4.0 * nu;
     let e = (-k * h).exp();
@@ -282,7 +287,9 @@ fn layer_matrix(k: f64, nu: f64, h: f64) -> [[f64; 4]; 4] {
 
 /// Hankel transforms of k T(k) to a, b, c:
 /// a = 1/(4 pi) ∫ [kT_ll (J0 + J2) + kT_tt (J0 - J2)] dk, b = 1/(2 pi) ∫ (kT_tt - kT_ll) J2 dk,
-/// c = -1/(2 pi) ∫ kT_ln J1 dk (Simpson's rule on `spectra` sampled every `dk` from k = 0).
+/// c = -1/(2 pi) ∫ kT_ln J1 dk (Simpson's rule on `spectra` sampled every `dk` from k = 0). Test only: the plain
+/// transform the tables' accumulation (with its asymptotic Bessel functions) is held to.
+#[cfg(test)]
 pub fn hankel(spectra: &[Spectra], dk: f64, r: f64) -> Radial {
     let n = spectra.len();
     let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
@@ -344,7 +351,7 @@ fn correction_decay_length(layers: &[Layer], d: f64) -> f64 {
 }
 
 /// The stack's response less the half-space's of its top layer at the pattern's depth `d`, tabulated every
-/// `TABLE_STEP_MM` from 0: the in-plane radial functions (see [`hankel`]) and the normal displacement's,
+/// `TABLE_STEP_MM` from 0: the in-plane radial functions (the transforms of `hankel`, a test's reference) and the normal displacement's,
 /// z = 1/(2 pi) ∫ kW_nn J0 dk, t = 1/(2 pi) ∫ kW_nl J1 dk (which give Boussinesq's and Cerruti's w for the
 /// half-space's spectra). The spectrum is sampled every `dk` (24 points per period of the Bessel functions at the
 /// table's reach) up to where the difference has decayed by exp(-`SPECTRUM_DECAY`).
@@ -480,7 +487,7 @@ pub fn stack_layers(config: &ElasticConfig) -> Vec<Layer> {
 
 /// The spectra of a stack of bonded layers on a rigid plate, observed at depth `d` (mm below the surface), for a
 /// reference shear modulus `mu_ref` (the [`Spectra`] and the normal displacement's spectra of
-/// [`layer_vertical_spectra`] times mu_ref / mu, so that one layer of modulus mu_ref gives exactly those).
+/// `layer_vertical_spectra` (the tests' closed form) times mu_ref / mu, so that one layer of modulus mu_ref gives exactly those).
 ///
 /// Each layer's plane-strain field under a surface load of wave number k is a sum of two families, one decaying
 /// from its top (local depth z) and one from its bottom (s = h - z), with u_x = U(z) sin kx and u_z = W(z) cos kx:
