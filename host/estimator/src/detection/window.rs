@@ -135,15 +135,19 @@ fn for_each_row<'a>(
     if !(y_hi >= 0.0) || !centre[0].is_finite() {
         return;
     }
+    // The bounds are whole numbers from here on, x's in 0..width and y's in 0..height once checked, so they convert
+    // exactly either way; through i64 rather than usize, whose conversions to and from f64 are several instructions
+    // each on x86-64 (a window's every row takes three).
+    let y_last = y_hi as i64 as usize;
     let y_start = on_grid(y_lo, stride);
     let mut y = y_start;
-    while y as f64 <= y_hi {
-        if let Some((lo, hi)) = cell.row_span(y as f64 + 0.5 - centre[1], half) {
+    while y <= y_last {
+        if let Some((lo, hi)) = cell.row_span(y as i64 as f64 + 0.5 - centre[1], half) {
             let x_lo = ceil(centre[0] + lo - 0.5).max(0.0);
             let x_hi = floor(centre[0] + hi - 0.5).min(px.width as f64 - 1.0);
             if x_hi >= x_lo {
-                let x0 = on_grid(x_lo as usize, stride);
-                let x1 = x_hi as usize;
+                let x0 = on_grid(x_lo as i64 as usize, stride);
+                let x1 = x_hi as i64 as usize;
                 if x0 <= x1 {
                     let line = &px.raw[y * px.width * 3..(y + 1) * px.width * 3];
                     row(y, line, x0, x1);
