@@ -410,6 +410,14 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
             None => ("–".into(), Some(false)),
         },
     );
+    row(
+        "20 mm edges listed as one contact".into(),
+        "all",
+        &|m| match m.edges_one_contact {
+            Some(n) => (format!("{n}/{}", m.edge_frames), Some(n == m.edge_frames)),
+            None => ("–".into(), Some(false)),
+        },
+    );
     row("tangential force direction error, mean / max °".into(), "<= 5", &|m| {
         (
             format!(
@@ -573,6 +581,7 @@ mod tests {
         good.edge_frames = 2;
         good.two_contacts_ok = Some(2);
         good.two_contact_frames = 2;
+        good.edges_one_contact = Some(2);
         good.tangential_direction_mae_deg = Some(2.0);
         good.tangential_direction_max_deg = Some(4.0);
         // Paper mode as today: no force vector, contacts or camera motion, and one press missed.

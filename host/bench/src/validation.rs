@@ -129,6 +129,9 @@ pub struct ModeFigures {
     /// Two presses 10 mm apart: both listed and each force within 20 % (None: the mode lists no contacts).
     pub two_contacts_ok: Option<usize>,
     pub two_contact_frames: usize,
+    /// The 20 mm edges (`edge` cases) listed as exactly one contact: a long contact is one contact, not its
+    /// fragments (None: the mode lists no contacts). Out of `edge_frames`.
+    pub edges_one_contact: Option<usize>,
     pub tangential_direction_mae_deg: Option<f64>,
     pub tangential_direction_max_deg: Option<f64>,
     /// The pushes' tangential force (fx, fy) against the truth's, the force calibration's scale applied: RMS of the
@@ -544,6 +547,17 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
             .count()
     });
 
+    let edges_one_contact = lists_contacts.then(|| {
+        of(CaseKind::Edge)
+            .filter(|s| {
+                s.observed
+                    .as_ref()
+                    .and_then(|o| o.contacts.as_ref())
+                    .is_some_and(|c| c.len() == 1)
+            })
+            .count()
+    });
+
     let direction_errors: Vec<f64> = of(CaseKind::Tangential)
         .filter_map(|s| {
             let found = s.observed.as_ref()?.force_vector_n?;
@@ -641,6 +655,7 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
         edge_frames: of(CaseKind::Edge).count(),
         two_contacts_ok,
         two_contact_frames: two.len(),
+        edges_one_contact,
         tangential_direction_mae_deg: nusense_estimator::stats::mean(&direction_errors),
         tangential_direction_max_deg: direction_errors.iter().copied().reduce(f64::max),
         tangential_force_rms_n: rms(&tangential_force_errors),
@@ -807,6 +822,14 @@ mod tests {
         let wrong_force = json!({"contact": true, "contacts": [
             {"centre_mm": [5.0, 0.0], "force_n": 8.0}, {"centre_mm": [-5.0, 0.0], "force_n": 6.0}]});
         scored.push(case(CaseKind::TwoContacts, two, Some(wrong_force)));
+        // An edge listed as one contact, and one listed as two fragments (its direction right in both).
+        let edge = press([0.0, 0.0], 2.0);
+        let one =
+            json!({"contact": true, "edge_angle_deg": 30.0, "contacts": [{"centre_mm": [0.0, 0.0], "force_n": 4.0}]});
+        let fragments = json!({"contact": true, "edge_angle_deg": 30.0, "contacts": [
+            {"centre_mm": [-4.0, 0.0], "force_n": 2.0}, {"centre_mm": [4.0, 0.0], "force_n": 2.0}]});
+        scored.push(case(CaseKind::Edge, edge.clone(), Some(one)));
+        scored.push(case(CaseKind::Edge, edge, Some(fragments)));
         let push = truth(&[([0.0, 0.0], [1.0, 0.0, 4.0])], None);
         let turned = [2.0 * 10f64.to_radians().cos(), 2.0 * 10f64.to_radians().sin(), 8.0];
         scored.push(case(
@@ -829,6 +852,7 @@ mod tests {
         assert_eq!(f.detection_rates[1], (0.3, 0.5));
         assert_eq!((f.false_contacts, f.rest_frames), (1, 2));
         assert_eq!((f.two_contacts_ok, f.two_contact_frames), (Some(1), 2));
+        assert_eq!((f.edges_one_contact, f.edge_frames), (Some(1), 2));
         assert!((f.tangential_direction_mae_deg.unwrap() - 10.0).abs() < 1e-9);
         // The push reads 1 N (2 N at scale 0.5) turned by 10 degrees: a chord of 2 sin 5 degrees.
         assert!((f.tangential_force_rms_n.unwrap() - 2.0 * 5f64.to_radians().sin()).abs() < 1e-12);
