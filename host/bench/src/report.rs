@@ -78,6 +78,14 @@ fn opt(value: Option<f64>, digits: usize) -> String {
     value.map_or_else(|| "–".to_owned(), |v| format!("{v:.digits$}"))
 }
 
+/// A count that must be all of `frames`, as "n/frames"; a mode that reports nothing to count ("–") misses it.
+fn all_of(count: Option<usize>, frames: usize) -> (String, Option<bool>) {
+    match count {
+        Some(n) => (format!("{n}/{frames}"), Some(n == frames)),
+        None => ("–".into(), Some(false)),
+    }
+}
+
 /// The markdown table with a header describing the run.
 pub fn markdown(report: &BenchReport) -> String {
     let mut out = String::new();
@@ -405,19 +413,11 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
     row(
         "two contacts 10 mm apart: both listed, each force ±20 %".into(),
         "all",
-        &|m| match m.two_contacts_ok {
-            Some(n) => (format!("{n}/{}", m.two_contact_frames), Some(n == m.two_contact_frames)),
-            None => ("–".into(), Some(false)),
-        },
+        &|m| all_of(m.two_contacts_ok, m.two_contact_frames),
     );
-    row(
-        "20 mm edges listed as one contact".into(),
-        "all",
-        &|m| match m.edges_one_contact {
-            Some(n) => (format!("{n}/{}", m.edge_frames), Some(n == m.edge_frames)),
-            None => ("–".into(), Some(false)),
-        },
-    );
+    row("20 mm edges listed as one contact".into(), "all", &|m| {
+        all_of(m.edges_one_contact, m.edge_frames)
+    });
     row("tangential force direction error, mean / max °".into(), "<= 5", &|m| {
         (
             format!(
