@@ -351,10 +351,10 @@ fn correction_decay_length(layers: &[Layer], d: f64) -> f64 {
 }
 
 /// The stack's response less the half-space's of its top layer at the pattern's depth `d`, tabulated every
-/// `TABLE_STEP_MM` from 0: the in-plane radial functions (the transforms of `hankel`, a test's reference) and the normal displacement's,
-/// z = 1/(2 pi) ∫ kW_nn J0 dk, t = 1/(2 pi) ∫ kW_nl J1 dk (which give Boussinesq's and Cerruti's w for the
-/// half-space's spectra). The spectrum is sampled every `dk` (24 points per period of the Bessel functions at the
-/// table's reach) up to where the difference has decayed by exp(-`SPECTRUM_DECAY`).
+/// `TABLE_STEP_MM` from 0: the in-plane radial functions (the transforms of `hankel`, a test's reference) and the
+/// normal displacement's, z = 1/(2 pi) ∫ kW_nn J0 dk, t = 1/(2 pi) ∫ kW_nl J1 dk (which give Boussinesq's and
+/// Cerruti's w for the half-space's spectra). The spectrum is sampled every `dk` (24 points per period of the Bessel
+/// functions at the table's reach) up to where the difference has decayed by exp(-`SPECTRUM_DECAY`).
 fn tabulate_stack_correction(layers: &[Layer], d: f64) -> (Vec<Radial>, Vec<Vertical>) {
     let (mu, nu) = (layers[0].shear_modulus, layers[0].poisson_ratio);
     let k_max = SPECTRUM_DECAY / correction_decay_length(layers, d);
@@ -487,7 +487,8 @@ pub fn stack_layers(config: &ElasticConfig) -> Vec<Layer> {
 
 /// The spectra of a stack of bonded layers on a rigid plate, observed at depth `d` (mm below the surface), for a
 /// reference shear modulus `mu_ref` (the [`Spectra`] and the normal displacement's spectra of
-/// `layer_vertical_spectra` (the tests' closed form) times mu_ref / mu, so that one layer of modulus mu_ref gives exactly those).
+/// `layer_vertical_spectra` (the tests' closed form) times mu_ref / mu, so that one layer of modulus mu_ref gives
+/// exactly those).
 ///
 /// Each layer's plane-strain field under a surface load of wave number k is a sum of two families, one decaying
 /// from its top (local depth z) and one from its bottom (s = h - z), with u_x = U(z) sin kx and u_z = W(z) cos kx:
