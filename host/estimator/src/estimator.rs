@@ -777,11 +777,12 @@ impl Estimator {
         let count = rest.corners_mm.len();
         let mut shift = vec![0.0f64; count];
         for factor in LIGHT_PROBE {
+            // Each of the 256 levels scaled once, then looked up (per byte, the rounding is a library call).
+            let level: [u8; 256] =
+                std::array::from_fn(|v| (f32::from(v as u8) * factor).round().clamp(0.0, 255.0) as u8);
             let mut probe = reference.clone();
-            for p in probe.pixels_mut() {
-                for c in p.0.iter_mut() {
-                    *c = (f32::from(*c) * factor).round().clamp(0.0, 255.0) as u8;
-                }
+            for c in probe.iter_mut() {
+                *c = level[usize::from(*c)];
             }
             // A copy of the tracker as it stands on this rest frame (just built, or just re-tared onto it): the
             // probe is measured as the next frame would be, with no second full-frame search.
