@@ -12,6 +12,8 @@ pub struct CellFrame {
     pub col_step: Point2,
     pub row_step: Point2,
     inverse: [[f64; 2]; 2],
+    /// [`Self::min_step`], computed once: the tracker divides by it for every square in every frame.
+    min_step: f64,
 }
 
 impl CellFrame {
@@ -29,6 +31,7 @@ impl CellFrame {
             col_step,
             row_step,
             inverse,
+            min_step: col_step[0].hypot(col_step[1]).min(row_step[0].hypot(row_step[1])),
         })
     }
 
@@ -42,9 +45,7 @@ impl CellFrame {
 
     /// Length of the shorter step, px.
     pub fn min_step(&self) -> f64 {
-        self.col_step[0]
-            .hypot(self.col_step[1])
-            .min(self.row_step[0].hypot(self.row_step[1]))
+        self.min_step
     }
 
     /// The x-range (in pixel-centre offsets from the centre) of row offset `dy` inside |s|, |t| <= half.
