@@ -61,8 +61,16 @@ impl CellFrame {
                 continue;
             }
             let (p, q) = ((-half - b) / a, (half - b) / a);
-            lo = lo.max(p.min(q));
-            hi = hi.min(p.max(q));
+            // -half - b <= half - b, and rounding keeps that order, so p <= q where a > 0 and q <= p otherwise.
+            // Comparisons rather than f64::min and max, whose NaN handling cost several instructions each on every
+            // row of every window: a NaN bound (from a dy that is not finite) leaves lo and hi as they were either way.
+            let (near, far) = if a > 0.0 { (p, q) } else { (q, p) };
+            if near > lo {
+                lo = near;
+            }
+            if far < hi {
+                hi = far;
+            }
         }
         (lo <= hi).then_some((lo, hi))
     }
@@ -144,8 +152,12 @@ fn for_each_row<'a>(
     let mut y = y_start;
     while y <= y_last {
         if let Some((lo, hi)) = cell.row_span(y as i64 as f64 + 0.5 - centre[1], half) {
-            let x_lo = ceil(centre[0] + lo - 0.5).max(0.0);
-            let x_hi = floor(centre[0] + hi - 0.5).min(px.width as f64 - 1.0);
+            // Clamped by comparisons, as in `row_span` (a NaN takes the frame's edge, as f64::max and min give).
+            let x_lo = ceil(centre[0] + lo - 0.5);
+            let x_lo = if x_lo > 0.0 { x_lo } else { 0.0 };
+            let x_hi = floor(centre[0] + hi - 0.5);
+            let last_x = px.width as f64 - 1.0;
+            let x_hi = if x_hi < last_x { x_hi } else { last_x };
             if x_hi >= x_lo {
                 let x0 = on_grid(x_lo as i64 as usize, stride);
                 let x1 = x_hi as i64 as usize;
