@@ -220,9 +220,10 @@ pub enum ElasticModel {
 /// set (at 122e3ba) the pushes' tangential force reads 0.87 times the truth (0.22 N RMS) against 2.40 times (2.39 N),
 /// torque 2.1 against 18.7 N mm RMS, the push's direction 1.0 / 2.1 deg mean / max against 1.6 / 6.1. Not the
 /// default, because the normal load reads worse: force over the pad 0.41 N RMS against 0.36, localisation 0.44
-/// against 0.33 mm, both of two contacts 10 mm apart listed in 4 of 6 cases against 6, the edges' floor 0.5 against
-/// 0.3 N; the inverse's 3.3 mm cells and heuristics were built around the equivalent layer's smoother kernel. To use
-/// it, set `model = "layered"` and `shear_modulus_kpa = 11`.
+/// against 0.33 mm (0.40 since its contact centres come from quarter cells, see `InverseModel::quarter_centres`),
+/// both of two contacts 10 mm apart listed in 4 of 6 cases against 6, the edges' floor 0.5 against 0.3 N; the
+/// inverse's 3.3 mm cells and heuristics were built around the equivalent layer's smoother kernel. To use it, set
+/// `model = "layered"` and `shear_modulus_kpa = 11`.
 ///
 /// The pad's edge is free by default: measured on simulated pads without a clamped edge, assuming one where there
 /// is none moves contacts near the edge by up to 1 mm and costs 0.35 N RMS of force, while on a pad bonded 3 mm
