@@ -418,6 +418,12 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
     row("20 mm edges listed as one contact".into(), "all", &|m| {
         all_of(m.edges_one_contact, m.edge_frames)
     });
+    row("two round presses reported as an edge".into(), "0", &|m| {
+        (
+            format!("{}/{}", m.round_pairs_with_edge, m.two_contact_frames),
+            Some(m.round_pairs_with_edge == 0),
+        )
+    });
     row("tangential force direction error, mean / max °".into(), "<= 5", &|m| {
         (
             format!(
@@ -593,6 +599,8 @@ mod tests {
         paper.detection_floor_n = Some(1.0);
         paper.false_contacts = 1;
         paper.rest_frames = 4;
+        paper.two_contact_frames = 2;
+        paper.round_pairs_with_edge = 1;
         let report = |size| ValidationReport {
             profile: nusense_sim::validation::Profile::Full,
             seed: 7,
@@ -634,6 +642,10 @@ mod tests {
         assert_eq!(
             line("| two contacts"),
             "| two contacts 10 mm apart: both listed, each force ±20 % | all | 2/2 | – ✗ |"
+        );
+        assert_eq!(
+            line("| two round presses"),
+            "| two round presses reported as an edge | 0 | 0/2 | 1/2 ✗ |"
         );
         assert_eq!(
             line("| camera rotation"),

@@ -132,6 +132,9 @@ pub struct ModeFigures {
     /// The 20 mm edges (`edge` cases) listed as exactly one contact: a long contact is one contact, not its
     /// fragments (None: the mode lists no contacts). Out of `edge_frames`.
     pub edges_one_contact: Option<usize>,
+    /// The two presses 10 mm apart (round tips) reported with an edge direction: two fingertips are not an edge
+    /// (issue 12: no direction for round contacts). Out of `two_contact_frames`.
+    pub round_pairs_with_edge: usize,
     pub tangential_direction_mae_deg: Option<f64>,
     pub tangential_direction_max_deg: Option<f64>,
     /// The pushes' tangential force (fx, fy) against the truth's, the force calibration's scale applied: RMS of the
@@ -547,6 +550,11 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
             .count()
     });
 
+    let round_pairs_with_edge = two
+        .iter()
+        .filter(|s| s.observed.as_ref().is_some_and(|o| o.edge_angle_deg.is_some()))
+        .count();
+
     let edges_one_contact = lists_contacts.then(|| {
         of(CaseKind::Edge)
             .filter(|s| {
@@ -656,6 +664,7 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
         two_contacts_ok,
         two_contact_frames: two.len(),
         edges_one_contact,
+        round_pairs_with_edge,
         tangential_direction_mae_deg: nusense_estimator::stats::mean(&direction_errors),
         tangential_direction_max_deg: direction_errors.iter().copied().reduce(f64::max),
         tangential_force_rms_n: rms(&tangential_force_errors),
@@ -819,7 +828,8 @@ mod tests {
         let listed = json!({"contact": true, "contacts": [
             {"centre_mm": [5.5, 0.0], "force_n": 8.4}, {"centre_mm": [-5.0, 0.5], "force_n": 3.8}]});
         scored.push(case(CaseKind::TwoContacts, two.clone(), Some(listed)));
-        let wrong_force = json!({"contact": true, "contacts": [
+        // Listed apart but told an edge along the pair (a direction across two contacts).
+        let wrong_force = json!({"contact": true, "edge_angle_deg": 0.0, "contacts": [
             {"centre_mm": [5.0, 0.0], "force_n": 8.0}, {"centre_mm": [-5.0, 0.0], "force_n": 6.0}]});
         scored.push(case(CaseKind::TwoContacts, two, Some(wrong_force)));
         // An edge listed as one contact, and one listed as two fragments (its direction right in both).
@@ -853,6 +863,7 @@ mod tests {
         assert_eq!((f.false_contacts, f.rest_frames), (1, 2));
         assert_eq!((f.two_contacts_ok, f.two_contact_frames), (Some(1), 2));
         assert_eq!((f.edges_one_contact, f.edge_frames), (Some(1), 2));
+        assert_eq!(f.round_pairs_with_edge, 1);
         assert!((f.tangential_direction_mae_deg.unwrap() - 10.0).abs() < 1e-9);
         // The push reads 1 N (2 N at scale 0.5) turned by 10 degrees: a chord of 2 sin 5 degrees.
         assert!((f.tangential_force_rms_n.unwrap() - 2.0 * 5f64.to_radians().sin()).abs() < 1e-12);
