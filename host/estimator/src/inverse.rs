@@ -240,6 +240,14 @@ struct LineLoad {
     pub length_mm: f64,
 }
 
+/// Two point loads against a line load, as [`InverseModel::pair_against_line`] finds them.
+struct PairAgainstLine {
+    /// The two points, mm.
+    points: [Point2; 2],
+    /// The pair's explained sum of squares less the line's (see [`InverseModel::fit_line_to`]), mm^2.
+    gain_mm2: f64,
+}
+
 /// A cell and its (fx, fy, fz), N.
 type Traction = (usize, [f64; 3]);
 
@@ -1029,26 +1037,60 @@ impl InverseModel {
                 .collect();
             regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
             let found = !regions.is_empty();
-            solved = Some((groups, support, motion, regions));
+            solved = Some((groups, support, motion, regions, tractions));
             if found {
                 break;
             }
         }
-        let Some((groups, support, motion, regions)) = solved else {
+        let Some((groups, support, motion, regions, solved_tractions)) = solved else {
             return empty;
         };
         // The strongest contact's shape, from the node solve: its region there that holds the contact's peak cell.
         // Half of a contact split in two is a point load's (see `split_pair`): it has no direction, and the node
-        // solve's region holds both halves, bridged by the blur.
+        // solve's region holds both halves, bridged by the blur. The blur bridges contacts the cell map lists apart
+        // too: when the listed contacts it bridges are two presses by `split_pair`'s rule ([`Self::two_presses`],
+        // their cells taken as one), the others' cells are not the strongest's shape (two fingertips are not an
+        // edge along the pair); when a line explains them as well, they are a long contact's parts (the cell map
+        // cuts some 20 mm edges into two or three) and the direction is theirs.
+        let observed = Observed {
+            d,
+            valid,
+            tractions: &solved_tractions,
+        };
         let edge_region = regions.first().and_then(|first| {
             if first.cells.iter().any(|c| halved.contains(&c.0)) {
                 return None;
             }
             let peak = first.cells.iter().max_by(|a, b| a.1[2].total_cmp(&b.1[2]))?.0;
             let (smooth, _, _) = self.constrained_solve(d, valid, seed, &groups, PressureBasis::Nodes, false)?;
-            self.regions(&smooth, &support, None)
+            let shape = self
+                .regions(&smooth, &support, None)
                 .into_iter()
-                .find(|r| r.cells.iter().any(|c| c.0 == peak))
+                .find(|r| r.cells.iter().any(|c| c.0 == peak))?;
+            let bridged: Vec<&Region> = regions[1..]
+                .iter()
+                .filter(|other| other.cells.iter().any(|c| shape.cells.iter().any(|s| s.0 == c.0)))
+                .collect();
+            if bridged.is_empty() {
+                return Some(shape);
+            }
+            let listed = self.region(
+                first
+                    .cells
+                    .iter()
+                    .chain(bridged.iter().flat_map(|other| &other.cells))
+                    .copied()
+                    .collect(),
+            );
+            if self.two_presses(&listed, observed, noise_mm).is_none() {
+                return Some(shape);
+            }
+            let apart: Vec<usize> = bridged
+                .iter()
+                .flat_map(|other| other.cells.iter().map(|c| c.0))
+                .collect();
+            let own: Vec<Traction> = shape.cells.into_iter().filter(|c| !apart.contains(&c.0)).collect();
+            (!own.is_empty()).then(|| self.region(own))
         });
         // Tractions outside the contacts are not reported (they are below the floor).
         let mut kept = vec![0.0; 3 * cells];
@@ -1235,14 +1277,10 @@ impl InverseModel {
             .sum()
     }
 
-    /// Two presses side by side read as one elongated contact when the cover's blur fills the dip between them (on
-    /// the validation set, pairs 10 mm apart along oblique directions, which the cell map shows as one peak): a
-    /// contact is split in two when two point loads (free positions, amplitudes >= 0) explain its displacements
-    /// better than the best straight line load (a long contact) by more than [`SUPPORT_SIGMAS`]^2 times the noise
-    /// (the 3 sigma rule of the dips' test), lie at least [`ROUND_EXTENT_PITCHES`] apart (closer, the map shows
-    /// one round contact either way), and each half of its cells (split at the points' bisector) clears the floor
-    /// where it is.
-    fn split_pair(&self, region: &Region, observed: Observed, noise_mm: f64, min_force_n: f64) -> Option<[Region; 2]> {
+    /// Two point loads (free positions, amplitudes >= 0) against the best straight line load (a long contact) as
+    /// the explanation of an elongated region's displacements (`None` when it is not elongated, see
+    /// [`Self::elongation`]): the pair's positions and how much more of the displacements it explains.
+    fn pair_against_line(&self, region: &Region, observed: Observed) -> Option<PairAgainstLine> {
         let start = self.elongation(region)?;
         let mut cells: Vec<usize> = region.cells.iter().map(|c| c.0).collect();
         cells.sort_unstable();
@@ -1286,12 +1324,22 @@ impl InverseModel {
             |_| {},
             &mut score,
         );
-        let (a, b) = ([p[0], p[1]], [p[2], p[3]]);
+        Some(PairAgainstLine {
+            points: [[p[0], p[1]], [p[2], p[3]]],
+            gain_mm2: pair_score - line_score,
+        })
+    }
+
+    /// Two presses side by side read as one elongated contact when the cover's blur fills the dip between them (on
+    /// the validation set, pairs 10 mm apart along oblique directions, which the cell map shows as one peak): a
+    /// contact is split in two when [`Self::two_presses`] says so, its two points lie at least
+    /// [`ROUND_EXTENT_PITCHES`] apart (closer, the map shows one round contact either way), and each half of its
+    /// cells (split at the points' bisector) clears the floor where it is.
+    fn split_pair(&self, region: &Region, observed: Observed, noise_mm: f64, min_force_n: f64) -> Option<[Region; 2]> {
+        let [a, b] = self.two_presses(region, observed, noise_mm)?;
         let axis = [b[0] - a[0], b[1] - a[1]];
-        let separation = axis[0].hypot(axis[1]);
-        if !(pair_score - line_score > SUPPORT_SIGMAS * SUPPORT_SIGMAS * noise_mm * noise_mm
-            && separation >= ROUND_EXTENT_PITCHES * pitch)
-        {
+        let pitch = self.pad.pitch_x_mm().max(self.pad.pitch_y_mm());
+        if axis[0].hypot(axis[1]) < ROUND_EXTENT_PITCHES * pitch {
             return None;
         }
         let middle = [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])];
@@ -1307,6 +1355,14 @@ impl InverseModel {
             .iter()
             .all(|h| h.force_vector_n[2] >= min_force_n * h.floor_scale)
             .then_some(halves)
+    }
+
+    /// Where the two presses are, when an elongated region is two of them rather than one long contact: two point
+    /// loads explain its displacements better than the best straight line load by more than [`SUPPORT_SIGMAS`]^2
+    /// times the noise at `noise_mm` (the 3 sigma rule of the dips' test; see [`Self::pair_against_line`]).
+    fn two_presses(&self, region: &Region, observed: Observed, noise_mm: f64) -> Option<[Point2; 2]> {
+        let pair = self.pair_against_line(region, observed)?;
+        (pair.gain_mm2 > SUPPORT_SIGMAS * SUPPORT_SIGMAS * noise_mm * noise_mm).then_some(pair.points)
     }
 
     /// A unit line load (centre, degrees, length in mm) on the cells: each of points 0.5 mm apart along it shared
@@ -2704,6 +2760,38 @@ mod tests {
             "{angle} vs {truth}: {moments:?} {:?}",
             stage2.regions[0].cells
         );
+    }
+
+    /// Two round presses 10 mm apart (issue 12's pair), along the grid and across it, are two contacts with their
+    /// forces, and the strongest has no edge direction: the node map's blur bridges the two, but two fingertips
+    /// are not an edge along the pair.
+    #[test]
+    fn two_round_presses_10_mm_apart_are_two_contacts_and_no_edge() {
+        let model = model();
+        let valid = vec![true; model.observations / 2];
+        for (angle, centre) in [(0.0f64, [-2.0, 1.0]), (45.0, [3.0, -2.0]), (120.0, [-4.0, 0.5])] {
+            let (c, s) = (angle.to_radians().cos(), angle.to_radians().sin());
+            let (a, b) = (
+                node_at(&model, [centre[0] - 5.0 * c, centre[1] - 5.0 * s]),
+                node_at(&model, [centre[0] + 5.0 * c, centre[1] + 5.0 * s]),
+            );
+            let mut load = node_press(&model, a.0, a.1, [0.0, 0.0, 3.0]);
+            load.extend(node_press(&model, b.0, b.1, [0.0, 0.0, 2.5]));
+            let d = field(&model, &load, [0.0; MOTION_PARAMETERS]);
+            let stage = model.stage1(&d, &valid);
+            let stage2 = model.stage2(&d, &valid, &stage, 0.002, 0.1);
+            assert_eq!(stage2.regions.len(), 2, "{angle} deg: {:?}", stage2.regions);
+            for (region, truth) in stage2.regions.iter().zip([3.0, 2.5]) {
+                assert!(
+                    (region.force_vector_n[2] - truth).abs() < 0.2 * truth,
+                    "{angle} deg: {:?}",
+                    stage2.regions
+                );
+            }
+            // None either when the pair was one region split in two.
+            let moments = stage2.edge_region.as_ref().map(|r| model.moments(r, 0.35));
+            assert_eq!(moments.and_then(|m| m.angle_deg), None, "{angle} deg: {moments:?}");
+        }
     }
 
     /// A 6 N line load laid on the cells as [`InverseModel::line_shape`] lays it (so the model explains it exactly),

@@ -103,7 +103,8 @@ fn a_round_press_has_no_direction() {
 }
 
 /// Two 4 mm spheres 10 mm apart about `mid`, along `direction` (deg), pressing `fa` and `fb` N: both listed as
-/// contacts, each within 3 mm and 20 % of its force (the model's newtons scaled by one centre press's).
+/// contacts, each within 3 mm and 20 % of its force (the model's newtons scaled by one centre press's), and no edge
+/// direction (two fingertips are not an edge along the pair).
 fn assert_two_contacts_listed(pairs: &[([f64; 2], f64, f64, f64)]) {
     let mut bench = Bench::new();
     // The model's newtons on this sensor, from one press at the centre (the validation pad is softer than the
@@ -131,6 +132,11 @@ fn assert_two_contacts_listed(pairs: &[([f64; 2], f64, f64, f64)]) {
         let (reading, truth) = bench.read(&name, CaseKind::TwoContacts, scene, 310 + k as u64);
         let touch = reading.touch.as_ref().unwrap_or_else(|| panic!("{name}: no contact"));
         let listed: Vec<([f64; 2], f64)> = touch.contacts().map(|c| (c.centre_mm, c.force_n * scale)).collect();
+        assert_eq!(
+            touch.edge.angle_deg, None,
+            "{name}: {:?}; listed {listed:.2?}",
+            touch.edge
+        );
         for press in &truth.frame.contacts {
             let nearest = listed
                 .iter()
