@@ -202,6 +202,8 @@ struct OthersAndShape {
     field: Vec<f64>,
     /// The contact's pressure shape's displacements per newton: 2 per corner, mm.
     shape: Vec<f64>,
+    /// Each of the contact's cells' share of its normal force (see [`pressure_shares`]).
+    shares: Vec<f64>,
 }
 
 /// One contact region from stage 2.
@@ -1117,34 +1119,15 @@ impl InverseModel {
     fn quarter_centres(&self, d: &[f64], valid: &[bool], tractions: &[f64], regions: &mut [Region]) {
         let Some(quarter_cells) = &self.quarters else { return };
         let rows = self.observations;
-        let mut all = vec![0.0; rows];
-        self.a.mul_vec(tractions, &mut all);
         for region in regions.iter_mut() {
+            let Some(others) = self.others_and_shape(tractions, region) else {
+                continue;
+            };
             // The displacements less the other regions' field.
-            let mut own = vec![0.0; rows];
-            for (j, f) in &region.cells {
-                for (k, force) in f.iter().enumerate() {
-                    for (o, &a) in own.iter_mut().zip(self.a_t.row(3 * j + k)) {
-                        *o += force * a;
-                    }
-                }
-            }
             let data: Vec<f64> = (0..rows)
-                .map(|r| if valid[r / 2] { d[r] - all[r] + own[r] } else { 0.0 })
+                .map(|r| if valid[r / 2] { d[r] - others.field[r] } else { 0.0 })
                 .collect();
             let quarters: Vec<usize> = region.cells.iter().flat_map(|c| 4 * c.0..4 * c.0 + 4).collect();
-            let total: f64 = region.cells.iter().map(|c| c.1[2].max(0.0)).sum();
-            let weights: Vec<f64> = region
-                .cells
-                .iter()
-                .map(|c| {
-                    if total > 0.0 {
-                        c.1[2].max(0.0) / total
-                    } else {
-                        1.0 / region.cells.len() as f64
-                    }
-                })
-                .collect();
             let nq = quarters.len();
             let n = nq + 2 + MOTION_PARAMETERS;
             let mut design = DMatrix::zeros(rows, n);
@@ -1152,13 +1135,13 @@ impl InverseModel {
             for (k, &q) in quarters.iter().enumerate() {
                 columns[k * rows..(k + 1) * rows].copy_from_slice(quarter_cells.pressure_t.row(q));
             }
+            // The region's uniform shear, spread as its pressure is (stage 2's shear without its twist).
             for axis in 0..2 {
-                let out = &mut columns[(nq + axis) * rows..(nq + axis + 1) * rows];
-                for ((j, _), w) in region.cells.iter().zip(&weights) {
-                    for (o, &a) in out.iter_mut().zip(self.a_t.row(3 * j + axis)) {
-                        *o += w * a;
-                    }
-                }
+                columns[(nq + axis) * rows..(nq + axis + 1) * rows].copy_from_slice(&self.share_weighted(
+                    region,
+                    &others.shares,
+                    axis,
+                ));
             }
             for p in 0..MOTION_PARAMETERS {
                 columns[(nq + 2 + p) * rows..(nq + 3 + p) * rows].copy_from_slice(self.b_t.row(p));
@@ -1551,10 +1534,7 @@ impl InverseModel {
     /// `region`, the displacements they make, and the region's pressure shape (its cells' normal responses weighted
     /// by their share of its force). `None` when the region holds no pressure.
     fn others_and_shape(&self, tractions: &[f64], region: &Region) -> Option<OthersAndShape> {
-        let total: f64 = region.cells.iter().map(|(_, f)| f[2].max(0.0)).sum();
-        if !(total > 0.0) {
-            return None;
-        }
+        let shares = pressure_shares(region)?;
         let mut others = tractions.to_vec();
         for (j, _) in &region.cells {
             others[3 * j..3 * j + 3].fill(0.0);
@@ -1562,18 +1542,26 @@ impl InverseModel {
         let rows = self.observations;
         let mut field = vec![0.0; rows];
         self.a.mul_vec(&others, &mut field);
-        let mut shape = vec![0.0; rows];
-        for (j, f) in &region.cells {
-            let w = f[2].max(0.0) / total;
-            for (s, a) in shape.iter_mut().zip(self.a_t.row(3 * j + 2)) {
-                *s += w * a;
-            }
-        }
+        let shape = self.share_weighted(region, &shares, 2);
         Some(OthersAndShape {
             tractions: others,
             field,
             shape,
+            shares,
         })
+    }
+
+    /// The displacements of traction component `k` (0, 1: shear along x, y; 2: pressure) on `region`'s cells, each
+    /// cell's weighted by its `shares` (from [`pressure_shares`]): per newton of a load spread as the region's
+    /// pressure is. 2 per corner, mm.
+    fn share_weighted(&self, region: &Region, shares: &[f64], k: usize) -> Vec<f64> {
+        let mut out = vec![0.0; self.observations];
+        for ((j, _), w) in region.cells.iter().zip(shares) {
+            for (o, a) in out.iter_mut().zip(self.a_t.row(3 * j + k)) {
+                *o += w * a;
+            }
+        }
+        out
     }
 
     /// The normal equations of least squares in the motion's columns and `extra` columns (one value per observation
@@ -2142,6 +2130,13 @@ impl InverseModel {
 }
 
 /// A load shape's (cell, share) correlation with the matched filter's `matched` correlations of the frame.
+/// Each of `region`'s cells' share of its normal force (negative pressure counted as none), in its cells' order;
+/// `None` when the region holds no pressure.
+fn pressure_shares(region: &Region) -> Option<Vec<f64>> {
+    let total: f64 = region.cells.iter().map(|(_, f)| f[2].max(0.0)).sum();
+    (total > 0.0).then(|| region.cells.iter().map(|(_, f)| f[2].max(0.0) / total).collect())
+}
+
 fn shape_correlation(shape: &[(usize, f64)], matched: &[f64]) -> f64 {
     shape.iter().map(|(j, w)| w * matched[*j]).sum()
 }
