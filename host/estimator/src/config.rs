@@ -251,14 +251,14 @@ pub struct ElasticConfig {
     pub cover_mm: f64,
     /// Gel between the pattern layer and the rigid plate, mm (bonded layer only).
     pub gel_mm: f64,
-    /// The pad is bonded to its frame around the pattern (bonded layer only).
+    /// The pad is bonded to its frame around the pattern (bonded layer and layered models).
     pub bonded_border: bool,
-    /// The pad is held in a frame whose walls, `border_margin_mm` beyond the pattern, it slides along (bonded layer
-    /// only, and not with `bonded_border`; see [`crate::elastic::Border::Sliding`]). Off by default: on the validation
-    /// sensor, whose pad is held so (4 mm beyond the pattern), it brought the quick set's force over the pad from 0.34
-    /// to 0.22 N RMS at 16c9bf7, but on the simulated real sensor's pad, an unbounded half-space, it moves a press one
-    /// cell from the border 1 mm inwards and misreads a rest frame with one LED side 20 % up as a contact at the
-    /// pattern's corner (tests/hard_cases.rs); which holds for the real pad has not been measured.
+    /// The pad is held in a frame whose walls, `border_margin_mm` beyond the pattern, it slides along (bonded layer and
+    /// layered models, and not with `bonded_border`; see [`crate::elastic::Border::Sliding`]). Off by default: on the
+    /// validation sensor, whose pad is held so (4 mm beyond the pattern), it brought the quick set's force over the pad
+    /// from 0.34 to 0.22 N RMS at 16c9bf7, but on the simulated real sensor's pad, an unbounded half-space, it moves a
+    /// press one cell from the border 1 mm inwards and misreads a rest frame with one LED side 20 % up as a contact at
+    /// the pattern's corner (tests/hard_cases.rs); which holds for the real pad has not been measured.
     pub sliding_walls: bool,
     /// Distance from the pattern's edge to where the pad is bonded to its frame, or to the frame's walls, mm.
     pub border_margin_mm: f64,
