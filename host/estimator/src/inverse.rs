@@ -2129,7 +2129,6 @@ impl InverseModel {
     }
 }
 
-/// A load shape's (cell, share) correlation with the matched filter's `matched` correlations of the frame.
 /// Each of `region`'s cells' share of its normal force (negative pressure counted as none), in its cells' order;
 /// `None` when the region holds no pressure.
 fn pressure_shares(region: &Region) -> Option<Vec<f64>> {
@@ -2137,6 +2136,7 @@ fn pressure_shares(region: &Region) -> Option<Vec<f64>> {
     (total > 0.0).then(|| region.cells.iter().map(|(_, f)| f[2].max(0.0) / total).collect())
 }
 
+/// A load shape's (cell, share) correlation with the matched filter's `matched` correlations of the frame.
 fn shape_correlation(shape: &[(usize, f64)], matched: &[f64]) -> f64 {
     shape.iter().map(|(j, w)| w * matched[*j]).sum()
 }
