@@ -2481,6 +2481,35 @@ mod tests {
         )
     }
 
+    /// A round press of `force_n` N (normal) over a disc of `radius_mm` about `centre` with Hertz's pressure
+    /// (sqrt(1 - r^2/a^2)), laid on the cells as points 0.25 mm apart each shared bilinearly among the four cell
+    /// centres around it ([`InverseModel::line_shape`] of a point): a sphere's contact, where it falls on the grid.
+    fn hertz_press(model: &InverseModel, centre: Point2, radius_mm: f64, force_n: f64) -> Vec<(usize, [f64; 3])> {
+        let step = 0.25;
+        let reach = (radius_mm / step).ceil() as i32;
+        let mut dense = vec![0.0; model.cells.len()];
+        let mut point = Vec::new();
+        for i in -reach..=reach {
+            for j in -reach..=reach {
+                let (x, y) = (f64::from(i) * step, f64::from(j) * step);
+                let r2 = (x * x + y * y) / (radius_mm * radius_mm);
+                if r2 < 1.0 {
+                    model.line_shape([centre[0] + x, centre[1] + y], 0.0, 0.0, &mut point);
+                    for &(k, share) in &point {
+                        dense[k] += (1.0 - r2).sqrt() * share;
+                    }
+                }
+            }
+        }
+        let total: f64 = dense.iter().sum();
+        dense
+            .into_iter()
+            .enumerate()
+            .filter(|&(_, w)| w > 0.0)
+            .map(|(k, w)| (k, [0.0, 0.0, force_n * w / total]))
+            .collect()
+    }
+
     /// The active-set solve as it was before the free set's factor was updated in place: a factorisation from
     /// scratch at every step.
     fn active_set_from_scratch(h: &DMatrix<f64>, g: &DVector<f64>, constrained: &[bool]) -> Option<DVector<f64>> {
@@ -2784,6 +2813,51 @@ mod tests {
                 );
             }
             // None either when the pair was one region split in two.
+            let moments = stage2.edge_region.as_ref().map(|r| model.moments(r, 0.35));
+            assert_eq!(moments.and_then(|m| m.angle_deg), None, "{angle} deg: {moments:?}");
+        }
+    }
+
+    /// Two spheres 10 mm apart along oblique directions (3.4 mm contacts, Hertz's pressure, as the validation set's
+    /// pairs): the cell map lists them apart, but the node map's blur bridges the two into one elongated region,
+    /// whose second moments would give the pair's direction (45, 60 and 135 deg here) as an edge's. Two point loads
+    /// explain the displacements better than any line, so they are two presses: two contacts with their forces and
+    /// centres, and no edge direction (two fingertips are not an edge along the pair).
+    #[test]
+    fn two_spheres_the_node_map_bridges_are_two_contacts_and_no_edge() {
+        let model = model();
+        let valid = vec![true; model.observations / 2];
+        for (angle, centre, forces, radius) in [
+            (45.0f64, [-4.0, 0.5], [3.0, 3.0], 3.4),
+            (60.0, [-4.0, 0.5], [3.0, 3.0], 3.4),
+            (135.0, [0.7, 0.3], [3.0, 2.5], 2.0),
+        ] {
+            let (c, s) = (angle.to_radians().cos(), angle.to_radians().sin());
+            let presses = [
+                ([centre[0] - 5.0 * c, centre[1] - 5.0 * s], forces[0]),
+                ([centre[0] + 5.0 * c, centre[1] + 5.0 * s], forces[1]),
+            ];
+            let load: Vec<(usize, [f64; 3])> = presses
+                .iter()
+                .flat_map(|&(at, force)| hertz_press(&model, at, radius, force))
+                .collect();
+            let d = field(&model, &load, [0.0; MOTION_PARAMETERS]);
+            let stage = model.stage1(&d, &valid);
+            let stage2 = model.stage2(&d, &valid, &stage, 0.002, 0.1);
+            assert_eq!(stage2.regions.len(), 2, "{angle} deg: {:?}", stage2.regions);
+            for (at, force) in presses {
+                let distance = |r: &Region| (r.centre_mm[0] - at[0]).hypot(r.centre_mm[1] - at[1]);
+                let nearest = stage2
+                    .regions
+                    .iter()
+                    .min_by(|a, b| distance(a).total_cmp(&distance(b)))
+                    .expect("two regions");
+                assert!(
+                    distance(nearest) < 1.0 && (nearest.force_vector_n[2] - force).abs() < 0.1 * force,
+                    "{angle} deg, {force} N at {at:?}: {:?}",
+                    stage2.regions
+                );
+            }
             let moments = stage2.edge_region.as_ref().map(|r| model.moments(r, 0.35));
             assert_eq!(moments.and_then(|m| m.angle_deg), None, "{angle} deg: {moments:?}");
         }
