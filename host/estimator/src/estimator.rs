@@ -317,11 +317,10 @@ impl Estimator {
         // The published detector keeps the noise the fast tracker was first judged by (its residuals after stage 1,
         // never below the configured floors): its corners' scatter on rest frames is not measured.
         let (outcome, near_loads) = match self.mode {
-            Mode::Paper => {
-                let floor_mm = self.rest.support_floor_mm;
-                let noise_mm = self.model.frame_noise_mm(&motion.stage, floor_mm).max(floor_mm);
-                (self.model.test(&tested_stage, noise_mm), Vec::new())
-            }
+            Mode::Paper => (
+                self.model.test(&tested_stage, self.support_noise_mm(&motion.stage)),
+                Vec::new(),
+            ),
             Mode::Fast | Mode::Inverse => self.model.measured_test_and_loads_of(
                 &tested_stage,
                 &motion.data,
@@ -383,7 +382,7 @@ impl Estimator {
                 samples: &samples,
             };
             (
-                self.line_touch(&field, &valid, &outcome, line.model_n, registration),
+                self.line_touch(&field, &motion, &valid, &outcome, line.model_n, registration),
                 None,
             )
         };
@@ -541,8 +540,7 @@ impl Estimator {
         // above the floor at that noise; the strongest is one above the test's floor too (the test found a contact),
         // which is lower for a light press and higher for a heavy one (whose far field the scatter about the motion
         // takes for noise).
-        let floor_mm = self.rest.support_floor_mm;
-        let noise_mm = self.model.frame_noise_mm(&motion.stage, floor_mm).max(floor_mm);
+        let noise_mm = self.support_noise_mm(&motion.stage);
         let others_floor_n = self.model.test(&motion.stage, noise_mm).detection_floor_n;
         let min_force_n = outcome.detection_floor_n.min(others_floor_n);
         let mut described = self
@@ -662,6 +660,7 @@ impl Estimator {
     fn line_touch(
         &self,
         field: &PaperField,
+        motion: &Compensated,
         valid: &[bool],
         outcome: &TestOutcome,
         line_n: f64,
@@ -706,7 +705,7 @@ impl Estimator {
             torque_nmm: None,
             area_mm2: None,
         };
-        let edge = self.shear_edge(field.samples, &affine, registration);
+        let edge = self.shear_edge(field.samples, &affine, registration, motion, valid);
         Some(Touch {
             strongest,
             others: Vec::new(),
@@ -720,8 +719,17 @@ impl Estimator {
         })
     }
 
-    /// The shear field's principal axis (modes `fast` and `paper`).
-    fn shear_edge(&self, samples: &ShearSamples, affine: &AffineMotion, registration: &Registration) -> EdgeEstimate {
+    /// The shear field's principal axis (modes `fast` and `paper`). None when the loads stage 1 finds are two presses
+    /// ([`InverseModel::stage1_loads_are_two_presses`], at stage 2's noise): the field of two round presses side by
+    /// side is elongated along the pair, and two fingertips are not an edge (issue 12: none for round contacts).
+    fn shear_edge(
+        &self,
+        samples: &ShearSamples,
+        affine: &AffineMotion,
+        registration: &Registration,
+        motion: &Compensated,
+        valid: &[bool],
+    ) -> EdgeEstimate {
         let sheared: Vec<(Point2, f64)> = self
             .rest
             .sampler
@@ -743,7 +751,26 @@ impl Estimator {
             thresholds.edge_min_confidence,
         );
         let coverage = self.coverage(&registration.corners, edge.region_centre_mm, edge.region_radius_mm);
-        edge.with_coverage(coverage, MIN_EDGE_COVERAGE, thresholds.edge_min_confidence)
+        let edge = edge.with_coverage(coverage, MIN_EDGE_COVERAGE, thresholds.edge_min_confidence);
+        // The two-press test costs two pattern searches: only a direction that would be reported is put to it.
+        let two_presses = edge.angle_deg.is_some()
+            && self.model.stage1_loads_are_two_presses(
+                &motion.stage,
+                &motion.data,
+                valid,
+                self.support_noise_mm(&motion.stage),
+            );
+        EdgeEstimate {
+            angle_deg: edge.angle_deg.filter(|_| !two_presses),
+            ..edge
+        }
+    }
+
+    /// The noise stage 2 picks its loaded cells at (and the published detector's contact test uses): what the frame's
+    /// stage 1 fit leaves, never below the support floor (`inverse.noise_floor_px`).
+    fn support_noise_mm(&self, stage: &Stage1) -> f64 {
+        let floor_mm = self.rest.support_floor_mm;
+        self.model.frame_noise_mm(stage, floor_mm).max(floor_mm)
     }
 
     /// Fraction of the corners within `radius_mm` (plus one cell) of `centre_mm` that are valid, judged on the

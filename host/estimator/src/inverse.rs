@@ -1348,6 +1348,25 @@ impl InverseModel {
         (pair.gain_mm2 > SUPPORT_SIGMAS * SUPPORT_SIGMAS * noise_mm * noise_mm).then_some(pair.points)
     }
 
+    /// Whether the loads stage 1 finds at `noise_mm` (its loaded cells and their ring, every group taken as one
+    /// region, with stage 1's pressure) are two presses by [`Self::two_presses`]' rule. The gamma modes read one
+    /// contact and take the edge direction from the whole shear field, which two presses side by side make as
+    /// elongated as an edge, along the pair; a long contact, which a line explains as well as two points, is not two.
+    pub fn stage1_loads_are_two_presses(&self, stage: &Stage1, d: &[f64], valid: &[bool], noise_mm: f64) -> bool {
+        let cells: Vec<Traction> = self
+            .loaded_groups(stage, noise_mm)
+            .into_iter()
+            .flatten()
+            .map(|j| (j, [0.0, 0.0, stage.tractions[3 * j + 2]]))
+            .collect();
+        let observed = Observed {
+            d,
+            valid,
+            tractions: &stage.tractions,
+        };
+        !cells.is_empty() && self.two_presses(&self.region(cells), observed, noise_mm).is_some()
+    }
+
     /// A unit line load (centre, degrees, length in mm) on the cells: each of points 0.5 mm apart along it shared
     /// bilinearly among the four cell centres around it (clamped to the outermost cells' centres), as (cell,
     /// share).
