@@ -563,20 +563,14 @@ impl Estimator {
             edge_region,
             ..
         } = described;
-        // Each contact beside the strongest must clear the floor where it is, still clear it when how the pad is held
-        // at its edge is left free (`InverseModel::border_doubt`), and clear it less the share of the other contacts'
-        // far field its shape takes up (`InverseModel::far_field_shadow`): judged against stage 2's tractions as
-        // found, before any is left out.
+        // Each contact beside the strongest must hold its own at the others' floor (`InverseModel::holds_its_own`),
+        // judged against stage 2's tractions as found, before any is left out.
         let found = tractions.clone();
         let mut rank = 0;
         kept.retain(|region| {
             rank += 1;
             let floor_n = others_floor_n * region.floor_scale;
-            let force_n = region.force_vector_n[2];
-            let listed = rank == 1
-                || (force_n >= floor_n
-                    && force_n - self.model.far_field_shadow(valid, &found, region).abs() >= floor_n
-                    && self.model.border_doubt(&motion.data, valid, &found, region) >= floor_n);
+            let listed = rank == 1 || self.model.holds_its_own(&motion.data, valid, &found, region, floor_n);
             if !listed {
                 for (j, _) in &region.cells {
                     tractions[3 * j..3 * j + 3].fill(0.0);

@@ -40,7 +40,10 @@
 //! the line shapes a matched filter finds significant and better explained as a line than as a square patch; there
 //! the fragments a line's pressure breaks into are one contact unless the dip between them is significant, and a
 //! group of cells is judged against the floor as a whole, by its unbiased least-squares force (see
-//! `InverseModel::contacts`). The edge direction (second
+//! `InverseModel::contacts`). Two regions side by side are one long contact when a straight line load explains them
+//! better than two point loads by the test's margin and the pressure between them is more than two round presses
+//! leave there (`InverseModel::join_cut_lines`: the cell map cuts some 20 mm edges of the validation pad into lumps
+//! about 10 mm apart). The edge direction (second
 //! moments of the pressure) comes from a second solve with the pressure's unknowns on the grid's nodes instead of its
 //! cells, which has no checkerboard noise (see [`PressureBasis`]).
 
@@ -1037,6 +1040,7 @@ impl InverseModel {
                     None => vec![r],
                 })
                 .collect();
+            self.join_cut_lines(&mut regions, &groups, &halved, observed, noise_mm, min_force_n);
             regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
             let found = !regions.is_empty();
             solved = Some((groups, support, motion, regions, tractions));
@@ -1053,7 +1057,8 @@ impl InverseModel {
         // too: when the listed contacts it bridges are two presses by `split_pair`'s rule ([`Self::two_presses`],
         // their cells taken as one), the others' cells are not the strongest's shape (two fingertips are not an
         // edge along the pair); when a line explains them as well, they are a long contact's parts (the cell map
-        // cuts some 20 mm edges into two or three) and the direction is theirs.
+        // cuts some 20 mm edges into two or three, and `join_cut_lines` joins most but not all) and the direction is
+        // theirs.
         let observed = Observed {
             d,
             valid,
@@ -1365,6 +1370,124 @@ impl InverseModel {
             tractions: &stage.tractions,
         };
         !cells.is_empty() && self.two_presses(&self.region(cells), observed, noise_mm).is_some()
+    }
+
+    /// Two regions of one loaded group are one long contact that the cell map cut in two (it cuts the validation
+    /// pad's 20 mm edges about 5 mm either side of their centres, where the equivalent layer misreads that pad) when
+    /// their union is elongated, a straight line load explains it better than two point loads by more than
+    /// [`SUPPORT_SIGMAS`]^2 times the noise at `noise_mm` (the other way round from [`Self::two_presses`]), the
+    /// weaker would be listed beside the other on its own ([`Self::holds_its_own`]: a load the border or the other's
+    /// far field explains is not a part of it), and the pressure between them is more than two round presses can
+    /// leave there ([`Self::gap_exceeds_two_presses`]). Regions joined this way are judged again with the others.
+    fn join_cut_lines(
+        &self,
+        regions: &mut Vec<Region>,
+        groups: &[Vec<usize>],
+        halved: &[usize],
+        observed: Observed,
+        noise_mm: f64,
+        min_force_n: f64,
+    ) {
+        let group_of = |r: &Region| {
+            r.cells
+                .first()
+                .and_then(|c| groups.iter().position(|g| g.binary_search(&c.0).is_ok()))
+        };
+        let margin = SUPPORT_SIGMAS * SUPPORT_SIGMAS * noise_mm * noise_mm;
+        loop {
+            let mut joined = None;
+            'pairs: for i in 0..regions.len() {
+                for k in i + 1..regions.len() {
+                    let (a, b) = (&regions[i], &regions[k]);
+                    if group_of(a).is_none()
+                        || group_of(a) != group_of(b)
+                        || !self.touching(a, b)
+                        || a.cells.iter().chain(&b.cells).any(|c| halved.contains(&c.0))
+                    {
+                        continue;
+                    }
+                    // The cheap test first.
+                    if !self.gap_exceeds_two_presses(a, b, observed.tractions) {
+                        continue;
+                    }
+                    let weaker = if a.force_vector_n[2] < b.force_vector_n[2] {
+                        a
+                    } else {
+                        b
+                    };
+                    let floor_n = min_force_n * weaker.floor_scale;
+                    if !self.holds_its_own(observed.d, observed.valid, observed.tractions, weaker, floor_n) {
+                        continue;
+                    }
+                    let union = self.region(a.cells.iter().chain(&b.cells).copied().collect());
+                    if self
+                        .pair_against_line(&union, observed)
+                        .is_some_and(|pair| pair.gain_mm2 < -margin)
+                    {
+                        joined = Some((i, k, union));
+                        break 'pairs;
+                    }
+                }
+            }
+            let Some((i, k, union)) = joined else {
+                return;
+            };
+            regions.remove(k);
+            regions[i] = union;
+        }
+    }
+
+    /// Whether the pressure midway between two regions' peaks is more than two round presses there can leave. A
+    /// round press (a pressure falling away from its centre alike in every direction) leaves at the midpoint, half
+    /// the peaks' distance from its centre, what it leaves at that distance across the line through the peaks; so
+    /// two of them leave at the midpoint at most the sum of what the two peaks show across at that distance, each on
+    /// its higher side (the cell map's checkerboard noise makes one side of a peak differ from the other). A strip's
+    /// pressure runs on along it, past what its sides show. Cells are taken at the points (nearest cell centre); a
+    /// point off the pattern is left out, and with a peak that has none across, the regions are not joined.
+    fn gap_exceeds_two_presses(&self, a: &Region, b: &Region, tractions: &[f64]) -> bool {
+        let peak = |r: &Region| {
+            r.cells
+                .iter()
+                .max_by(|x, y| x.1[2].total_cmp(&y.1[2]))
+                .map(|c| self.cells[c.0].centre_mm)
+        };
+        let (Some(pa), Some(pb)) = (peak(a), peak(b)) else {
+            return false;
+        };
+        let (cols, rows) = (usize::from(self.pad.cols), usize::from(self.pad.rows));
+        let origin = self.cells[0].centre_mm;
+        let (px, py) = (self.pad.pitch_x_mm(), self.pad.pitch_y_mm());
+        let pressure_at = |q: Point2| -> Option<f64> {
+            let (c, r) = (((q[0] - origin[0]) / px).round(), ((q[1] - origin[1]) / py).round());
+            (c >= 0.0 && r >= 0.0 && (c as usize) < cols && (r as usize) < rows)
+                .then(|| tractions[3 * (r as usize * cols + c as usize) + 2])
+        };
+        let axis = [pb[0] - pa[0], pb[1] - pa[1]];
+        let across = [-0.5 * axis[1], 0.5 * axis[0]];
+        let Some(gap) = pressure_at([pa[0] + 0.5 * axis[0], pa[1] + 0.5 * axis[1]]) else {
+            return false;
+        };
+        let beside = |p: Point2| {
+            [-1.0, 1.0]
+                .into_iter()
+                .filter_map(|side| pressure_at([p[0] + side * across[0], p[1] + side * across[1]]))
+                .reduce(f64::max)
+        };
+        let (Some(beside_a), Some(beside_b)) = (beside(pa), beside(pb)) else {
+            return false;
+        };
+        gap > beside_a + beside_b
+    }
+
+    /// Whether a region beside another contact is a contact of its own at `floor_n` (N, where it is): it clears the
+    /// floor, still clears it less the share of the other contacts' far field its shape takes up
+    /// ([`Self::far_field_shadow`]), and when how the pad is held at its edge is left free ([`Self::border_doubt`]),
+    /// judged against stage 2's `tractions` as found. `d`: 2 per corner, mm; `valid`: per corner.
+    pub fn holds_its_own(&self, d: &[f64], valid: &[bool], tractions: &[f64], region: &Region, floor_n: f64) -> bool {
+        let force_n = region.force_vector_n[2];
+        force_n >= floor_n
+            && force_n - self.far_field_shadow(valid, tractions, region).abs() >= floor_n
+            && self.border_doubt(d, valid, tractions, region) >= floor_n
     }
 
     /// A unit line load (centre, degrees, length in mm) on the cells: each of points 0.5 mm apart along it shared

@@ -78,6 +78,31 @@ fn an_edge_has_its_direction_at_every_angle() {
     assert!(mean <= 2.5, "mean error {mean:.2} deg: {errors:.2?}");
 }
 
+/// The estimator's cell map cuts some 20 mm edges (the validation pad's: uniform strips) into two or three lumps about
+/// 10 mm apart, where its equivalent layer misreads that pad; the parts are joined into one contact (see
+/// `InverseModel::join_cut_lines`), which keeps its direction. Two round presses 10 mm apart stay two (the tests
+/// below).
+#[test]
+fn an_edge_the_cell_map_cuts_is_one_contact_with_its_direction() {
+    let mut bench = Bench::new();
+    let edges = [(108.2, [9.0, -7.8], 7.9), (176.7, [-5.6, 4.5], 3.2)];
+    for (k, (angle, at, force)) in edges.into_iter().enumerate() {
+        let name = format!("edge at {angle} deg");
+        let scene = Scene::with_contact(Contact::edge(20.0, 1.0, angle, at, force));
+        let (reading, truth) = bench.read(&name, CaseKind::Edge, scene, 400 + k as u64);
+        let truth = truth.frame.contacts[0].edge_angle_deg.unwrap();
+        let touch = reading.touch.as_ref().unwrap_or_else(|| panic!("{name}: no contact"));
+        let listed: Vec<([f64; 2], f64)> = touch.contacts().map(|c| (c.centre_mm, c.force_n)).collect();
+        assert_eq!(listed.len(), 1, "{name}: listed {listed:.2?}");
+        let found = touch
+            .edge
+            .angle_deg
+            .unwrap_or_else(|| panic!("{name}: no direction (confidence {})", touch.edge.confidence));
+        let error = angle_error_deg(found, truth);
+        assert!(error <= 8.0, "{name}: found {found:.1} deg, truth {truth:.1}");
+    }
+}
+
 #[test]
 fn a_round_press_has_no_direction() {
     let mut bench = Bench::new();
