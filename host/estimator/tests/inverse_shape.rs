@@ -46,6 +46,20 @@ fn angle_error_deg(found: f64, truth: f64) -> f64 {
     d.min(180.0 - d)
 }
 
+/// The edge direction's error against the rendered edge's, in deg; the reading must have a contact with a direction
+/// within 8 deg of the truth (the per-edge bound of the tests below).
+fn edge_direction_error_deg(name: &str, reading: &Reading, truth: &CaseTruth) -> f64 {
+    let truth = truth.frame.contacts[0].edge_angle_deg.unwrap();
+    let touch = reading.touch.as_ref().unwrap_or_else(|| panic!("{name}: no contact"));
+    let found = touch
+        .edge
+        .angle_deg
+        .unwrap_or_else(|| panic!("{name}: no direction (confidence {})", touch.edge.confidence));
+    let error = angle_error_deg(found, truth);
+    assert!(error <= 8.0, "{name}: found {found:.1} deg, truth {truth:.1}");
+    error
+}
+
 /// Issue 12's target is 2 deg; measured here: 1.8 deg mean, 6.9 worst (at 98 deg), so the bounds are 2.5 deg on the
 /// mean and 8 on each edge (before the node solve: 5.7 and 15.9).
 #[test]
@@ -64,15 +78,7 @@ fn an_edge_has_its_direction_at_every_angle() {
         let name = format!("edge at {angle} deg");
         let scene = Scene::with_contact(Contact::edge(20.0, 1.0, angle, at, force));
         let (reading, truth) = bench.read(&name, CaseKind::Edge, scene, 100 + k as u64);
-        let truth = truth.frame.contacts[0].edge_angle_deg.unwrap();
-        let touch = reading.touch.as_ref().unwrap_or_else(|| panic!("{name}: no contact"));
-        let found = touch
-            .edge
-            .angle_deg
-            .unwrap_or_else(|| panic!("{name}: no direction (confidence {})", touch.edge.confidence));
-        let error = angle_error_deg(found, truth);
-        assert!(error <= 8.0, "{name}: found {found:.1} deg, truth {truth:.1}");
-        errors.push(error);
+        errors.push(edge_direction_error_deg(&name, &reading, &truth));
     }
     let mean = errors.iter().sum::<f64>() / errors.len() as f64;
     assert!(mean <= 2.5, "mean error {mean:.2} deg: {errors:.2?}");
@@ -90,16 +96,10 @@ fn an_edge_the_cell_map_cuts_is_one_contact_with_its_direction() {
         let name = format!("edge at {angle} deg");
         let scene = Scene::with_contact(Contact::edge(20.0, 1.0, angle, at, force));
         let (reading, truth) = bench.read(&name, CaseKind::Edge, scene, 400 + k as u64);
-        let truth = truth.frame.contacts[0].edge_angle_deg.unwrap();
         let touch = reading.touch.as_ref().unwrap_or_else(|| panic!("{name}: no contact"));
         let listed: Vec<([f64; 2], f64)> = touch.contacts().map(|c| (c.centre_mm, c.force_n)).collect();
         assert_eq!(listed.len(), 1, "{name}: listed {listed:.2?}");
-        let found = touch
-            .edge
-            .angle_deg
-            .unwrap_or_else(|| panic!("{name}: no direction (confidence {})", touch.edge.confidence));
-        let error = angle_error_deg(found, truth);
-        assert!(error <= 8.0, "{name}: found {found:.1} deg, truth {truth:.1}");
+        edge_direction_error_deg(&name, &reading, &truth);
     }
 }
 
