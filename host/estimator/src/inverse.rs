@@ -1374,7 +1374,7 @@ impl InverseModel {
 
     /// Two regions of one loaded group are one long contact that the cell map cut in two (it cuts the validation
     /// pad's 20 mm edges about 5 mm either side of their centres, where the equivalent layer misreads that pad) when
-    /// their union is elongated, a straight line load explains it better than two point loads by more than
+    /// a straight line load explains their union better than two point loads by more than
     /// [`SUPPORT_SIGMAS`]^2 times the noise at `noise_mm` (the other way round from [`Self::two_presses`]), the
     /// weaker would be listed beside the other on its own ([`Self::holds_its_own`]: a load the border or the other's
     /// far field explains is not a part of it), and the pressure between them is more than two round presses can
