@@ -539,7 +539,8 @@ impl WindowTotals {
         touch_rows(spans);
         let longest = spans.iter().map(|s| s.count).max().unwrap_or(0);
         // SAFETY (the loads and gathers below): the arrays are ROWS_AT_ONCE = 8 lanes of 32 bits, a vector's width;
-        // every word gathered from `raw` starts at `min(first + i * pixel_bytes, last)` for a lane, between the byte
+        // every word gathered from `raw` starts at `min(first + i * pixel_bytes, last)` for a lane (no clamp is
+        // needed while i < `shortest`, every lane's count: there the first term is at most `last`), between the byte
         // before its row's first pixel (which exists: no row starts at 0) and the byte before its last pixel, so its
         // four bytes lie in the row's span; every table index is min(R, G) + 255 - B or 510 (`yellow_bin`), in
         // 0..=510, the table's range.
@@ -560,8 +561,8 @@ impl WindowTotals {
         let (mut w, mut wx) = (_mm256_setzero_ps(), _mm256_setzero_ps());
         let mut clipped = _mm256_setzero_si256();
         let table = membership.as_ptr();
-        for i in 0..longest {
-            let at = _mm256_min_epi32(offset, last);
+        // One pixel of every lane: its membership and whether it is clipped white (all ones where it is).
+        let look_up = |at: __m256i| {
             let words = unsafe { _mm256_i32gather_epi32::<1>(base.cast(), at) };
             let r = _mm256_and_si256(_mm256_srli_epi32::<8>(words), byte);
             let g = _mm256_and_si256(_mm256_srli_epi32::<16>(words), byte);
@@ -572,10 +573,29 @@ impl WindowTotals {
             let bin = _mm256_sub_epi32(_mm256_add_epi32(low, bin_zero), b);
             let bin = _mm256_max_epi32(bin, _mm256_and_si256(low_clipped, last_bin));
             let m = unsafe { _mm256_i32gather_ps::<4>(table, bin) };
+            (m, _mm256_cmpgt_epi32(_mm256_min_epi32(low, b), below_clipped))
+        };
+        // While every lane still has pixels (most of a batch: its rows differ in length by a few pixels at most,
+        // near a window's top and bottom), the offsets need no clamp and the sums no mask: the same additions of the
+        // same values as the loop after it, in about 0.8 times its instructions.
+        let shortest = if spans.len() == ROWS_AT_ONCE {
+            spans.iter().map(|s| s.count).min().unwrap_or(0)
+        } else {
+            0
+        };
+        for _ in 0..shortest {
+            let (m, white) = look_up(offset);
+            clipped = _mm256_sub_epi32(clipped, white);
+            w = _mm256_add_ps(w, m);
+            wx = _mm256_add_ps(wx, _mm256_mul_ps(m, x));
+            x = _mm256_add_ps(x, step);
+            offset = _mm256_add_epi32(offset, step_bytes);
+        }
+        for i in shortest..longest {
+            let (m, white) = look_up(_mm256_min_epi32(offset, last));
             let live = _mm256_cmpgt_epi32(count, _mm256_set1_epi32(i as i32));
             let m = _mm256_and_ps(m, _mm256_castsi256_ps(live));
-            let white = _mm256_and_si256(_mm256_cmpgt_epi32(_mm256_min_epi32(low, b), below_clipped), live);
-            clipped = _mm256_sub_epi32(clipped, white);
+            clipped = _mm256_sub_epi32(clipped, _mm256_and_si256(white, live));
             w = _mm256_add_ps(w, m);
             wx = _mm256_add_ps(wx, _mm256_mul_ps(m, x));
             x = _mm256_add_ps(x, step);
