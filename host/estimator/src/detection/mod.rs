@@ -22,7 +22,7 @@ use crate::config::Thresholds;
 use crate::error::EstimateError;
 use blobs::find_square_blobs;
 use indexing::index_lattice;
-use window::{add_to_histogram, centroid, mean_brightness, mean_membership, CellFrame, Pixels};
+use window::{add_to_histogram, centroid, mean_brightness, mean_membership, CellFrame, Pixels, Window};
 use yellowness::{otsu, Histogram, MembershipTable, YellownessMap};
 
 /// Every square's sub-pixel centroid (raw px) and area (px^2), in the pad's square order; `None` where the square
@@ -91,7 +91,14 @@ struct SquareModel {
     reference_area: f64,
     /// Mean R + G + B of the square's middle in the rest frame (see [`LIGHT_CHANGE`]); 0 where unknown.
     reference_brightness: f64,
-    cell: CellFrame,
+    /// The square's cell and its search window ([`WINDOW_HALF`]).
+    window: Window,
+}
+
+impl SquareModel {
+    fn cell(&self) -> &CellFrame {
+        self.window.cell()
+    }
 }
 
 /// What one frame's detection found.
@@ -179,7 +186,7 @@ impl FastTracker {
                 reference: None,
                 reference_area: 0.0,
                 reference_brightness: 0.0,
-                cell: cell.unwrap_or(any_cell),
+                window: Window::new(cell.unwrap_or(any_cell), WINDOW_HALF),
             })
             .collect();
         let mut tracker = Self {
@@ -204,7 +211,7 @@ impl FastTracker {
         let refined_cells = local_cells(&pad, &squares_px)?;
         for (model, cell) in tracker.squares.iter_mut().zip(refined_cells) {
             if let Some(cell) = cell {
-                model.cell = cell;
+                model.window = Window::new(cell, WINDOW_HALF);
             }
         }
         // Measure the reference again with those cells, from where the first pass ended, as every later frame is
@@ -227,7 +234,7 @@ impl FastTracker {
         };
         for model in &mut tracker.squares {
             if let Some(p) = model.reference {
-                model.reference_brightness = mean_brightness(&px, p, &model.cell, CENTRE_HALF, tracker.stride);
+                model.reference_brightness = mean_brightness(&px, p, model.cell(), CENTRE_HALF, tracker.stride);
             }
         }
         tracker.previous = squares_px.clone();
@@ -261,7 +268,7 @@ impl FastTracker {
         let squares: Vec<Option<Point2>> = self.squares.iter().map(|m| m.reference).collect();
         for (model, cell) in self.squares.iter_mut().zip(local_cells(&self.pad, &squares)?) {
             if let Some(cell) = cell {
-                model.cell = cell;
+                model.window = Window::new(cell, WINDOW_HALF);
             }
         }
         Ok(())
@@ -325,7 +332,8 @@ impl FastTracker {
     fn relit_squares(&self, frame: &RgbImage, measured: &[Option<(Point2, f64)>]) -> Vec<bool> {
         let moved = self.squares.iter().any(|model| {
             model.reference.is_some_and(|r| {
-                sub(self.last_motion.apply(r), r)[0].hypot(sub(self.last_motion.apply(r), r)[1]) / model.cell.min_step()
+                sub(self.last_motion.apply(r), r)[0].hypot(sub(self.last_motion.apply(r), r)[1])
+                    / model.cell().min_step()
                     > JUMP_CELLS
             })
         });
@@ -377,7 +385,7 @@ impl FastTracker {
         };
         let light_changed = |model: &SquareModel, at: Point2| {
             model.reference_brightness > 0.0
-                && (mean_brightness(&px, at, &model.cell, CENTRE_HALF, self.stride) / model.reference_brightness - 1.0)
+                && (mean_brightness(&px, at, model.cell(), CENTRE_HALF, self.stride) / model.reference_brightness - 1.0)
                     .abs()
                     > LIGHT_CHANGE
         };
@@ -439,7 +447,7 @@ impl FastTracker {
             .map(|m| m.reference.map(|r| motion.apply(r)))
             .collect();
         let cells =
-            |a: Point2, b: Point2, model: &SquareModel| sub(a, b)[0].hypot(sub(a, b)[1]) / model.cell.min_step();
+            |a: Point2, b: Point2, model: &SquareModel| sub(a, b)[0].hypot(sub(a, b)[1]) / model.cell().min_step();
         let jumped = self
             .squares
             .iter()
@@ -488,7 +496,7 @@ impl FastTracker {
             .zip(&self.squares)
             .filter_map(|((m, p), model)| {
                 let (m, p) = (m.as_ref()?.0, (*p)?);
-                Some(sub(m, p)[0].hypot(sub(m, p)[1]) / model.cell.min_step())
+                Some(sub(m, p)[0].hypot(sub(m, p)[1]) / model.cell().min_step())
             })
             .collect();
         let median_move = if moves.is_empty() { 0.0 } else { median(&mut moves) };
@@ -575,7 +583,7 @@ impl FastTracker {
         let (mut visited, mut clipped) = (0usize, 0usize);
         for (model, p) in self.squares.iter().zip(predicted) {
             if let Some(p) = p {
-                let (v, c) = add_to_histogram(&px, *p, &model.cell, WINDOW_HALF, self.stride * 3, &mut histogram);
+                let (v, c) = add_to_histogram(&px, *p, model.cell(), WINDOW_HALF, self.stride * 3, &mut histogram);
                 visited += v;
                 clipped += c;
             }
@@ -660,7 +668,7 @@ impl FastTracker {
             let Some(trend) = self.trend_prediction(slot, &snapshot) else {
                 continue;
             };
-            let miss = self.squares[slot].cell.to_cell(sub(at, trend));
+            let miss = self.squares[slot].cell().to_cell(sub(at, trend));
             if miss[0].abs().max(miss[1].abs()) > TREND_CELLS {
                 result[slot] = None;
                 search[slot] = true;
@@ -682,7 +690,7 @@ impl FastTracker {
                     continue;
                 };
                 let taken = result.iter().flatten().any(|(other, _)| {
-                    let gap = model.cell.to_cell(sub(*other, at));
+                    let gap = model.cell().to_cell(sub(*other, at));
                     gap[0].abs().max(gap[1].abs()) < TAKEN_CELLS
                 });
                 if !taken {
@@ -761,7 +769,7 @@ impl FastTracker {
         let mut centre = [start[0].round(), start[1].round()];
         let mut last = None;
         for _ in 0..MAX_PASSES {
-            let Some(found) = centroid(px, centre, &model.cell, WINDOW_HALF, self.stride, membership) else {
+            let Some(found) = centroid(px, centre, &model.window, self.stride, membership) else {
                 return SquareOutcome::Lost;
             };
             let next = [found.at[0].round(), found.at[1].round()];
@@ -783,11 +791,11 @@ impl FastTracker {
         if found.clipped_fraction > MAX_CLIPPED_FRACTION {
             return SquareOutcome::Clipped;
         }
-        let offset = model.cell.to_cell(sub(found.at, start));
+        let offset = model.cell().to_cell(sub(found.at, start));
         if offset[0].abs() > reach || offset[1].abs() > reach {
             return SquareOutcome::Lost;
         }
-        if mean_membership(px, found.at, &model.cell, CENTRE_HALF, self.stride, membership) < MIN_CENTRE_MEMBERSHIP {
+        if mean_membership(px, found.at, model.cell(), CENTRE_HALF, self.stride, membership) < MIN_CENTRE_MEMBERSHIP {
             return SquareOutcome::Lost;
         }
         if check_area && model.reference_area > 0.0 {
