@@ -144,12 +144,23 @@ fn for_each_row<'a>(
         cell,
         half,
         stride,
-        |y| cell.row_span(y as i64 as f64 + 0.5 - centre[1], half),
+        |y| {
+            cell.row_span(y as i64 as f64 + 0.5 - centre[1], half)
+                .map(|span| row_pixels(centre[0], span))
+        },
         row,
     );
 }
 
-/// [`for_each_row`], with row `y`'s x-range (as [`CellFrame::row_span`] gives it for that row) from `span_of`.
+/// The first and last pixel (not yet clamped to the frame) of a row whose x-range about `centre_x` is `(lo, hi)`
+/// ([`CellFrame::row_span`]): -inf and +inf, from a row without bounds, saturate to i64's ends.
+#[inline(always)]
+fn row_pixels(centre_x: f64, (lo, hi): (f64, f64)) -> (i64, i64) {
+    (ceil(centre_x + lo - 0.5) as i64, floor(centre_x + hi - 0.5) as i64)
+}
+
+/// [`for_each_row`], with row `y`'s first and last pixel (as [`row_pixels`] gives them for that row) from
+/// `pixels_of`.
 #[inline(always)]
 fn for_each_row_spanned<'a>(
     px: &Pixels<'a>,
@@ -157,7 +168,7 @@ fn for_each_row_spanned<'a>(
     cell: &CellFrame,
     half: f64,
     stride: usize,
-    span_of: impl Fn(usize) -> Option<(f64, f64)>,
+    pixels_of: impl Fn(usize) -> Option<(i64, i64)>,
     mut row: impl FnMut(usize, &'a [u8], usize, usize),
 ) {
     let reach = half * (cell.col_step[1].abs() + cell.row_step[1].abs());
@@ -173,16 +184,14 @@ fn for_each_row_spanned<'a>(
     let y_start = on_grid(y_lo, stride);
     let mut y = y_start;
     while y <= y_last {
-        if let Some((lo, hi)) = span_of(y) {
-            // Clamped by comparisons, as in `row_span` (a NaN takes the frame's edge, as f64::max and min give).
-            let x_lo = ceil(centre[0] + lo - 0.5);
-            let x_lo = if x_lo > 0.0 { x_lo } else { 0.0 };
-            let x_hi = floor(centre[0] + hi - 0.5);
-            let last_x = px.width as f64 - 1.0;
-            let x_hi = if x_hi < last_x { x_hi } else { last_x };
+        if let Some((x_lo, x_hi)) = pixels_of(y) {
+            // Clamped to the frame as whole numbers: a row's range is finite or unbounded, never NaN (`row_span`
+            // with a finite offset; the centre is finite), so this is the clamp in f64 it replaces.
+            let x_lo = x_lo.max(0);
+            let x_hi = x_hi.min(px.width as i64 - 1);
             if x_hi >= x_lo {
-                let x0 = on_grid(x_lo as i64 as usize, stride);
-                let x1 = x_hi as i64 as usize;
+                let x0 = on_grid(x_lo as usize, stride);
+                let x1 = x_hi as usize;
                 if x0 <= x1 {
                     let line = &px.raw[y * px.width * 3..(y + 1) * px.width * 3];
                     row(y, line, x0, x1);
@@ -278,34 +287,65 @@ pub struct WindowCentroid {
     pub clipped_fraction: f64,
 }
 
-/// A square's search window: its cell and half-size (cell units), with the x-range of every row it can hold
-/// tabulated for a centre on a whole pixel, the only centre [`centroid`] is given by the tracker. A row's range is
-/// [`CellFrame::row_span`] of the row's offset from the centre, and with the centre on a whole pixel that offset is
-/// the same half-integer for the same row of the window wherever the window is, so the table holds the very values
-/// the row would compute (their divisions and comparisons took about 70 of the some 150 instructions a window's row
-/// cost, and a frame at 2048x1536 has some 11,000 such rows).
+/// A square's search window: its cell and half-size (cell units), with every row it can hold tabulated for a centre
+/// on a whole pixel, the only centre [`centroid`] is given by the tracker. A row's range is [`CellFrame::row_span`]
+/// of the row's offset from the centre, and with the centre on a whole pixel that offset is the same half-integer for
+/// the same row of the window wherever the window is, so the table holds the very values the row would compute (their
+/// divisions and comparisons took about 70 of the some 150 instructions a window's row cost, and a frame at 2048x1536
+/// has some 11,000 such rows), and for most rows the first and last pixel as offsets from the centre, which save the
+/// row its rounding (see [`TabulatedRow::Offsets`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Window {
     cell: CellFrame,
     half: f64,
-    /// The row offset (row minus the centre's row) of `spans[0]`.
+    /// The row offset (row minus the centre's row) of `rows[0]`.
     first_offset: i64,
-    spans: Vec<Option<(f64, f64)>>,
+    rows: Vec<TabulatedRow>,
+}
+
+/// One row of a [`Window`]'s table.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum TabulatedRow {
+    /// No pixel of the row is in the window.
+    Empty,
+    /// The row's first and last pixel from a whole-pixel centre: [`row_pixels`] gives the centre plus these for any
+    /// such centre within [`WHOLE_CENTRE`] of 0 (see [`Window::new`]), so they need no rounding in the row.
+    Offsets(i64, i64),
+    /// The row's range (its ends lie too near a pixel's edge for `Offsets`).
+    Span(f64, f64),
 }
 
 /// Most rows a [`Window`] tabulates (a window this tall is no square's: its rows are computed as they come).
 const MAX_TABULATED_ROWS: f64 = 4096.0;
+/// A whole-pixel centre's x at most this far from 0 takes a [`TabulatedRow::Offsets`] (frames are far narrower).
+const WHOLE_CENTRE: f64 = 1_048_576.0;
+/// A row end this close to a pixel's edge (after the half pixel) is rounded in the row.
+const EDGE_MARGIN: f64 = 1e-6;
 
 impl Window {
     pub fn new(cell: CellFrame, half: f64) -> Self {
         let reach = half * (cell.col_step[1].abs() + cell.row_step[1].abs());
+        // Offsets are exact: for a whole x with |x| <= 2^20 and |lo - 0.5| < 2^20, the row computes x + lo - 0.5 in
+        // two roundings of at most 2^-32 each (half an ulp below 2^22), and lo - 0.5 is computed here in one of at
+        // most 2^-33, all far inside EDGE_MARGIN of the nearest whole number (x is whole, so the sum's distance to one
+        // is lo - 0.5's), so rounding the computed sum up gives x plus the rounded-up lo - 0.5 (and the same for hi,
+        // rounded down).
+        let row = |j: i64| match cell.row_span(j as f64 + 0.5, half) {
+            None => TabulatedRow::Empty,
+            Some((lo, hi)) => {
+                let (u, v) = (lo - 0.5, hi - 0.5);
+                let clear = |e: f64| e.abs() < WHOLE_CENTRE && (e - e.round()).abs() > EDGE_MARGIN;
+                if clear(u) && clear(v) {
+                    TabulatedRow::Offsets(u.ceil() as i64, v.floor() as i64)
+                } else {
+                    TabulatedRow::Span(lo, hi)
+                }
+            }
+        };
         // Every row a window visits lies within `reach` + 1 of its centre (`for_each_row`); one more on each side.
-        let (first_offset, spans) = if reach.is_finite() && reach < MAX_TABULATED_ROWS / 2.0 - 2.0 {
+        let (first_offset, rows) = if reach.is_finite() && reach < MAX_TABULATED_ROWS / 2.0 - 2.0 {
             let (first, last) = (-(ceil(reach) as i64) - 2, ceil(reach) as i64 + 2);
-            (
-                first,
-                (first..=last).map(|j| cell.row_span(j as f64 + 0.5, half)).collect(),
-            )
+            (first, (first..=last).map(row).collect())
         } else {
             (0, Vec::new())
         };
@@ -313,7 +353,7 @@ impl Window {
             cell,
             half,
             first_offset,
-            spans,
+            rows,
         }
     }
 
@@ -321,17 +361,30 @@ impl Window {
         &self.cell
     }
 
-    /// The x-range of the row `offset` rows below a whole-pixel centre: `row_span(offset + 0.5)`.
+    /// The first and last pixel ([`row_pixels`]) of the row `offset` rows below a centre on a whole row, at
+    /// `centre_x`; `whole_x`: that `centre_x` is a whole pixel within [`WHOLE_CENTRE`] of 0.
     #[inline(always)]
-    fn span(&self, offset: i64) -> Option<(f64, f64)> {
+    fn pixels(&self, offset: i64, centre_x: f64, whole_x: bool) -> Option<(i64, i64)> {
         let tabulated = offset
             .checked_sub(self.first_offset)
             .and_then(|i| usize::try_from(i).ok())
-            .and_then(|i| self.spans.get(i));
+            .and_then(|i| self.rows.get(i));
         match tabulated {
-            Some(span) => *span,
-            None => self.cell.row_span(offset as f64 + 0.5, self.half),
+            Some(TabulatedRow::Empty) => None,
+            Some(&TabulatedRow::Offsets(lo, hi)) if whole_x => {
+                let x = centre_x as i64;
+                Some((x + lo, x + hi))
+            }
+            Some(&TabulatedRow::Offsets(..)) => self.computed(offset, centre_x),
+            Some(&TabulatedRow::Span(lo, hi)) => Some(row_pixels(centre_x, (lo, hi))),
+            None => self.computed(offset, centre_x),
         }
+    }
+
+    fn computed(&self, offset: i64, centre_x: f64) -> Option<(i64, i64)> {
+        self.cell
+            .row_span(offset as f64 + 0.5, self.half)
+            .map(|span| row_pixels(centre_x, span))
     }
 }
 
@@ -397,14 +450,17 @@ fn centroid_with(
     let mut pending: [RowSpan; ROWS_AT_ONCE] = [RowSpan::EMPTY; ROWS_AT_ONCE];
     let mut held = 0;
     let (cell, half) = (&window.cell, window.half);
-    // With the centre on a whole pixel, row y's offset y + 0.5 - centre is exactly (y - centre) + 0.5 (whole numbers
-    // and halves this small are exact in f64), so the table's span is the one the row would compute.
+    // With the centre on a whole row, row y's offset y + 0.5 - centre is exactly (y - centre) + 0.5 (whole numbers
+    // and halves this small are exact in f64), so the table's row is the one the row would compute.
     let centre_row = (centre[1].abs() < EXACT_INTEGERS && floor(centre[1]) == centre[1]).then_some(centre[1] as i64);
-    let span_of = |y: usize| match centre_row {
-        Some(centre_row) => window.span(y as i64 - centre_row),
-        None => cell.row_span(y as i64 as f64 + 0.5 - centre[1], half),
+    let whole_x = centre[0].abs() <= WHOLE_CENTRE && floor(centre[0]) == centre[0];
+    let pixels_of = |y: usize| match centre_row {
+        Some(centre_row) => window.pixels(y as i64 - centre_row, centre[0], whole_x),
+        None => cell
+            .row_span(y as i64 as f64 + 0.5 - centre[1], half)
+            .map(|span| row_pixels(centre[0], span)),
     };
-    for_each_row_spanned(px, centre, cell, half, stride, span_of, |y, line, x0, x1| {
+    for_each_row_spanned(px, centre, cell, half, stride, pixels_of, |y, line, x0, x1| {
         pending[held] = RowSpan::new(y, line, x0, x1, stride);
         held += 1;
         if held == ROWS_AT_ONCE {
@@ -829,8 +885,8 @@ mod tests {
         assert!(compared > 100, "{compared} windows held yellow");
     }
 
-    /// A window's tabulated rows are the spans its rows compute around a whole-pixel centre, bit for bit, past the
-    /// table's ends too (where they are computed as they come).
+    /// A window's tabulated rows give the pixels its rows compute around a whole-pixel centre, past the table's ends
+    /// too (where they are computed as they come), and rows whose ends lie near a pixel's edge.
     #[test]
     fn tabulated_rows_are_the_computed_ones() {
         let cells = [
@@ -838,20 +894,33 @@ mod tests {
             CellFrame::new([17.3, 4.1], [-3.7, 16.2]).unwrap(),
             CellFrame::new([40.0, -9.0], [8.0, 33.0]).unwrap(),
             CellFrame::new([91.7, 2.3], [-1.9, 88.4]).unwrap(),
+            // Row ends on pixel edges: a square cell of 30 px, its half-width 4.5 px at 0.15 and 16.5 px at 0.55.
+            CellFrame::new([30.0, 0.0], [0.0, 30.0]).unwrap(),
         ];
+        let mut spans = 0;
         for cell in cells {
             for half in [0.15, 0.55] {
                 let window = Window::new(cell, half);
-                assert!(!window.spans.is_empty());
-                for centre_row in [0i64, 7, 1535] {
+                assert!(!window.rows.is_empty());
+                spans += window
+                    .rows
+                    .iter()
+                    .filter(|r| matches!(r, TabulatedRow::Span(..)))
+                    .count();
+                for centre in [[0.0f64, 0.0], [5.0, 7.0], [2047.0, 1535.0], [-3.0, 9.0], [4e6, 12.0]] {
+                    let centre_row = centre[1] as i64;
+                    let whole_x = centre[0].abs() <= WHOLE_CENTRE;
                     for y in (centre_row - 200).max(0)..centre_row + 200 {
-                        let bits = |s: Option<(f64, f64)>| s.map(|(lo, hi)| (lo.to_bits(), hi.to_bits()));
-                        let computed = cell.row_span(y as f64 + 0.5 - centre_row as f64, half);
-                        assert_eq!(bits(window.span(y - centre_row)), bits(computed), "{cell:?} {half} {y}");
+                        let computed = cell
+                            .row_span(y as f64 + 0.5 - centre[1], half)
+                            .map(|span| row_pixels(centre[0], span));
+                        let tabulated = window.pixels(y - centre_row, centre[0], whole_x);
+                        assert_eq!(tabulated, computed, "{cell:?} {half} {centre:?} {y}");
                     }
                 }
             }
         }
+        assert!(spans > 0, "no row end near a pixel's edge");
     }
 
     #[test]
