@@ -190,7 +190,7 @@ fn two_presses_ten_mm_apart_are_two_contacts_with_their_own_forces() {
 /// The pairs the pressure map alone did not separate: 4 N beside 2.5 N about [6, -4] along 60 and 90 deg read as one
 /// contact of 6.5 N between them, and 3.5 N beside 3.5 N about [2, 8] along 120 deg as one of 7.4 N (their
 /// pressures, blurred by the 2.8 mm cover and the node elements, make one peak, or two joined by a saddle at 60 % of
-/// them). Two point loads explain their displacements better than any line load (`InverseModel::split_pair`).
+/// them). Two round loads explain their displacements better than any line load (`InverseModel::split_pair`).
 #[test]
 fn two_presses_ten_mm_apart_in_any_direction_and_force_ratio_are_two_contacts() {
     assert_two_contacts_listed(&[
