@@ -1250,9 +1250,9 @@ impl InverseModel {
     /// edge 3.1-3.7 mm, and on the validation sensor's edges 0-2.3 mm.
     fn fit_line_to(&self, matched: &[f64], start: LineLoad) -> (LineLoad, f64) {
         let pitch = self.pad.pitch_x_mm().min(self.pad.pitch_y_mm());
-        let mut shape = Vec::new();
+        let (mut dense, mut shape) = (Vec::new(), Vec::new());
         let mut score = |p: &[f64; 5]| -> f64 {
-            self.line_shape([p[0], p[1]], p[2], p[3], p[4], &mut shape);
+            self.line_shape([p[0], p[1]], p[2], p[3], p[4], &mut dense, &mut shape);
             let correlation = shape_correlation(&shape, matched);
             let energy = self.matched_product(&shape, &shape);
             if correlation > 0.0 && energy > 0.0 {
@@ -1314,18 +1314,36 @@ impl InverseModel {
         let pitch = self.pad.pitch_x_mm().max(self.pad.pitch_y_mm());
         let (c, s) = (line.angle_deg.to_radians().cos(), line.angle_deg.to_radians().sin());
         let quarter = 0.25 * line.length_mm;
-        let (mut first, mut second) = (Vec::new(), Vec::new());
+        // Each point's shape, correlation and energy, kept while it stays where it is: the search moves one
+        // coordinate at a time, so one of the two points.
+        struct Point {
+            at: Option<Point2>,
+            shape: Vec<(usize, f64)>,
+            correlation: f64,
+            energy: f64,
+        }
+        let mut points = [(); 2].map(|()| Point {
+            at: None,
+            shape: Vec::new(),
+            correlation: 0.0,
+            energy: 0.0,
+        });
+        let mut dense = Vec::new();
         let mut score = |p: &[f64; 4]| -> f64 {
-            self.line_shape([p[0], p[1]], 0.0, 0.0, line.spread_mm, &mut first);
-            self.line_shape([p[2], p[3]], 0.0, 0.0, line.spread_mm, &mut second);
-            let (c1, c2) = (
-                shape_correlation(&first, &matched),
-                shape_correlation(&second, &matched),
-            );
+            for (point, at) in points.iter_mut().zip([[p[0], p[1]], [p[2], p[3]]]) {
+                if point.at != Some(at) {
+                    self.line_shape(at, 0.0, 0.0, line.spread_mm, &mut dense, &mut point.shape);
+                    point.correlation = shape_correlation(&point.shape, &matched);
+                    point.energy = self.matched_product(&point.shape, &point.shape);
+                    point.at = Some(at);
+                }
+            }
+            let [first, second] = &points;
+            let (c1, c2) = (first.correlation, second.correlation);
             let (g11, g22, g12) = (
-                self.matched_product(&first, &first),
-                self.matched_product(&second, &second),
-                self.matched_product(&first, &second),
+                first.energy,
+                second.energy,
+                self.matched_product(&first.shape, &second.shape),
             );
             let det = g11 * g22 - g12 * g12;
             let (a1, a2) = ((g22 * c1 - g12 * c2) / det, (g11 * c2 - g12 * c1) / det);
@@ -1547,12 +1565,15 @@ impl InverseModel {
     /// bilinearly among the four cell centres around it (clamped to the outermost cells' centres), as (cell,
     /// share); with `spread_mm` > 0 each point is first spread evenly over itself and a hexagon of points that far
     /// around it (a disc's coarse stand-in: the cells are 3.3 mm apart).
+    /// The shares are summed in `dense` (one per cell, all zero or empty on entry and left all zero): a search that lays
+    /// many shapes passes the same buffer, so that each shape reads back and clears only the cells its points reach.
     fn line_shape(
         &self,
         centre: Point2,
         angle_deg: f64,
         length_mm: f64,
         spread_mm: f64,
+        dense: &mut Vec<f64>,
         shape: &mut Vec<(usize, f64)>,
     ) {
         let (cols, rows) = (usize::from(self.pad.cols), usize::from(self.pad.rows));
@@ -1568,23 +1589,49 @@ impl InverseModel {
         let weight = 1.0 / (points * spread.len()) as f64;
         let split = |at: f64, n: usize| -> (usize, f64) {
             let clamped = at.clamp(0.0, (n - 1) as f64);
-            let low = (clamped.floor() as usize).min(n.saturating_sub(2));
+            // Not negative, so the cast truncates as `floor` would (NaN to 0 either way), without a libm call: on
+            // x86-64 without SSE4.1, `floor` is a function call, most of this loop's cost.
+            let low = (clamped as usize).min(n.saturating_sub(2));
             (low, clamped - low as f64)
         };
-        let mut dense = vec![0.0; self.cells.len()];
-        for i in 0..points {
-            let t = ((i as f64 + 0.5) / points as f64 - 0.5) * length_mm;
+        let along = |i: usize| ((i as f64 + 0.5) / points as f64 - 0.5) * length_mm;
+        let cell_x = |t: f64, offset: &Point2| (centre[0] + t * c + spread_mm * offset[0] - origin[0]) / px;
+        let cell_y = |t: f64, offset: &Point2| (centre[1] + t * s + spread_mm * offset[1] - origin[1]) / py;
+        // The rows and columns of the cells the points reach (each point's lower left of its four): every rounded
+        // step above is monotonic in t, so with each offset a point's row and column lie between those of the first
+        // and last points with that offset.
+        let (mut rows_reached, mut cols_reached) = ((usize::MAX, 0), (usize::MAX, 0));
+        for t in [along(0), along(points - 1)] {
             for offset in spread {
-                let (col, fx) = split((centre[0] + t * c + spread_mm * offset[0] - origin[0]) / px, cols);
-                let (row, fy) = split((centre[1] + t * s + spread_mm * offset[1] - origin[1]) / py, rows);
-                dense[row * cols + col] += weight * (1.0 - fx) * (1.0 - fy);
-                dense[row * cols + col + 1] += weight * fx * (1.0 - fy);
-                dense[(row + 1) * cols + col] += weight * (1.0 - fx) * fy;
-                dense[(row + 1) * cols + col + 1] += weight * fx * fy;
+                let (col, row) = (split(cell_x(t, offset), cols).0, split(cell_y(t, offset), rows).0);
+                rows_reached = (rows_reached.0.min(row), rows_reached.1.max(row));
+                cols_reached = (cols_reached.0.min(col), cols_reached.1.max(col));
+            }
+        }
+        dense.resize(self.cells.len(), 0.0);
+        for i in 0..points {
+            let t = along(i);
+            for offset in spread {
+                let (col, fx) = split(cell_x(t, offset), cols);
+                let (row, fy) = split(cell_y(t, offset), rows);
+                let below = row * cols + col;
+                let (low, high) = dense[below..below + cols + 2].split_at_mut(cols);
+                low[0] += weight * (1.0 - fx) * (1.0 - fy);
+                low[1] += weight * fx * (1.0 - fy);
+                high[0] += weight * (1.0 - fx) * fy;
+                high[1] += weight * fx * fy;
             }
         }
         shape.clear();
-        shape.extend(dense.into_iter().enumerate().filter(|&(_, w)| w > 0.0));
+        for row in rows_reached.0..=rows_reached.1 + 1 {
+            let first = row * cols + cols_reached.0;
+            for (j, w) in (first..=first + cols_reached.1 + 1 - cols_reached.0).zip(&mut dense[first..]) {
+                if *w > 0.0 {
+                    shape.push((j, *w));
+                }
+                *w = 0.0;
+            }
+        }
     }
 
     /// The contacts among stage 2's regions (strongest first), each group of loaded cells judged as a whole: a region
@@ -2713,7 +2760,14 @@ mod tests {
                 let (x, y) = (f64::from(i) * step, f64::from(j) * step);
                 let r2 = (x * x + y * y) / (radius_mm * radius_mm);
                 if r2 < 1.0 {
-                    model.line_shape([centre[0] + x, centre[1] + y], 0.0, 0.0, 0.0, &mut point);
+                    model.line_shape(
+                        [centre[0] + x, centre[1] + y],
+                        0.0,
+                        0.0,
+                        0.0,
+                        &mut Vec::new(),
+                        &mut point,
+                    );
                     for &(k, share) in &point {
                         dense[k] += (1.0 - r2).sqrt() * share;
                     }
@@ -2784,6 +2838,33 @@ mod tests {
             }
         }
         Some(x)
+    }
+
+    #[test]
+    fn line_shape_is_the_same_in_a_reused_buffer() {
+        // A search passes one buffer to every shape it lays: each must read as if laid in a fresh one, at any angle,
+        // spread and position (the grid's edges clamp the points), and leave the buffer clear.
+        let model = model();
+        let mut dense = Vec::new();
+        let (mut reused, mut fresh) = (Vec::new(), Vec::new());
+        for (k, (angle, length, spread)) in [
+            (0.0, 18.0, 0.0),
+            (33.0, 12.5, 1.7),
+            (97.0, 0.0, 3.3),
+            (152.0, 40.0, 6.6),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            for centre in [[-3.0, 2.0], [11.0, -7.5], [-30.0, 25.0]] {
+                let centre = [centre[0] + 0.37 * k as f64, centre[1] - 0.21 * k as f64];
+                model.line_shape(centre, angle, length, spread, &mut dense, &mut reused);
+                model.line_shape(centre, angle, length, spread, &mut Vec::new(), &mut fresh);
+                assert!(!fresh.is_empty());
+                assert_eq!(reused, fresh);
+                assert!(dense.iter().all(|&w| w == 0.0));
+            }
+        }
     }
 
     /// Random non-negative least squares problems (some unknowns free of the bound, as the tangential forces and the
@@ -3100,7 +3181,7 @@ mod tests {
             (152.0, [-5.0, -2.0]),
         ] {
             let mut shape = Vec::new();
-            model.line_shape(centre, angle, 18.0, 0.0, &mut shape);
+            model.line_shape(centre, angle, 18.0, 0.0, &mut Vec::new(), &mut shape);
             // The bilinear shares keep the line's force and centre.
             let total: f64 = shape.iter().map(|s| s.1).sum();
             let mean_x: f64 = shape.iter().map(|(j, w)| w * model.cells[*j].centre_mm[0]).sum();
