@@ -1590,8 +1590,9 @@ impl InverseModel {
         let split = |at: f64, n: usize| -> (usize, f64) {
             let clamped = at.clamp(0.0, (n - 1) as f64);
             // Not negative, so the cast truncates as `floor` would (NaN to 0 either way), without a libm call: on
-            // x86-64 without SSE4.1, `floor` is a function call, most of this loop's cost.
-            let low = (clamped as usize).min(n.saturating_sub(2));
+            // x86-64 without SSE4.1, `floor` is a function call, most of this loop's cost. Below n (a u16), the
+            // cast through u32 is the same, in fewer instructions than a u64's.
+            let low = (clamped as u32 as usize).min(n.saturating_sub(2));
             (low, clamped - low as f64)
         };
         let along = |i: usize| ((i as f64 + 0.5) / points as f64 - 0.5) * length_mm;
