@@ -144,12 +144,17 @@ fn for_each_row<'a>(
         cell,
         half,
         stride,
-        |y| {
-            cell.row_span(y as i64 as f64 + 0.5 - centre[1], half)
-                .map(|span| row_pixels(centre[0], span))
-        },
+        |y| computed_row(cell, half, centre, y as i64),
         row,
     );
+}
+
+/// Row `y`'s first and last pixel ([`row_pixels`]) in the window of `cell` and `half` about `centre`: the rule every
+/// row follows, which a [`Window`]'s table only holds ready for a centre on a whole pixel.
+#[inline(always)]
+fn computed_row(cell: &CellFrame, half: f64, centre: Point2, y: i64) -> Option<(i64, i64)> {
+    cell.row_span(y as f64 + 0.5 - centre[1], half)
+        .map(|span| row_pixels(centre[0], span))
 }
 
 /// The first and last pixel (not yet clamped to the frame) of a row whose x-range about `centre_x` is `(lo, hi)`
@@ -381,10 +386,11 @@ impl Window {
         }
     }
 
+    /// [`computed_row`] for the row `offset` rows below a centre on a whole row, as that row of a centre on row 0: the
+    /// cell sees only the row's offset from the centre, the same half-integer either way (`offset + 0.5 - 0.0` is
+    /// `offset + 0.5` to the bit).
     fn computed(&self, offset: i64, centre_x: f64) -> Option<(i64, i64)> {
-        self.cell
-            .row_span(offset as f64 + 0.5, self.half)
-            .map(|span| row_pixels(centre_x, span))
+        computed_row(&self.cell, self.half, [centre_x, 0.0], offset)
     }
 }
 
@@ -456,9 +462,7 @@ fn centroid_with(
     let whole_x = centre[0].abs() <= WHOLE_CENTRE && floor(centre[0]) == centre[0];
     let pixels_of = |y: usize| match centre_row {
         Some(centre_row) => window.pixels(y as i64 - centre_row, centre[0], whole_x),
-        None => cell
-            .row_span(y as i64 as f64 + 0.5 - centre[1], half)
-            .map(|span| row_pixels(centre[0], span)),
+        None => computed_row(cell, half, centre, y as i64),
     };
     for_each_row_spanned(px, centre, cell, half, stride, pixels_of, |y, line, x0, x1| {
         pending[held] = RowSpan::new(y, line, x0, x1, stride);
@@ -911,9 +915,7 @@ mod tests {
                     let centre_row = centre[1] as i64;
                     let whole_x = centre[0].abs() <= WHOLE_CENTRE;
                     for y in (centre_row - 200).max(0)..centre_row + 200 {
-                        let computed = cell
-                            .row_span(y as f64 + 0.5 - centre[1], half)
-                            .map(|span| row_pixels(centre[0], span));
+                        let computed = computed_row(&cell, half, centre, y);
                         let tabulated = window.pixels(y - centre_row, centre[0], whole_x);
                         assert_eq!(tabulated, computed, "{cell:?} {half} {centre:?} {y}");
                     }
