@@ -208,12 +208,7 @@ impl FastTracker {
             squares_px.push(model.reference);
         }
         // Refresh the cells from the refined reference so later windows follow the lens exactly.
-        let refined_cells = local_cells(&pad, &squares_px)?;
-        for (model, cell) in tracker.squares.iter_mut().zip(refined_cells) {
-            if let Some(cell) = cell {
-                model.window = Window::new(cell, WINDOW_HALF);
-            }
-        }
+        tracker.refresh_cells(&squares_px)?;
         // Measure the reference again with those cells, from where the first pass ended, as every later frame is
         // measured: the reference is then where tracking the rest frame itself puts its squares, so that the same
         // frame again has no displacement (with the coarse cells' reference, its corners sat up to a few tenths of
@@ -266,7 +261,14 @@ impl FastTracker {
             model.reference_brightness = 0.0;
         }
         let squares: Vec<Option<Point2>> = self.squares.iter().map(|m| m.reference).collect();
-        for (model, cell) in self.squares.iter_mut().zip(local_cells(&self.pad, &squares)?) {
+        self.refresh_cells(&squares)
+    }
+
+    /// Gives every square the cell (and search window) that [`local_cells`] finds for it with the squares at
+    /// `squares`, one place for the rule the reference and a re-tare both follow; where that cell is degenerate, the
+    /// square keeps the one it had rather than searching in no cell.
+    fn refresh_cells(&mut self, squares: &[Option<Point2>]) -> Result<(), EstimateError> {
+        for (model, cell) in self.squares.iter_mut().zip(local_cells(&self.pad, squares)?) {
             if let Some(cell) = cell {
                 model.window = Window::new(cell, WINDOW_HALF);
             }
