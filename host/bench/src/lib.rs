@@ -4,7 +4,7 @@
 //! degree p = q = 1 against p = q = 3. Each is scored on the simulated sweeps of the paper's experiments
 //! (nusense-sim: a grid of press positions, force ramps for a sphere and a flat tip, edge angles) for
 //! localisation RMSE, leave-one-out force error after calibration and edge-angle error, and on the real pair
-//! (shared/data/real) for points found and gamma agreement. Speed is the median and p99 time of `estimate`
+//! ([`find_real_pair`]) for points found and gamma agreement. Speed is the median and p99 time of `estimate`
 //! per frame, and a ratio against a baseline variant timed in the same run.
 
 pub mod decode;

@@ -1,8 +1,8 @@
 //! The sensor config: everything the estimator needs to know about one sensor, as TOML.
 //!
-//! Every value has a default that fits the real NUSense sensor (the authors' published parameters, see
-//! shared/data/real/README.md), so an empty file is a valid config. Unknown keys are errors: a typo must not
-//! silently fall back to a default.
+//! Every value has a default that fits the real NUSense sensor (the authors' published parameters, which came
+//! with the real pair in host/estimator/tests/data/real), so an empty file is a valid config. Unknown keys are
+//! errors: a typo must not silently fall back to a default.
 
 use std::path::{Path, PathBuf};
 

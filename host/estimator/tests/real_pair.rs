@@ -1,4 +1,4 @@
-//! The real sensor's pair of frames (shared/data/real): counts, contact, and the rest frame against itself.
+//! The real sensor's pair of frames (tests/data/real): counts, contact, and the rest frame against itself.
 
 use std::path::PathBuf;
 use std::sync::OnceLock;

@@ -1,5 +1,4 @@
-//! Geometry shared by the estimator and the simulator, so that both speak one convention
-//! (see shared/DESIGN.md, "Coordinates and units"):
+//! Geometry shared by the estimator and the simulator, so that both speak one convention:
 //!
 //! - raw px: the frame as captured, x right, y down, origin at the top-left pixel *corner*;
 //! - undistorted px: after the fisheye model, in the rectified camera of

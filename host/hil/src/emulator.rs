@@ -38,7 +38,7 @@ pub enum EmulatorError {
     BuildFailed { status: String, stderr_tail: String },
     #[error("the QEMU image {path} does not exist (build it with `cd firmware/images && PATH=/usr/bin:$PATH RUSTC_BOOTSTRAP=1 cargo build --release`)")]
     NoImage { path: PathBuf },
-    #[error("cannot start {program}: {source} (install QEMU 10: see shared/TOOLCHAIN.md or scripts/setup)")]
+    #[error("cannot start {program}: {source} (`scripts/setup test` installs QEMU 10)")]
     QemuSpawn {
         program: String,
         #[source]

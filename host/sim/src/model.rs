@@ -1,8 +1,8 @@
 //! The simulated sensor: pad, gel, camera pose, colours, LEDs and image formation settings.
 //!
-//! [`SensorModel::real`] reproduces the real sensor of shared/data/real. Where a number was measured on those two
-//! frames (2048 x 1536 raw JPEGs), the comment next to it says how; nothing here is fitted per pixel, only a handful
-//! of physical constants.
+//! [`SensorModel::real`] reproduces the real sensor of host/estimator/tests/data/real. Where a number was measured
+//! on those two frames (2048 x 1536 raw JPEGs), the comment next to it says how; nothing here is fitted per pixel,
+//! only a handful of physical constants.
 
 use nusense_geometry::camera::FisheyeIntrinsics;
 use nusense_geometry::{CameraError, PadGeometry};

@@ -18,8 +18,8 @@ pub struct Args {
     /// (1024x768) instead of the full one (2048x1536).
     #[arg(long)]
     quick: bool,
-    /// Folder with the real pair (reference_fisheye.jpg, touch_fisheye.jpg); by default shared/data/real is
-    /// searched next to and above the repository.
+    /// Folder with the real pair (reference_fisheye.jpg, touch_fisheye.jpg); by default the copy the repository
+    /// ships (host/estimator/tests/data/real), else shared/data/real next to or above it.
     #[arg(long, value_name = "DIR")]
     real: Option<PathBuf>,
     /// Print the results as JSON on stdout as well.

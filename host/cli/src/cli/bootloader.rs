@@ -18,8 +18,12 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     match board.link.request(RequestBody::EnterBootloader)? {
         Reply::Ack => {
             println!(
-                "Board on {} is restarting into its DFU bootloader; flash it with\n  \
-                 dfu-util -a 0 -s 0x08000000:leave -D nusense-f411.bin",
+                "Board on {} is restarting into its DFU bootloader. Flash the image in two pieces, which leave \
+                 the saved configuration (flash sectors 1-2) alone; vectors.bin and code.bin are made with \
+                 arm-none-eabi-objcopy as firmware/README.md (\"First flash\") shows:\n  \
+                 dfu-util -a 0 -s 0x08000000 -D vectors.bin\n  \
+                 dfu-util -a 0 -s 0x0800C000:leave -D code.bin\n\
+                 (one image written from 0x08000000 would erase the saved configuration)",
                 board.port
             );
             Ok(ExitCode::SUCCESS)

@@ -1,4 +1,4 @@
-//! Mode `paper`: the sensor authors' published pipeline with their parameters (shared/data/real/README.md), as
+//! Mode `paper`: the sensor authors' published pipeline with their parameters (the config's defaults), as
 //! faithfully as we can make it, so that speed and error can be compared with the fast mode on the same frames.
 //!
 //! Stages, in order: fisheye undistortion with a bilinear remap ([`undistort`]), crop to the region of interest,
