@@ -585,19 +585,21 @@ impl Estimator {
         if contacts.is_empty() {
             return (None, Some(zero_map));
         }
+        let shear = self.config.elastic.tangential_force_scale;
         let force: [f64; 3] = std::array::from_fn(|k| kept.iter().map(|r| r.force_vector_n[k]).sum());
         let centre = [
             kept.iter().map(|r| r.force_vector_n[2] * r.centre_mm[0]).sum::<f64>() / force[2],
             kept.iter().map(|r| r.force_vector_n[2] * r.centre_mm[1]).sum::<f64>() / force[2],
         ];
-        let torque = kept
-            .iter()
-            .flat_map(|r| &r.cells)
-            .map(|(j, f)| {
-                let p = cells[*j].centre_mm;
-                (p[0] - centre[0]) * f[1] - (p[1] - centre[1]) * f[0]
-            })
-            .sum();
+        let torque = shear
+            * kept
+                .iter()
+                .flat_map(|r| &r.cells)
+                .map(|(j, f)| {
+                    let p = cells[*j].centre_mm;
+                    (p[0] - centre[0]) * f[1] - (p[1] - centre[1]) * f[0]
+                })
+                .sum::<f64>();
         let moments = edge_region
             .as_ref()
             .map(|region| self.model.moments(region, self.config.thresholds.edge_min_confidence));
@@ -617,7 +619,7 @@ impl Estimator {
             strongest,
             others: contacts.collect(),
             force_n: force[2],
-            force_vector_n: Some(force),
+            force_vector_n: Some(sheared(force, shear)),
             torque_nmm: Some(torque),
             edge,
         };
@@ -631,8 +633,11 @@ impl Estimator {
             centre_undistorted_px: undistorted,
             centre_mm: region.centre_mm,
             force_n: region.force_vector_n[2],
-            force_vector_n: Some(region.force_vector_n),
-            torque_nmm: Some(region.torque_nmm),
+            force_vector_n: Some(sheared(
+                region.force_vector_n,
+                self.config.elastic.tangential_force_scale,
+            )),
+            torque_nmm: Some(region.torque_nmm * self.config.elastic.tangential_force_scale),
             area_mm2: Some(region.area_mm2),
         })
     }
@@ -1002,6 +1007,11 @@ fn central_press_gamma(
         .collect();
     let samples = sampler.sample(&pressed, valid)?;
     Ok(gamma(&samples, config.calibration.alpha))
+}
+
+/// A force vector with its tangential part (fx, fy) calibrated: see `ElasticConfig::tangential_force_scale`.
+fn sheared([fx, fy, fz]: [f64; 3], scale: f64) -> [f64; 3] {
+    [fx * scale, fy * scale, fz]
 }
 
 fn sub(a: Point2, b: Point2) -> Point2 {

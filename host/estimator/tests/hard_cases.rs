@@ -524,6 +524,55 @@ fn a_press_with_a_tangential_push_reports_its_direction() {
     }
 }
 
+/// `elastic.tangential_force_scale` (what `nusense calibrate` fits from pushes) multiplies the push's fx, fy and the
+/// torque, total and per contact, and leaves the contact, its place and its normal force as they were.
+#[test]
+fn the_tangential_force_scale_scales_shear_and_torque_only() {
+    let mut contact = Contact::sphere(5.0, [-3.0, 2.0], 5.0);
+    contact.tangential_force_n = [1.2, -0.8];
+    contact.torsion_nmm = 10.0;
+    let (frame, _) = render(&Scene::with_contact(contact), 17);
+    let plain = estimator().estimate(&frame).expect("a push is measurable");
+    let mut config = SensorConfig::default();
+    config.elastic.tangential_force_scale = 0.4;
+    let scaled = Estimator::new(config, Mode::Inverse, reference())
+        .expect("the simulated rest frame is measurable")
+        .estimate(&frame)
+        .expect("a push is measurable");
+    let (plain, scaled) = (
+        plain.touch.expect("a 5 N push is a contact"),
+        scaled.touch.expect("the same contact"),
+    );
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + a.abs());
+    let v = plain.force_vector_n.expect("the inverse gives a force vector");
+    let w = scaled.force_vector_n.expect("the inverse gives a force vector");
+    assert!(v[0].hypot(v[1]) > 0.5, "the push is measured: {v:?}");
+    assert!(
+        close(w[0], 0.4 * v[0]) && close(w[1], 0.4 * v[1]) && w[2] == v[2],
+        "{v:?} -> {w:?}"
+    );
+    let (t, u) = (
+        plain.torque_nmm.expect("a torque"),
+        scaled.torque_nmm.expect("a torque"),
+    );
+    assert!(t.abs() > 1.0 && close(u, 0.4 * t), "torque {t} -> {u}");
+    assert_eq!(plain.force_n, scaled.force_n);
+    assert_eq!(plain.others.len(), scaled.others.len());
+    for (a, b) in plain.contacts().zip(scaled.contacts()) {
+        assert_eq!(
+            (a.centre_mm, a.force_n, a.area_mm2),
+            (b.centre_mm, b.force_n, b.area_mm2)
+        );
+        let (v, w) = (a.force_vector_n.expect("a vector"), b.force_vector_n.expect("a vector"));
+        assert!(
+            close(w[0], 0.4 * v[0]) && close(w[1], 0.4 * v[1]) && w[2] == v[2],
+            "{v:?} -> {w:?}"
+        );
+        let (t, u) = (a.torque_nmm.expect("a torque"), b.torque_nmm.expect("a torque"));
+        assert!(close(u, 0.4 * t), "contact torque {t} -> {u}");
+    }
+}
+
 #[test]
 fn force_so_large_that_corners_move_more_than_half_a_cell() {
     let truth = [0.0, 0.0];
