@@ -60,9 +60,14 @@ fn estimate_all(config: &SensorConfig, rest: &RgbImage, frames: &[RgbImage]) -> 
     frames.iter().map(|f| estimator.estimate(f).unwrap()).collect()
 }
 
-/// The session as the daemon records it (one reading message per line) and as an F/T sensor logs it (fz negative,
-/// pressing into the sensor).
-fn write_session(dir: &Path, readings: &[Reading]) -> (std::path::PathBuf, std::path::PathBuf) {
+/// The training presses' reference force, [fx, fy, fz] on the pad.
+fn training_forces() -> Vec<[f64; 3]> {
+    TRAINING.iter().map(|&(_, force)| [0.0, 0.0, force]).collect()
+}
+
+/// The session as the daemon records it (one reading message per line) and as an F/T sensor logs it: the force on
+/// the sensor (opposite to the pad's), its x and y axes a quarter turn from the pad's.
+fn write_session(dir: &Path, readings: &[Reading], forces: &[[f64; 3]]) -> (std::path::PathBuf, std::path::PathBuf) {
     let time_of = |k: usize| 1.0 + PRESS_PERIOD_S * k as f64;
     let mut lines = String::new();
     for (k, reading) in readings.iter().enumerate() {
@@ -88,12 +93,12 @@ fn write_session(dir: &Path, readings: &[Reading]) -> (std::path::PathBuf, std::
     let samples = (end_s * LOG_RATE_HZ) as usize;
     for i in 0..samples {
         let t = i as f64 / LOG_RATE_HZ;
-        let force = TRAINING
+        let [fx, fy, fz] = forces
             .iter()
             .enumerate()
             .find(|(k, _)| (t - time_of(*k)).abs() <= 0.1)
-            .map_or(0.0, |(_, &(_, force))| force);
-        log += &format!("{t:.4},0.0,0.0,{:.4},0,0,0\n", -force);
+            .map_or([0.0; 3], |(_, &force)| force);
+        log += &format!("{t:.4},{:.4},{:.4},{:.4},0,0,0\n", fy, -fx, -fz);
     }
     let readings_path = dir.join("readings.jsonl");
     let log_path = dir.join("ft.csv");
@@ -144,7 +149,7 @@ fn the_fitted_modulus_makes_unseen_presses_read_their_force() {
             readings.iter().all(|r| r.touch.is_some()),
             "every training press is a contact"
         );
-        let (readings_path, log_path) = write_session(dir.path(), &readings);
+        let (readings_path, log_path) = write_session(dir.path(), &readings, &training_forces());
         let config_path = dir.path().join(format!("sensor-{start_kpa}.toml"));
         std::fs::write(
             &config_path,
@@ -202,7 +207,7 @@ fn one_calibration_reads_unseen_presses_within_the_issue_target() {
     let frames = render();
     let dir = tempfile::tempdir().unwrap();
     let readings = estimate_all(&SensorConfig::default(), &frames.rest, &frames.training);
-    let (readings_path, log_path) = write_session(dir.path(), &readings);
+    let (readings_path, log_path) = write_session(dir.path(), &readings, &training_forces());
     let config_path = dir.path().join("sensor.toml");
     calibrate_session(&readings_path, &log_path, &config_path);
     let rms = held_out_force_rms(&SensorConfig::load(&config_path).unwrap(), &frames);
@@ -273,4 +278,123 @@ fn a_rest_frame_without_the_pattern_is_a_clear_error_and_the_config_is_left_alon
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("cannot find the pattern in the rest frame"), "{stderr}");
     assert_eq!(std::fs::read_to_string(&config_path).unwrap(), "# untouched\n");
+}
+
+/// Pushes (position mm, normal force N, tangential force [fx, fy] N) over the pad: the tangential calibration's.
+const PUSHES: [([f64; 2], f64, [f64; 2]); 6] = [
+    ([0.0, 0.0], 4.0, [1.5, 0.0]),
+    ([-10.0, 5.0], 5.0, [0.0, -1.8]),
+    ([8.0, -6.0], 3.5, [-1.0, 1.0]),
+    ([12.0, 7.0], 6.0, [1.2, 1.6]),
+    ([-6.0, -8.0], 4.5, [-1.4, -0.6]),
+    ([4.0, 9.0], 5.5, [0.9, -1.5]),
+];
+/// Pushes never used to calibrate.
+const HELD_OUT_PUSHES: [([f64; 2], f64, [f64; 2]); 3] = [
+    ([-4.0, 3.0], 5.0, [-1.6, 0.8]),
+    ([9.0, -2.0], 4.0, [0.5, 1.3]),
+    ([-12.0, -6.0], 6.0, [1.8, -0.4]),
+];
+
+fn render_pushes(renderer: &Renderer, pushes: &[([f64; 2], f64, [f64; 2])], first_seed: u64) -> Vec<RgbImage> {
+    pushes
+        .iter()
+        .zip(first_seed..)
+        .map(|(&(at, normal, tangential), seed)| {
+            let mut contact = Contact::sphere(5.0, at, normal);
+            contact.tangential_force_n = tangential;
+            renderer
+                .render(&Scene::with_contact(contact), [100.0; 4], seed)
+                .unwrap()
+                .0
+        })
+        .collect()
+}
+
+/// The tangential force scale fitted from a session with pushes (its F/T log in the sensor's own axes) is written
+/// into the config, does not depend on the scale the session was read with, and makes pushes it never saw read
+/// their tangential force.
+#[test]
+fn the_fitted_tangential_scale_makes_unseen_pushes_read_their_shear() {
+    let renderer = Renderer::new(SensorModel::real(WIDTH, HEIGHT)).unwrap();
+    let rest = renderer.render(&Scene::rest(), [100.0; 4], 1).unwrap().0;
+    let training = render_pushes(&renderer, &PUSHES, 300);
+    let held_out = render_pushes(&renderer, &HELD_OUT_PUSHES, 400);
+    let forces: Vec<[f64; 3]> = PUSHES.iter().map(|&(_, n, [tx, ty])| [tx, ty, n]).collect();
+    let dir = tempfile::tempdir().unwrap();
+    let held_out_errors = |config: &SensorConfig| -> Vec<f64> {
+        estimate_all(config, &rest, &held_out)
+            .iter()
+            .zip(&HELD_OUT_PUSHES)
+            .map(|(reading, &(_, _, [tx, ty]))| {
+                let v = reading
+                    .touch
+                    .as_ref()
+                    .and_then(|t| t.force_vector_n)
+                    .expect("a push is a contact");
+                v[0].hypot(v[1]) / tx.hypot(ty) - 1.0
+            })
+            .collect()
+    };
+    let mut fitted = Vec::new();
+    // From the model's own shear and from a config that reads it 2.5 times too strong.
+    for start in [1.0, 2.5] {
+        let mut config = SensorConfig::default();
+        config.elastic.tangential_force_scale = start;
+        let readings = estimate_all(&config, &rest, &training);
+        let (readings_path, log_path) = write_session(dir.path(), &readings, &forces);
+        let config_path = dir.path().join(format!("sensor-{start}.toml"));
+        std::fs::write(&config_path, format!("[elastic]\ntangential_force_scale = {start}\n")).unwrap();
+        let report = calibrate_session(&readings_path, &log_path, &config_path);
+        let tangential = &report["tangential"];
+        assert_eq!(tangential["points"], PUSHES.len(), "{report}");
+        assert_eq!(tangential["tangential_force_scale_before"], start, "{report}");
+        let written = SensorConfig::load(&config_path).unwrap();
+        assert_eq!(
+            written.elastic.tangential_force_scale,
+            tangential["tangential_force_scale"].as_f64().unwrap()
+        );
+        fitted.push(written);
+    }
+    let (from_default, from_strong) = (
+        fitted[0].elastic.tangential_force_scale,
+        fitted[1].elastic.tangential_force_scale,
+    );
+    assert!(
+        (from_default / from_strong - 1.0).abs() < 0.01,
+        "the fit depends on its start: {from_default} against {from_strong}"
+    );
+    let before = held_out_errors(&{
+        let mut c = SensorConfig::default();
+        c.elastic.tangential_force_scale = 2.5;
+        c
+    });
+    let after = held_out_errors(&fitted[1]);
+    eprintln!(
+        "held-out pushes' tangential force off by {before:.3?} before, {after:.3?} after (scale {from_strong:.3})"
+    );
+    // One scale cannot take out the pushes' own scatter on this pad (a half-space read as a bonded layer): 6-16 %
+    // when this test was written, against 350-470 % before.
+    assert!(before.iter().all(|e| e.abs() > 1.0), "{before:.3?}");
+    assert!(after.iter().all(|e| e.abs() <= 0.2), "{after:.3?}");
+}
+
+/// A log with the normal force alone: the normal calibrations are fitted, the tangential scale is left as it was.
+#[test]
+fn a_log_without_pushes_leaves_the_tangential_scale_alone() {
+    let frames = render();
+    let dir = tempfile::tempdir().unwrap();
+    let readings = estimate_all(&SensorConfig::default(), &frames.rest, &frames.training);
+    let (readings_path, log_path) = write_session(dir.path(), &readings, &training_forces());
+    let config_path = dir.path().join("sensor.toml");
+    std::fs::write(&config_path, "[elastic]\ntangential_force_scale = 0.6\n").unwrap();
+    let report = calibrate_session(&readings_path, &log_path, &config_path);
+    assert!(
+        report["tangential"].is_null() && report["modulus"].is_object(),
+        "{report}"
+    );
+    assert_eq!(
+        SensorConfig::load(&config_path).unwrap().elastic.tangential_force_scale,
+        0.6
+    );
 }

@@ -498,6 +498,9 @@ pub enum ForceComponent {
     Fz,
     /// sqrt(fx^2 + fy^2 + fz^2).
     Norm,
+    /// sqrt(fx^2 + fy^2): the push's size, whatever the F/T sensor's axes in the pad's plane (the reference for
+    /// [`modulus::fit_tangential_scale`]).
+    Tangential,
 }
 
 /// A force/torque log sample: time in seconds and the chosen force in newtons.
@@ -556,6 +559,7 @@ pub fn parse_force_log_csv(text: &str, component: ForceComponent) -> Result<Vec<
         ForceComponent::Fy => vec![(column("fy")?, "fy")],
         ForceComponent::Fz | ForceComponent::AbsFz => vec![(column("fz")?, "fz")],
         ForceComponent::Norm => vec![(column("fx")?, "fx"), (column("fy")?, "fy"), (column("fz")?, "fz")],
+        ForceComponent::Tangential => vec![(column("fx")?, "fx"), (column("fy")?, "fy")],
     };
     lines
         .map(|(line, text)| {
@@ -566,7 +570,7 @@ pub fn parse_force_log_csv(text: &str, component: ForceComponent) -> Result<Vec<
             let force_n = match component {
                 ForceComponent::AbsFz => values[0].abs(),
                 ForceComponent::Fx | ForceComponent::Fy | ForceComponent::Fz => values[0],
-                ForceComponent::Norm => values.iter().map(|v| v * v).sum::<f64>().sqrt(),
+                ForceComponent::Norm | ForceComponent::Tangential => values.iter().map(|v| v * v).sum::<f64>().sqrt(),
             };
             Ok(ForceSample { time_s, force_n })
         })
@@ -677,6 +681,20 @@ pub fn set_config_shear_modulus(text: &str, kpa: f64) -> Result<String, Calibrat
     }
     edit_config(text, |document| {
         table_mut(document, "elastic")?.insert("shear_modulus_kpa", toml_edit::value(kpa));
+        Ok(())
+    })
+}
+
+/// Sets `elastic.tangential_force_scale` (what [`modulus::fit_tangential_scale`] calibrates), keeping everything
+/// else.
+pub fn set_config_tangential_force_scale(text: &str, scale: f64) -> Result<String, CalibrationError> {
+    if !(scale.is_finite() && scale > 0.0) {
+        return Err(CalibrationError::Config(format!(
+            "refusing to write a tangential force scale of {scale}"
+        )));
+    }
+    edit_config(text, |document| {
+        table_mut(document, "elastic")?.insert("tangential_force_scale", toml_edit::value(scale));
         Ok(())
     })
 }

@@ -2,6 +2,10 @@
 //! - the paper's force line F = a * gamma + b (`[calibration]`), from (gamma, force) pairs or a session;
 //! - the pad model's stiffness (`elastic.shear_modulus_kpa`), from a session's inverse-mode readings: the reference
 //!   force against the model's, one scale through the origin (see `nusense_estimator::calibration::modulus`);
+//! - the pad model's shear stiffness against its normal stiffness (`elastic.tangential_force_scale`), from the same
+//!   session's pushes: the reference's tangential force against the model's, one scale through the origin, on the
+//!   readings whose reference push is at least 0.5 N (see `nusense_estimator::calibration::modulus`); the log needs
+//!   `fx` and `fy` for it, and a session without pushes leaves the scale as it was;
 //! - with `--rest FRAME`, the raw px -> pad mm map of this sensor's lens and pose (`[pad_map]`), fitted on a frame
 //!   with nothing touching the pad, and its residual.
 //!
@@ -17,10 +21,11 @@
 //!   time when a force sample lies within `--max-skew-ms`; others are dropped and counted.
 //!
 //! Readings in inverse mode with contact also give the model's force (`force_n`); with at least two of them the
-//! modulus scale is fitted as well.
+//! modulus scale is fitted as well, and with at least two pushes the tangential scale.
 //!
 //! With `--config FILE`, what was fitted is written into that TOML (created if missing; other keys and comments are
-//! kept) unless `--dry-run`; the modulus is the config's own times the fitted scale. `--json` prints the fits as
+//! kept) unless `--dry-run`; the modulus is the config's own times the fitted scale, and the tangential scale the
+//! config's own times its fitted ratio over the modulus's (the new modulus scales the model's shear as well). `--json` prints the fits as
 //! one JSON object. A line that does not rise with gamma is refused and nothing is written (`--dry-run` still shows
 //! it). Exit code: 0 on a fit, 1 when the data cannot be fitted, the line does not rise or the config cannot be
 //! written.
@@ -30,10 +35,11 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context};
 use nusense_capture::read_image_rgb;
-use nusense_estimator::calibration::modulus::{fit_modulus_scale, ModelForceSample, ModulusFit};
+use nusense_estimator::calibration::modulus::{fit_modulus_scale, fit_tangential_scale, ModelForceSample, ModulusFit};
 use nusense_estimator::calibration::{
     align_by_time, fit_force_line, forces_at_times, parse_force_log_csv, parse_pairs_csv, set_config_pad_map,
-    set_config_shear_modulus, update_config_toml, CalibrationSample, FitOptions, ForceComponent, ForceFit, TimedGamma,
+    set_config_shear_modulus, set_config_tangential_force_scale, update_config_toml, CalibrationError,
+    CalibrationSample, FitOptions, ForceComponent, ForceFit, TimedGamma,
 };
 use nusense_estimator::{Estimator, MapResidual, Mode, SensorConfig, StoredPadMap};
 use serde::Serialize;
@@ -115,6 +121,8 @@ struct Report {
     readings_dropped: usize,
     /// The pad model's stiffness; null without inverse-mode readings in contact.
     modulus: Option<ModulusReport>,
+    /// The pad model's shear against its normal stiffness; null without at least two pushes in the session.
+    tangential: Option<TangentialReport>,
     /// The rest frame's pad map; null without `--rest`.
     pad_map: Option<PadMapReport>,
     config_written: Option<String>,
@@ -133,6 +141,19 @@ struct ModulusReport {
 }
 
 #[derive(Serialize)]
+struct TangentialReport {
+    /// Reference tangential force / the model's, as the session's readings reported it.
+    scale: f64,
+    scale_interval: [f64; 2],
+    /// The config's tangential force scale before and after (after the new modulus's share is taken out).
+    tangential_force_scale_before: f64,
+    tangential_force_scale: f64,
+    residual_scale_n: f64,
+    points: usize,
+    outliers: usize,
+}
+
+#[derive(Serialize)]
 struct PadMapReport {
     width: u32,
     height: u32,
@@ -143,6 +164,8 @@ struct PadMapReport {
 struct Fits {
     line: Option<ForceFit>,
     modulus: Option<(ModulusFit, f64)>,
+    /// The fit and the config's new `elastic.tangential_force_scale`.
+    tangential: Option<(ModulusFit, f64)>,
     pad_map: Option<StoredPadMap>,
     readings_dropped: usize,
 }
@@ -197,6 +220,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             if let Some((_, kpa)) = fits.modulus {
                 text = set_config_shear_modulus(&text, kpa).with_context(context)?;
             }
+            if let Some((_, scale)) = fits.tangential {
+                text = set_config_tangential_force_scale(&text, scale).with_context(context)?;
+            }
             if let Some(map) = &fits.pad_map {
                 text = set_config_pad_map(&text, map).with_context(context)?;
             }
@@ -230,6 +256,7 @@ fn fit_all(args: &Args, config: &SensorConfig) -> anyhow::Result<Fits> {
     let mut fits = Fits {
         line: None,
         modulus: None,
+        tangential: None,
         pad_map: None,
         readings_dropped: 0,
     };
@@ -246,6 +273,18 @@ fn fit_all(args: &Args, config: &SensorConfig) -> anyhow::Result<Fits> {
             let fit = fit_modulus_scale(&session.model, options.bisquare_c, args.confidence)
                 .context("cannot fit the pad model's modulus")?;
             fits.modulus = Some((fit, config.elastic.shear_modulus_kpa * fit.scale));
+        }
+        // The readings' shear came from the config's modulus; the new one scales the model's shear by its own
+        // factor, which the tangential scale must not count twice.
+        let modulus_scale = fits.modulus.as_ref().map_or(1.0, |(fit, _)| fit.scale);
+        match fit_tangential_scale(&session.tangential, options.bisquare_c, args.confidence) {
+            Ok(fit) => {
+                let scale = config.elastic.tangential_force_scale * fit.scale / modulus_scale;
+                fits.tangential = Some((fit, scale));
+            }
+            // A session of normal presses: nothing to say about shear.
+            Err(CalibrationError::TooFewPoints { .. }) => {}
+            Err(e) => return Err(e).context("cannot fit the pad model's tangential force scale"),
         }
     }
     if let Some(path) = &args.rest {
@@ -267,6 +306,8 @@ struct Session {
     samples: Vec<CalibrationSample>,
     /// Inverse-mode readings in contact: the model's force against the reference.
     model: Vec<ModelForceSample>,
+    /// The same readings' tangential force (its size) against the reference's; empty when the log has no fx, fy.
+    tangential: Vec<ModelForceSample>,
     dropped: usize,
 }
 
@@ -295,9 +336,33 @@ fn load_session(args: &Args, readings_path: &PathBuf, log_path: &PathBuf) -> any
             })
         })
         .collect();
+    let tangential = match parse_force_log_csv(&log, ForceComponent::Tangential) {
+        Ok(mut pushes) => {
+            for f in &mut pushes {
+                f.time_s += args.time_offset_s;
+            }
+            let readings: Vec<(f64, f64)> = parsed
+                .model
+                .iter()
+                .filter_map(|m| Some((m.time_s, m.tangential_n?)))
+                .collect();
+            let times: Vec<f64> = readings.iter().map(|r| r.0).collect();
+            readings
+                .iter()
+                .zip(forces_at_times(&times, &pushes, max_skew_s))
+                .filter_map(|(&(_, model_n), reference)| {
+                    reference.map(|reference_n| ModelForceSample { model_n, reference_n })
+                })
+                .collect()
+        }
+        // A log of the normal force alone (no fx, fy columns): the normal calibrations still stand.
+        Err(CalibrationError::MissingColumn { .. }) => Vec::new(),
+        Err(e) => return Err(e).with_context(|| format!("in {}", log_path.display())),
+    };
     Ok(Session {
         samples: alignment.samples,
         model,
+        tangential,
         dropped: parsed.skipped + alignment.dropped,
     })
 }
@@ -312,11 +377,13 @@ const TIME_FIELDS: [(&str, f64); 6] = [
     ("timestamp_us", 1e-6),
 ];
 
-/// An inverse-mode reading in contact: the model's normal force at a time.
+/// An inverse-mode reading in contact: the model's normal force at a time, and the size of its tangential force
+/// when the reading has a force vector.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct TimedModelForce {
     time_s: f64,
     force_n: f64,
+    tangential_n: Option<f64>,
 }
 
 /// What a readings file holds for calibration.
@@ -368,7 +435,15 @@ fn parse_readings(text: &str) -> anyhow::Result<ParsedReadings> {
                     .with_context(|| {
                         format!("line {n}: an inverse-mode estimate in contact has no numeric `force_n`")
                     })?;
-                parsed.model.push(TimedModelForce { time_s, force_n });
+                let tangential_n = estimate
+                    .get("force_vector_n")
+                    .and_then(serde_json::Value::as_array)
+                    .and_then(|v| Some(v.first()?.as_f64()?.hypot(v.get(1)?.as_f64()?)));
+                parsed.model.push(TimedModelForce {
+                    time_s,
+                    force_n,
+                    tangential_n,
+                });
             }
             continue;
         }
@@ -415,6 +490,15 @@ fn report(fits: &Fits, config: &SensorConfig, confidence: f64, config_written: O
             points: fit.points,
             outliers: fit.outliers,
         }),
+        tangential: fits.tangential.map(|(fit, scale)| TangentialReport {
+            scale: fit.scale,
+            scale_interval: fit.scale_interval,
+            tangential_force_scale_before: config.elastic.tangential_force_scale,
+            tangential_force_scale: scale,
+            residual_scale_n: fit.residual_scale_n,
+            points: fit.points,
+            outliers: fit.outliers,
+        }),
         pad_map: fits.pad_map.map(|m| PadMapReport {
             width: m.width,
             height: m.height,
@@ -457,6 +541,18 @@ fn print_human(fits: &Fits, config: &SensorConfig, config_written: Option<&str>,
         println!(
             "  shear modulus {:.2} kPa -> {kpa:.2} kPa",
             config.elastic.shear_modulus_kpa
+        );
+    }
+    if let Some((fit, scale)) = &fits.tangential {
+        let level = fit.confidence * 100.0;
+        println!(
+            "pad model's shear: reference tangential force = {:.4} x model's from {} pushes ({} outliers), \
+             {level:.0} % interval [{:.4}, {:.4}], residual scale {:.4} N",
+            fit.scale, fit.points, fit.outliers, fit.scale_interval[0], fit.scale_interval[1], fit.residual_scale_n
+        );
+        println!(
+            "  tangential force scale {:.4} -> {scale:.4}",
+            config.elastic.tangential_force_scale
         );
     }
     if let Some(map) = &fits.pad_map {

@@ -128,6 +128,29 @@ pub fn fit_modulus_scale(
     })
 }
 
+/// Pushes lighter than this (reference tangential force, N) are not used for the tangential scale: a normal press
+/// alone reads up to about 0.3 N of tangential force in the model (5 % of its load, the quick validation set's
+/// presses), which against a reference near 0 says nothing about the shear stiffness.
+pub const MIN_REFERENCE_TANGENTIAL_N: f64 = 0.5;
+
+/// Fits F_reference,t = s * F_model,t on the tangential force's size (sqrt(fx^2 + fy^2): the F/T sensor's axes in
+/// the pad's plane need not be the pad's), on the readings whose reference push is at least
+/// [`MIN_REFERENCE_TANGENTIAL_N`]; the same robust fit through the origin as [`fit_modulus_scale`]'s. The model's
+/// tangential force is proportional to the shear stiffness it assumes, as its normal force is to the modulus, so
+/// one scale is the whole calibration (`elastic.tangential_force_scale`).
+pub fn fit_tangential_scale(
+    samples: &[ModelForceSample],
+    bisquare_c: f64,
+    confidence: f64,
+) -> Result<ModulusFit, CalibrationError> {
+    let pushes: Vec<ModelForceSample> = samples
+        .iter()
+        .copied()
+        .filter(|s| !(s.reference_n < MIN_REFERENCE_TANGENTIAL_N))
+        .collect();
+    fit_modulus_scale(&pushes, bisquare_c, confidence)
+}
+
 /// Standard error of a one-parameter M-estimator through the origin: K^2 [sum psi^2 / (n - 1)] / mean(psi')^2
 /// sigma^2 / sum x^2, Huber's correction K as in the force line's.
 fn sandwich_std_error(x: &[f64], residuals: &[f64], sigma: f64, c: f64) -> f64 {
@@ -174,6 +197,35 @@ mod tests {
         assert!(fit.scale_interval[0] < 0.62 && 0.62 < fit.scale_interval[1], "{fit:?}");
         assert_eq!(fit.points, 40);
         assert_eq!(fit.outliers, 0);
+    }
+
+    /// A session of normal presses with a few pushes: the presses' own small model shear (no reference push) must
+    /// not pull the scale towards 0.
+    #[test]
+    fn the_tangential_scale_is_fitted_on_the_pushes_alone() {
+        let pushes: Vec<ModelForceSample> = (0..6)
+            .map(|i| {
+                let model_n = 1.5 + 0.4 * f64::from(i);
+                ModelForceSample {
+                    model_n,
+                    reference_n: 0.58 * model_n,
+                }
+            })
+            .collect();
+        let mut session: Vec<ModelForceSample> = (0..30)
+            .map(|i| ModelForceSample {
+                model_n: 0.1 + 0.01 * f64::from(i),
+                reference_n: 0.02,
+            })
+            .collect();
+        session.extend(&pushes);
+        let fit = fit_tangential_scale(&session, 4.685, 0.95).unwrap();
+        assert_eq!(fit.points, 6, "{fit:?}");
+        assert!((fit.scale - 0.58).abs() < 1e-9, "{fit:?}");
+        assert_eq!(
+            fit_tangential_scale(&session[..30], 4.685, 0.95).unwrap_err(),
+            CalibrationError::TooFewPoints { found: 0, needed: 2 }
+        );
     }
 
     #[test]
