@@ -8,6 +8,7 @@
 use std::time::Instant;
 
 use image::RgbImage;
+use nusense_estimator::calibration::modulus::{fit_tangential_scale, ModelForceSample};
 use nusense_estimator::calibration::{fit_force_line, CalibrationSample, FitOptions};
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use nusense_sim::validation::{CaseKind, CaseTruth, Profile, ValidationRenderer, ValidationSet, FLOOR_FORCES_N};
@@ -374,8 +375,10 @@ fn strongest_centre(truth: &CaseTruth) -> Option<[f64; 2]> {
 
 /// The one force calibration, fitted on the calibration cases only.
 enum ForceCalibration {
-    /// The mode reports newtons: one scale factor on fz (least squares through the origin).
-    Scale(f64),
+    /// The mode reports newtons: one scale factor on fz (least squares through the origin, on the calibration
+    /// presses), and one on fx, fy and the torque (`nusense calibrate`'s tangential scale, on the calibration pushes;
+    /// the normal one when the set has none).
+    Scale { normal: f64, tangential: Option<f64> },
     /// The mode reports gamma: F = a gamma + b, fitted robustly as `nusense calibrate` does.
     GammaLine { a: f64, b: f64 },
 }
@@ -395,7 +398,25 @@ impl ForceCalibration {
             let (sxy, sxx) = newtons
                 .iter()
                 .fold((0.0, 0.0), |(sxy, sxx), (x, y)| (sxy + x * y, sxx + x * x));
-            return (sxx > 0.0).then(|| Self::Scale(sxy / sxx));
+            let pushes: Vec<ModelForceSample> = scored
+                .iter()
+                .filter(|s| s.kind == CaseKind::CalibrationPush)
+                .filter_map(|s| {
+                    let found = s.observed.as_ref().filter(|o| o.contact)?.force_vector_n?;
+                    let truth = s.truth.frame.force_vector_n;
+                    Some(ModelForceSample {
+                        model_n: found[0].hypot(found[1]),
+                        reference_n: truth[0].hypot(truth[1]),
+                    })
+                })
+                .collect();
+            let tangential = fit_tangential_scale(&pushes, FitOptions::default().bisquare_c, 0.95)
+                .ok()
+                .map(|fit| fit.scale);
+            return (sxx > 0.0).then(|| Self::Scale {
+                normal: sxy / sxx,
+                tangential,
+            });
         }
         let samples: Vec<CalibrationSample> = calibration
             .iter()
@@ -412,7 +433,14 @@ impl ForceCalibration {
 
     fn name(&self) -> String {
         match self {
-            Self::Scale(s) => format!("scale {s:.3}"),
+            Self::Scale {
+                normal,
+                tangential: None,
+            } => format!("scale {normal:.3}"),
+            Self::Scale {
+                normal,
+                tangential: Some(t),
+            } => format!("scale {normal:.3}, tangential {t:.3}"),
             Self::GammaLine { a, b } => format!("gamma line {a:.2} g {b:+.2}"),
         }
     }
@@ -423,7 +451,7 @@ impl ForceCalibration {
             return Some(0.0);
         }
         let f = match self {
-            Self::Scale(s) => o.force_vector_n?[2] * s,
+            Self::Scale { normal, .. } => o.force_vector_n?[2] * normal,
             Self::GammaLine { a, b } => a * o.gamma? + b,
         };
         Some(f.max(0.0))
@@ -431,7 +459,15 @@ impl ForceCalibration {
 
     fn scale(&self) -> f64 {
         match self {
-            Self::Scale(s) => *s,
+            Self::Scale { normal, .. } => *normal,
+            Self::GammaLine { .. } => 1.0,
+        }
+    }
+
+    /// The factor on the tangential force and the torque.
+    fn tangential_scale(&self) -> f64 {
+        match self {
+            Self::Scale { normal, tangential } => tangential.unwrap_or(*normal),
             Self::GammaLine { .. } => 1.0,
         }
     }
@@ -583,12 +619,12 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
         all
     };
 
-    // The calibration is fitted on normal presses only: whether the model's shear compliance against its normal
-    // compliance is the pad's shows here, not in the normal force's figures.
+    // The tangential scale is fitted on the calibration pushes, near the centre: how well one scale holds over the
+    // pad shows here.
     let tangential: Vec<([f64; 2], Option<[f64; 2]>)> = of(CaseKind::Tangential)
         .map(|s| {
             let truth = s.truth.frame.force_vector_n;
-            let scale = calibration.as_ref().map_or(1.0, ForceCalibration::scale);
+            let scale = calibration.as_ref().map_or(1.0, ForceCalibration::tangential_scale);
             let found = s
                 .observed
                 .as_ref()
@@ -614,7 +650,7 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
 
     let torque_errors: Vec<f64> = of(CaseKind::Twist)
         .filter_map(|s| {
-            let scale = calibration.as_ref().map_or(1.0, ForceCalibration::scale);
+            let scale = calibration.as_ref().map_or(1.0, ForceCalibration::tangential_scale);
             Some(s.observed.as_ref()?.torque_nmm? * scale - s.truth.frame.torque_nmm)
         })
         .collect();
@@ -773,8 +809,9 @@ mod tests {
     #[test]
     fn the_figures_are_the_known_answers_of_a_scripted_mode() {
         use serde_json::json;
-        // A mode that reports twice the true force in its own units, misses one press, places another 0.3 mm off,
-        // detects from 0.5 N, lists two contacts, turns pushes by 10 degrees and reads the camera's roll 0.1 off.
+        // A mode that reports twice the true force in its own units and four times its tangential force, misses one
+        // press, places another 0.3 mm off, detects from 0.5 N, lists two contacts, turns pushes by 10 degrees and
+        // reads the camera's roll 0.1 off.
         let press = |at: [f64; 2], f: f64| truth(&[(at, [0.0, 0.0, f])], None);
         let reading =
             |at: [f64; 2], fz: f64| json!({"contact": true, "contact_mm": at, "force_vector_n": [0.0, 0.0, fz]});
@@ -784,6 +821,13 @@ mod tests {
                 CaseKind::Calibration,
                 press([0.0, 0.0], f),
                 Some(reading([0.0, 0.0], 2.0 * f)),
+            ));
+        }
+        for (t, f) in [(1.0, 3.0), (2.0, 5.0), (0.8, 4.0)] {
+            scored.push(case(
+                CaseKind::CalibrationPush,
+                truth(&[([0.0, 0.0], [0.0, t, f])], None),
+                Some(json!({"contact": true, "force_vector_n": [0.0, 4.0 * t, 2.0 * f]})),
             ));
         }
         scored.push(case(
@@ -841,7 +885,7 @@ mod tests {
         scored.push(case(CaseKind::Edge, edge.clone(), Some(one)));
         scored.push(case(CaseKind::Edge, edge, Some(fragments)));
         let push = truth(&[([0.0, 0.0], [1.0, 0.0, 4.0])], None);
-        let turned = [2.0 * 10f64.to_radians().cos(), 2.0 * 10f64.to_radians().sin(), 8.0];
+        let turned = [4.0 * 10f64.to_radians().cos(), 4.0 * 10f64.to_radians().sin(), 8.0];
         scored.push(case(
             CaseKind::Tangential,
             push,
@@ -849,7 +893,7 @@ mod tests {
         ));
 
         let f = score(Mode::Fast, &scored);
-        assert_eq!(f.calibration.as_deref(), Some("scale 0.500"));
+        assert_eq!(f.calibration.as_deref(), Some("scale 0.500, tangential 0.250"));
         assert!((f.localisation_rmse_mm.unwrap() - 0.3).abs() < 1e-12);
         assert_eq!((f.localisation_misses, f.localisation_frames), (1, 2));
         // The missed 2 N press reads 0 N; the other is exact.
@@ -865,7 +909,7 @@ mod tests {
         assert_eq!((f.edges_one_contact, f.edge_frames), (Some(1), 2));
         assert_eq!(f.round_pairs_with_edge, 1);
         assert!((f.tangential_direction_mae_deg.unwrap() - 10.0).abs() < 1e-9);
-        // The push reads 1 N (2 N at scale 0.5) turned by 10 degrees: a chord of 2 sin 5 degrees.
+        // The push reads 1 N (4 N at the tangential scale 0.25) turned by 10 degrees: a chord of 2 sin 5 degrees.
         assert!((f.tangential_force_rms_n.unwrap() - 2.0 * 5f64.to_radians().sin()).abs() < 1e-12);
         assert!((f.tangential_force_ratio.unwrap() - 1.0).abs() < 1e-12);
         assert!((f.camera_rotation_rms_deg.unwrap() - 0.1).abs() < 1e-9);

@@ -57,10 +57,13 @@ pub enum CaseKind {
     Damaged,
     /// Presses at other frame sizes.
     Resolution,
+    /// Pushes near the centre with a known tangential force, as a force/torque log records them: what a calibration
+    /// of the model's shear against its pressure is fitted on (`nusense calibrate`'s tangential scale).
+    CalibrationPush,
 }
 
 impl CaseKind {
-    pub const ALL: [CaseKind; 12] = [
+    pub const ALL: [CaseKind; 13] = [
         CaseKind::Calibration,
         CaseKind::Press,
         CaseKind::Floor,
@@ -73,6 +76,7 @@ impl CaseKind {
         CaseKind::CameraMotion,
         CaseKind::Damaged,
         CaseKind::Resolution,
+        CaseKind::CalibrationPush,
     ];
 }
 
@@ -335,6 +339,26 @@ impl ValidationSet {
                 }
             }
         }
+        // After the edges' floor, for the same reason. Where and how hard as the calibration presses, the push a
+        // fifth to a half of the load, as the tangential cases.
+        for _ in 0..many(4, 8) {
+            let at = [rng.gen_range(-8.0..=8.0), rng.gen_range(-6.0..=6.0)];
+            let normal = rng.gen_range(3.0..=6.0);
+            let (magnitude, direction) = (
+                normal * rng.gen_range(0.2..=0.5),
+                rng.gen_range(0.0..std::f64::consts::TAU),
+            );
+            let mut contact = Contact::sphere(5.0, at, normal);
+            contact.tangential_force_n = [magnitude * direction.cos(), magnitude * direction.sin()];
+            push(
+                &mut rng,
+                CaseKind::CalibrationPush,
+                main,
+                Scene::with_contact(contact),
+                None,
+                0.0,
+            );
+        }
         Self { profile, seed, cases }
     }
 
@@ -368,6 +392,7 @@ fn kind_name(kind: CaseKind) -> &'static str {
         CaseKind::CameraMotion => "camera_motion",
         CaseKind::Damaged => "damaged",
         CaseKind::Resolution => "resolution",
+        CaseKind::CalibrationPush => "calibration_push",
     }
 }
 
