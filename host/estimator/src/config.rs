@@ -218,7 +218,9 @@ pub enum ElasticModel {
 /// ([`LAYERED_GEL_KPA`]) and h_skin = 1.07 mm ([`LAYERED_SKIN_MM`]); no bond layer (its thickness is not published
 /// either). What it gets right that the equivalent layer does not is shear against pressure: on the quick validation
 /// set (at 122e3ba) the pushes' tangential force reads 0.87 times the truth (0.22 N RMS) against 2.40 times (2.39 N),
-/// torque 2.1 against 18.7 N mm RMS, the push's direction 1.0 / 2.1 deg mean / max against 1.6 / 6.1. Not the
+/// torque 2.1 against 18.7 N mm RMS (both with the normal force's calibration alone; `tangential_force_scale`
+/// calibrates the equivalent layer's shear: 0.16 N and 1.3 N mm), the push's direction 1.0 / 2.1 deg mean / max
+/// against 1.6 / 6.1. Not the
 /// default, because the normal load reads worse: force over the pad 0.41 N RMS against 0.36, localisation 0.44
 /// against 0.33 mm (0.40 since its contact centres come from quarter cells, see `InverseModel::quarter_centres`),
 /// both of two contacts 10 mm apart listed in 4 of 6 cases against 6, the edges' floor 0.5 against 0.3 N; the
