@@ -250,21 +250,8 @@ impl ValidationSet {
         }
         for _ in 0..many(8, 24) {
             let at = [rng.gen_range(-15.0..=15.0), rng.gen_range(-10.0..=10.0)];
-            let normal = rng.gen_range(3.0..=6.0);
-            let (magnitude, direction) = (
-                normal * rng.gen_range(0.2..=0.5),
-                rng.gen_range(0.0..std::f64::consts::TAU),
-            );
-            let mut contact = Contact::sphere(5.0, at, normal);
-            contact.tangential_force_n = [magnitude * direction.cos(), magnitude * direction.sin()];
-            push(
-                &mut rng,
-                CaseKind::Tangential,
-                main,
-                Scene::with_contact(contact),
-                None,
-                DRIFT,
-            );
+            let scene = Scene::with_contact(sphere_with_push(&mut rng, at));
+            push(&mut rng, CaseKind::Tangential, main, scene, None, DRIFT);
         }
         for k in 0..many(4, 12) {
             let at = [rng.gen_range(-10.0..=10.0), rng.gen_range(-6.0..=6.0)];
@@ -343,21 +330,8 @@ impl ValidationSet {
         // fifth to a half of the load, as the tangential cases.
         for _ in 0..many(4, 8) {
             let at = [rng.gen_range(-8.0..=8.0), rng.gen_range(-6.0..=6.0)];
-            let normal = rng.gen_range(3.0..=6.0);
-            let (magnitude, direction) = (
-                normal * rng.gen_range(0.2..=0.5),
-                rng.gen_range(0.0..std::f64::consts::TAU),
-            );
-            let mut contact = Contact::sphere(5.0, at, normal);
-            contact.tangential_force_n = [magnitude * direction.cos(), magnitude * direction.sin()];
-            push(
-                &mut rng,
-                CaseKind::CalibrationPush,
-                main,
-                Scene::with_contact(contact),
-                None,
-                0.0,
-            );
+            let scene = Scene::with_contact(sphere_with_push(&mut rng, at));
+            push(&mut rng, CaseKind::CalibrationPush, main, scene, None, 0.0);
         }
         Self { profile, seed, cases }
     }
@@ -394,6 +368,18 @@ fn kind_name(kind: CaseKind) -> &'static str {
         CaseKind::Resolution => "resolution",
         CaseKind::CalibrationPush => "calibration_push",
     }
+}
+
+/// A 5 mm sphere pressing 3-6 N at `at`, pushed sideways by a fifth to a half of that in a random direction.
+fn sphere_with_push(rng: &mut ChaCha8Rng, at: Point2) -> Contact {
+    let normal = rng.gen_range(3.0..=6.0);
+    let (magnitude, direction) = (
+        normal * rng.gen_range(0.2..=0.5),
+        rng.gen_range(0.0..std::f64::consts::TAU),
+    );
+    let mut contact = Contact::sphere(5.0, at, normal);
+    contact.tangential_force_n = [magnitude * direction.cos(), magnitude * direction.sin()];
+    contact
 }
 
 fn camera_motion(rng: &mut ChaCha8Rng) -> CameraMotion {
