@@ -25,8 +25,8 @@
 //!
 //! With `--config FILE`, what was fitted is written into that TOML (created if missing; other keys and comments are
 //! kept) unless `--dry-run`; the modulus is the config's own times the fitted scale, and the tangential scale the
-//! config's own times its fitted ratio over the modulus's (the new modulus scales the model's shear as well). `--json` prints the fits as
-//! one JSON object. A line that does not rise with gamma is refused and nothing is written (`--dry-run` still shows
+//! config's own times its fitted ratio over the modulus's (the new modulus scales the model's shear as well).
+//! `--json` prints the fits as one JSON object. A line that does not rise with gamma is refused and nothing is written (`--dry-run` still shows
 //! it). Exit code: 0 on a fit, 1 when the data cannot be fitted, the line does not rise or the config cannot be
 //! written.
 
@@ -39,7 +39,7 @@ use nusense_estimator::calibration::modulus::{fit_modulus_scale, fit_tangential_
 use nusense_estimator::calibration::{
     align_by_time, fit_force_line, forces_at_times, parse_force_log_csv, parse_pairs_csv, set_config_pad_map,
     set_config_shear_modulus, set_config_tangential_force_scale, update_config_toml, CalibrationError,
-    CalibrationSample, FitOptions, ForceComponent, ForceFit, TimedGamma,
+    CalibrationSample, FitOptions, ForceComponent, ForceFit, ForceSample, TimedGamma,
 };
 use nusense_estimator::{Estimator, MapResidual, Mode, SensorConfig, StoredPadMap};
 use serde::Serialize;
@@ -316,45 +316,26 @@ fn load_session(args: &Args, readings_path: &PathBuf, log_path: &PathBuf) -> any
         std::fs::read_to_string(readings_path).with_context(|| format!("cannot read {}", readings_path.display()))?;
     let parsed = parse_readings(&text).with_context(|| format!("in {}", readings_path.display()))?;
     let log = std::fs::read_to_string(log_path).with_context(|| format!("cannot read {}", log_path.display()))?;
-    let mut forces =
-        parse_force_log_csv(&log, args.force.into()).with_context(|| format!("in {}", log_path.display()))?;
-    for f in &mut forces {
-        f.time_s += args.time_offset_s;
-    }
+    // The log's chosen force on the readings' clock.
+    let read_log = |component: ForceComponent| {
+        parse_force_log_csv(&log, component).map(|mut forces| {
+            for f in &mut forces {
+                f.time_s += args.time_offset_s;
+            }
+            forces
+        })
+    };
+    let forces = read_log(args.force.into()).with_context(|| format!("in {}", log_path.display()))?;
     let max_skew_s = args.max_skew_ms / 1e3;
     let alignment = align_by_time(&parsed.readings, &forces, max_skew_s)
         .context("cannot align the readings with the force log (check the clocks, --time-offset-s, --max-skew-ms)")?;
-    let times: Vec<f64> = parsed.model.iter().map(|m| m.time_s).collect();
-    let model = parsed
-        .model
-        .iter()
-        .zip(forces_at_times(&times, &forces, max_skew_s))
-        .filter_map(|(m, reference)| {
-            reference.map(|reference_n| ModelForceSample {
-                model_n: m.force_n,
-                reference_n,
-            })
-        })
-        .collect();
-    let tangential = match parse_force_log_csv(&log, ForceComponent::Tangential) {
-        Ok(mut pushes) => {
-            for f in &mut pushes {
-                f.time_s += args.time_offset_s;
-            }
-            let readings: Vec<(f64, f64)> = parsed
-                .model
-                .iter()
-                .filter_map(|m| Some((m.time_s, m.tangential_n?)))
-                .collect();
-            let times: Vec<f64> = readings.iter().map(|r| r.0).collect();
-            readings
-                .iter()
-                .zip(forces_at_times(&times, &pushes, max_skew_s))
-                .filter_map(|(&(_, model_n), reference)| {
-                    reference.map(|reference_n| ModelForceSample { model_n, reference_n })
-                })
-                .collect()
-        }
+    let model = with_reference(parsed.model.iter().map(|m| (m.time_s, m.force_n)), &forces, max_skew_s);
+    let tangential = match read_log(ForceComponent::Tangential) {
+        Ok(pushes) => with_reference(
+            parsed.model.iter().filter_map(|m| Some((m.time_s, m.tangential_n?))),
+            &pushes,
+            max_skew_s,
+        ),
         // A log of the normal force alone (no fx, fy columns): the normal calibrations still stand.
         Err(CalibrationError::MissingColumn { .. }) => Vec::new(),
         Err(e) => return Err(e).with_context(|| format!("in {}", log_path.display())),
@@ -365,6 +346,22 @@ fn load_session(args: &Args, readings_path: &PathBuf, log_path: &PathBuf) -> any
         tangential,
         dropped: parsed.skipped + alignment.dropped,
     })
+}
+
+/// Each (time, model force) paired with the log's force at that time; those with no log sample within `max_skew_s`
+/// are left out.
+fn with_reference(
+    readings: impl Iterator<Item = (f64, f64)>,
+    log: &[ForceSample],
+    max_skew_s: f64,
+) -> Vec<ModelForceSample> {
+    let readings: Vec<(f64, f64)> = readings.collect();
+    let times: Vec<f64> = readings.iter().map(|r| r.0).collect();
+    readings
+        .iter()
+        .zip(forces_at_times(&times, log, max_skew_s))
+        .filter_map(|(&(_, model_n), reference)| reference.map(|reference_n| ModelForceSample { model_n, reference_n }))
+        .collect()
 }
 
 /// Time fields a reading may carry, with their unit in seconds.
