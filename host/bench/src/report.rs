@@ -449,6 +449,20 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
             )
         },
     );
+    row(
+        "pushes' localisation RMSE, mm (without the push shift fitted on the calibration pushes)".into(),
+        "",
+        &|m| {
+            (
+                format!(
+                    "{} ({})",
+                    opt(m.push_localisation_rmse_mm, 2),
+                    opt(m.push_localisation_unshifted_rmse_mm, 2)
+                ),
+                None,
+            )
+        },
+    );
     row("torque RMS, N mm (the tangential scale)".into(), "", &|m| {
         (opt(m.torque_rms_nmm, 2), None)
     });

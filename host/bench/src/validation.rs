@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use image::RgbImage;
 use nusense_estimator::calibration::modulus::{fit_tangential_scale, ModelForceSample};
+use nusense_estimator::calibration::push_centre::{fit_push_centre_shift, shifted_centre, PushCentreSample};
 use nusense_estimator::calibration::{fit_force_line, CalibrationSample, FitOptions};
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use nusense_sim::validation::{CaseKind, CaseTruth, Profile, ValidationRenderer, ValidationSet, FLOOR_FORCES_N};
@@ -142,6 +143,10 @@ pub struct ModeFigures {
     /// vector error (a miss reads 0 N), N, and the median of read / true magnitudes.
     pub tangential_force_rms_n: Option<f64>,
     pub tangential_force_ratio: Option<f64>,
+    /// The pushes' strongest contact against the truth, RMS mm, with the push shift fitted on the calibration
+    /// pushes and without it (misses left out: the direction figures count them).
+    pub push_localisation_rmse_mm: Option<f64>,
+    pub push_localisation_unshifted_rmse_mm: Option<f64>,
     pub torque_rms_nmm: Option<f64>,
     pub camera_rotation_rms_deg: Option<f64>,
     pub camera_rotation_max_deg: Option<f64>,
@@ -376,9 +381,14 @@ fn strongest_centre(truth: &CaseTruth) -> Option<[f64; 2]> {
 /// The one force calibration, fitted on the calibration cases only.
 enum ForceCalibration {
     /// The mode reports newtons: one scale factor on fz (least squares through the origin, on the calibration
-    /// presses), and one on fx, fy and the torque (`nusense calibrate`'s tangential scale, on the calibration pushes;
-    /// the normal one when the set has none).
-    Scale { normal: f64, tangential: Option<f64> },
+    /// presses), one on fx, fy and the torque (`nusense calibrate`'s tangential scale, on the calibration pushes;
+    /// the normal one when the set has none), and how far a push's centre reads behind it
+    /// (`elastic.push_centre_shift_mm`, on the calibration pushes, whose places the set knows).
+    Scale {
+        normal: f64,
+        tangential: Option<f64>,
+        push_shift_mm: Option<f64>,
+    },
     /// The mode reports gamma: F = a gamma + b, fitted robustly as `nusense calibrate` does.
     GammaLine { a: f64, b: f64 },
 }
@@ -413,9 +423,23 @@ impl ForceCalibration {
             let tangential = fit_tangential_scale(&pushes, FitOptions::default().bisquare_c, 0.95)
                 .ok()
                 .map(|fit| fit.scale);
+            let centres: Vec<PushCentreSample> = scored
+                .iter()
+                .filter(|s| s.kind == CaseKind::CalibrationPush)
+                .filter_map(|s| {
+                    let found = s.observed.as_ref().filter(|o| o.contact)?;
+                    Some(PushCentreSample {
+                        model_force_vector_n: found.force_vector_n?,
+                        read_centre_mm: found.contact_mm?,
+                        true_centre_mm: strongest_centre(&s.truth)?,
+                    })
+                })
+                .collect();
+            let push_shift_mm = fit_push_centre_shift(&centres).ok();
             return (sxx > 0.0).then(|| Self::Scale {
                 normal: sxy / sxx,
                 tangential,
+                push_shift_mm,
             });
         }
         let samples: Vec<CalibrationSample> = calibration
@@ -435,12 +459,18 @@ impl ForceCalibration {
         match self {
             Self::Scale {
                 normal,
-                tangential: None,
-            } => format!("scale {normal:.3}"),
-            Self::Scale {
-                normal,
-                tangential: Some(t),
-            } => format!("scale {normal:.3}, tangential {t:.3}"),
+                tangential,
+                push_shift_mm,
+            } => {
+                let mut name = format!("scale {normal:.3}");
+                if let Some(t) = tangential {
+                    name += &format!(", tangential {t:.3}");
+                }
+                if let Some(k) = push_shift_mm {
+                    name += &format!(", push shift {k:.2} mm");
+                }
+                name
+            }
             Self::GammaLine { a, b } => format!("gamma line {a:.2} g {b:+.2}"),
         }
     }
@@ -467,8 +497,16 @@ impl ForceCalibration {
     /// The factor on the tangential force and the torque.
     fn tangential_scale(&self) -> f64 {
         match self {
-            Self::Scale { normal, tangential } => tangential.unwrap_or(*normal),
+            Self::Scale { normal, tangential, .. } => tangential.unwrap_or(*normal),
             Self::GammaLine { .. } => 1.0,
+        }
+    }
+
+    /// mm along a push per unit of push over load (the model's), 0 where none was fitted.
+    fn push_shift_mm(&self) -> f64 {
+        match self {
+            Self::Scale { push_shift_mm, .. } => push_shift_mm.unwrap_or(0.0),
+            Self::GammaLine { .. } => 0.0,
         }
     }
 }
@@ -648,6 +686,22 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
         .filter_map(|(truth, found)| found.map(|f| f[0].hypot(f[1]) / truth[0].hypot(truth[1])))
         .collect();
 
+    // The push shift is fitted on the calibration pushes, near the centre, like the tangential scale.
+    let push_shift_mm = calibration.as_ref().map_or(0.0, ForceCalibration::push_shift_mm);
+    let pad = SensorConfig::default().pad;
+    let pitch_mm = pad.pitch_x_mm().min(pad.pitch_y_mm());
+    let (push_errors, push_unshifted_errors): (Vec<f64>, Vec<f64>) = of(CaseKind::Tangential)
+        .filter_map(|s| {
+            let found = s.observed.as_ref().filter(|o| o.contact)?;
+            let (read, truth) = (found.contact_mm?, strongest_centre(&s.truth)?);
+            let shifted = match found.force_vector_n {
+                Some(f) => shifted_centre(read, f, push_shift_mm, pitch_mm),
+                None => read,
+            };
+            Some((distance(shifted, truth), distance(read, truth)))
+        })
+        .unzip();
+
     let torque_errors: Vec<f64> = of(CaseKind::Twist)
         .filter_map(|s| {
             let scale = calibration.as_ref().map_or(1.0, ForceCalibration::tangential_scale);
@@ -704,6 +758,8 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
         tangential_direction_mae_deg: nusense_estimator::stats::mean(&direction_errors),
         tangential_direction_max_deg: direction_errors.iter().copied().reduce(f64::max),
         tangential_force_rms_n: rms(&tangential_force_errors),
+        push_localisation_rmse_mm: rms(&push_errors),
+        push_localisation_unshifted_rmse_mm: rms(&push_unshifted_errors),
         tangential_force_ratio: quantile(&tangential_force_ratios, 0.5),
         torque_rms_nmm: rms(&torque_errors),
         camera_rotation_rms_deg: rms(&rotation_errors),
@@ -827,7 +883,8 @@ mod tests {
             scored.push(case(
                 CaseKind::CalibrationPush,
                 truth(&[([0.0, 0.0], [0.0, t, f])], None),
-                Some(json!({"contact": true, "force_vector_n": [0.0, 4.0 * t, 2.0 * f]})),
+                // Read behind the push by 1.5 mm per unit of the model's push over load.
+                Some(json!({"contact": true, "contact_mm": [0.0, -1.5 * 2.0 * t / f], "force_vector_n": [0.0, 4.0 * t, 2.0 * f]})),
             ));
         }
         scored.push(case(
@@ -886,14 +943,19 @@ mod tests {
         scored.push(case(CaseKind::Edge, edge, Some(fragments)));
         let push = truth(&[([0.0, 0.0], [1.0, 0.0, 4.0])], None);
         let turned = [4.0 * 10f64.to_radians().cos(), 4.0 * 10f64.to_radians().sin(), 8.0];
+        // Read behind the push as the calibration pushes are, and 0.2 mm across it.
+        let behind = [-1.5 * turned[0] / turned[2], -1.5 * turned[1] / turned[2] + 0.2];
         scored.push(case(
             CaseKind::Tangential,
             push,
-            Some(json!({"contact": true, "force_vector_n": turned})),
+            Some(json!({"contact": true, "contact_mm": behind, "force_vector_n": turned})),
         ));
 
         let f = score(Mode::Fast, &scored);
-        assert_eq!(f.calibration.as_deref(), Some("scale 0.500, tangential 0.250"));
+        assert_eq!(
+            f.calibration.as_deref(),
+            Some("scale 0.500, tangential 0.250, push shift 1.50 mm")
+        );
         assert!((f.localisation_rmse_mm.unwrap() - 0.3).abs() < 1e-12);
         assert_eq!((f.localisation_misses, f.localisation_frames), (1, 2));
         // The missed 2 N press reads 0 N; the other is exact.
@@ -912,6 +974,9 @@ mod tests {
         // The push reads 1 N (4 N at the tangential scale 0.25) turned by 10 degrees: a chord of 2 sin 5 degrees.
         assert!((f.tangential_force_rms_n.unwrap() - 2.0 * 5f64.to_radians().sin()).abs() < 1e-12);
         assert!((f.tangential_force_ratio.unwrap() - 1.0).abs() < 1e-12);
+        // The push shift takes the push back to its place but for the 0.2 mm across it.
+        assert!((f.push_localisation_rmse_mm.unwrap() - 0.2).abs() < 1e-12);
+        assert!((f.push_localisation_unshifted_rmse_mm.unwrap() - behind[0].hypot(behind[1])).abs() < 1e-12);
         assert!((f.camera_rotation_rms_deg.unwrap() - 0.1).abs() < 1e-9);
         assert_eq!(f.refused, 0);
         assert_eq!(f.median_ms, Some(1.0));

@@ -14,6 +14,7 @@
 use thiserror::Error;
 
 pub mod modulus;
+pub mod push_centre;
 
 /// One calibration point: the sensor's gamma and the reference force in newtons.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -42,6 +43,8 @@ pub enum CalibrationError {
         forces: usize,
         max_skew_s: f64,
     },
+    #[error("the push centre shift needs at least {needed} pushes of a tenth of their load or more, got {found}")]
+    TooFewPushes { found: usize, needed: usize },
     #[error("the sensor config: {0}")]
     Config(String),
 }
