@@ -158,3 +158,39 @@ fn a_line_that_falls_with_gamma_is_not_written_into_the_config() {
     assert!((report["a"].as_f64().unwrap() + 1.5).abs() < 0.01, "{report}");
     assert_eq!(std::fs::read_to_string(&config).unwrap(), original);
 }
+
+#[test]
+fn a_malformed_probe_position_in_the_log_fails_with_its_line_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let readings = dir.path().join("readings.jsonl");
+    let log = dir.path().join("ft.csv");
+    let mut ft = String::from("timestamp,fx,fy,fz,x_mm,y_mm\n");
+    let mut lines = String::new();
+    for k in 0..20 {
+        let t = 0.1 * f64::from(k);
+        let force = 1.0 + 0.2 * f64::from(k);
+        let x = if k == 7 { "abc".to_string() } else { "1.5".to_string() };
+        ft += &format!("{t},0,0,{force},{x},-2\n");
+        lines += &format!("{{\"ok\":true,\"gamma\":{},\"t\":{t}}}\n", (force + 1.14) / 3.09);
+    }
+    std::fs::write(&log, ft).unwrap();
+    std::fs::write(&readings, lines).unwrap();
+    let config = dir.path().join("sensor.toml");
+    std::fs::write(&config, "# untouched\n").unwrap();
+    let out = nusense()
+        .args(["calibrate", "--readings"])
+        .arg(&readings)
+        .arg("--ft-log")
+        .arg(&log)
+        .arg("--config")
+        .arg(&config)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("line 9") && stderr.contains("x_mm") && !stderr.contains("panicked"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read_to_string(&config).unwrap(), "# untouched\n");
+}

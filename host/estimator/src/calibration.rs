@@ -11,6 +11,7 @@
 //! Pairs come either straight from a CSV of (gamma, force), or from a recorded session: readings with
 //! timestamps aligned with a force/torque log by time ([`align_by_time`]).
 
+use nusense_geometry::Point2;
 use thiserror::Error;
 
 pub mod modulus;
@@ -530,27 +531,7 @@ pub fn parse_force_log_csv(text: &str, component: ForceComponent) -> Result<Vec<
     })?;
     let header = split_csv(header_line);
     let found = header.join(", ");
-    let time_columns: [(&str, f64); 12] = [
-        ("timestamp", 1.0),
-        ("time", 1.0),
-        ("t", 1.0),
-        ("timestamp_s", 1.0),
-        ("time_s", 1.0),
-        ("t_s", 1.0),
-        ("timestamp_ms", 1e-3),
-        ("time_ms", 1e-3),
-        ("t_ms", 1e-3),
-        ("timestamp_us", 1e-6),
-        ("time_us", 1e-6),
-        ("t_us", 1e-6),
-    ];
-    let (time_col, time_unit) = time_columns
-        .iter()
-        .find_map(|&(name, unit)| find_column(&header, &[name]).map(|c| (c, unit)))
-        .ok_or_else(|| CalibrationError::MissingColumn {
-            wanted: "timestamp".into(),
-            found: found.clone(),
-        })?;
+    let (time_col, time_unit) = time_column(&header)?;
     let column = |name: &str| {
         find_column(&header, &[name]).ok_or_else(|| CalibrationError::MissingColumn {
             wanted: name.into(),
@@ -578,6 +559,91 @@ pub fn parse_force_log_csv(text: &str, component: ForceComponent) -> Result<Vec<
             Ok(ForceSample { time_s, force_n })
         })
         .collect()
+}
+
+/// A force/torque log's time column and its unit in seconds: `timestamp`, `time` or `t`, with an optional `_s`,
+/// `_ms` or `_us` suffix (seconds without one).
+fn time_column(header: &[&str]) -> Result<(usize, f64), CalibrationError> {
+    let time_columns: [(&str, f64); 12] = [
+        ("timestamp", 1.0),
+        ("time", 1.0),
+        ("t", 1.0),
+        ("timestamp_s", 1.0),
+        ("time_s", 1.0),
+        ("t_s", 1.0),
+        ("timestamp_ms", 1e-3),
+        ("time_ms", 1e-3),
+        ("t_ms", 1e-3),
+        ("timestamp_us", 1e-6),
+        ("time_us", 1e-6),
+        ("t_us", 1e-6),
+    ];
+    time_columns
+        .iter()
+        .find_map(|&(name, unit)| find_column(header, &[name]).map(|c| (c, unit)))
+        .ok_or_else(|| CalibrationError::MissingColumn {
+            wanted: "timestamp".into(),
+            found: header.join(", "),
+        })
+}
+
+/// Where the probe touched the pad at a time of a force/torque log: mm from the pattern's centre in the pad's frame
+/// (x right, y down as seen in the raw image; the frame of a reading's `contact_mm`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PositionSample {
+    pub time_s: f64,
+    pub position_mm: Point2,
+}
+
+/// The probe's contact point from a force/torque log's optional `x_mm` and `y_mm` columns (the time column as
+/// [`parse_force_log_csv`] reads it). `Ok(None)` when the header has neither; a header with only one of them is a
+/// [`CalibrationError::MissingColumn`], and a row whose `x_mm` or `y_mm` is not a finite number a
+/// [`CalibrationError::Parse`] (every row must carry both).
+pub fn parse_position_log_csv(text: &str) -> Result<Option<Vec<PositionSample>>, CalibrationError> {
+    let mut lines = data_lines(text);
+    let (_, header_line) = lines.next().ok_or(CalibrationError::MissingColumn {
+        wanted: "a header".into(),
+        found: String::new(),
+    })?;
+    let header = split_csv(header_line);
+    let (x_col, y_col) = match (find_column(&header, &["x_mm"]), find_column(&header, &["y_mm"])) {
+        (None, None) => return Ok(None),
+        (Some(x), Some(y)) => (x, y),
+        (x, _) => {
+            return Err(CalibrationError::MissingColumn {
+                wanted: if x.is_some() { "y_mm" } else { "x_mm" }.into(),
+                found: header.join(", "),
+            })
+        }
+    };
+    let (time_col, time_unit) = time_column(&header)?;
+    lines
+        .map(|(line, text)| {
+            let fields = split_csv(text);
+            let get = |col: usize, what: &str| number_at(&fields, col, line, what);
+            Ok(PositionSample {
+                time_s: get(time_col, "timestamp")? * time_unit,
+                position_mm: [get(x_col, "x_mm")?, get(y_col, "y_mm")?],
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map(Some)
+}
+
+/// The log's position at each of `times` (seconds, the log's clock), interpolated by [`align_by_time`]'s rule as
+/// the forces are; `None` where no sample lies within `max_skew_s`.
+pub fn positions_at_times(times: &[f64], positions: &[PositionSample], max_skew_s: f64) -> Vec<Option<Point2>> {
+    let axis = |k: usize| {
+        let samples: Vec<ForceSample> = positions
+            .iter()
+            .map(|p| ForceSample {
+                time_s: p.time_s,
+                force_n: p.position_mm[k],
+            })
+            .collect();
+        forces_at_times(times, &samples, max_skew_s)
+    };
+    axis(0).into_iter().zip(axis(1)).map(|(x, y)| Some([x?, y?])).collect()
 }
 
 /// The outcome of [`align_by_time`].
@@ -698,6 +764,20 @@ pub fn set_config_tangential_force_scale(text: &str, scale: f64) -> Result<Strin
     }
     edit_config(text, |document| {
         table_mut(document, "elastic")?.insert("tangential_force_scale", toml_edit::value(scale));
+        Ok(())
+    })
+}
+
+/// Sets `elastic.push_centre_shift_mm` (what [`push_centre::fit_push_centre_shift`] calibrates), keeping everything
+/// else; a shift the config refuses (beyond +-10 mm) is refused.
+pub fn set_config_push_centre_shift(text: &str, shift_mm: f64) -> Result<String, CalibrationError> {
+    if !shift_mm.is_finite() {
+        return Err(CalibrationError::Config(format!(
+            "refusing to write a push centre shift of {shift_mm} mm"
+        )));
+    }
+    edit_config(text, |document| {
+        table_mut(document, "elastic")?.insert("push_centre_shift_mm", toml_edit::value(shift_mm));
         Ok(())
     })
 }
@@ -982,6 +1062,56 @@ mod tests {
     }
 
     #[test]
+    fn the_probe_position_columns_are_optional_and_checked() {
+        let log = "t_ms,fx,fy,fz,x_mm,y_mm\n1000,0.3,0.4,-1.2,2.5,-4\n1010,0,0,-2,3.5,-4.5\n";
+        assert_eq!(
+            parse_position_log_csv(log).unwrap(),
+            Some(vec![
+                PositionSample {
+                    time_s: 1.0,
+                    position_mm: [2.5, -4.0]
+                },
+                PositionSample {
+                    time_s: 1.01,
+                    position_mm: [3.5, -4.5]
+                }
+            ])
+        );
+        // Interpolated at the readings' times as the forces are; none far from every sample.
+        let positions = parse_position_log_csv(log).unwrap().unwrap();
+        let at = positions_at_times(&[1.005, 1.5], &positions, 0.006);
+        assert!((at[0].unwrap()[0] - 3.0).abs() < 1e-9 && (at[0].unwrap()[1] + 4.25).abs() < 1e-9);
+        assert_eq!(at[1], None);
+        // No position columns: nothing to fit, no error.
+        assert_eq!(parse_position_log_csv("timestamp,fx,fy,fz\n0,0,0,1\n").unwrap(), None);
+        // One of the two, a malformed value, a missing field, a missing time column: typed errors.
+        assert!(matches!(
+            parse_position_log_csv("timestamp,fz,x_mm\n0,1,2\n"),
+            Err(CalibrationError::MissingColumn { ref wanted, .. }) if wanted == "y_mm"
+        ));
+        assert!(matches!(
+            parse_position_log_csv("timestamp,fz,y_mm\n0,1,2\n"),
+            Err(CalibrationError::MissingColumn { ref wanted, .. }) if wanted == "x_mm"
+        ));
+        assert!(matches!(
+            parse_position_log_csv("timestamp,fz,x_mm,y_mm\n0,1,2,3\n0.01,1,abc,3\n"),
+            Err(CalibrationError::Parse { line: 3, .. })
+        ));
+        assert!(matches!(
+            parse_position_log_csv("timestamp,fz,x_mm,y_mm\n0,1,2\n"),
+            Err(CalibrationError::Parse { line: 2, .. })
+        ));
+        assert!(matches!(
+            parse_position_log_csv("timestamp,fz,x_mm,y_mm\n0,1,nan,3\n"),
+            Err(CalibrationError::Parse { line: 2, .. })
+        ));
+        assert!(matches!(
+            parse_position_log_csv("fz,x_mm,y_mm\n1,2,3\n"),
+            Err(CalibrationError::MissingColumn { .. })
+        ));
+    }
+
+    #[test]
     fn aligns_by_interpolation_within_the_skew() {
         let forces: Vec<ForceSample> = (0..11)
             .map(|i| ForceSample {
@@ -1090,6 +1220,13 @@ mod tests {
             Some(moved),
             "{again}"
         );
+        let shifted = set_config_push_centre_shift(&with_map, -0.76).unwrap();
+        let config = crate::SensorConfig::from_toml_str(&shifted).unwrap();
+        assert_eq!(config.elastic.push_centre_shift_mm, -0.76);
+        assert_eq!((config.elastic.shear_modulus_kpa, config.elastic.gel_mm), (31.25, 2.0));
+        assert!(shifted.contains("# bench sensor"), "{shifted}");
+        assert!(set_config_push_centre_shift(text, f64::NAN).is_err());
+        assert!(set_config_push_centre_shift(text, 12.0).is_err(), "the config's bound");
         let broken = crate::StoredPadMap { width: 0, ..map };
         assert!(set_config_pad_map(text, &broken).is_err());
     }

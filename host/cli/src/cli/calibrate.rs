@@ -6,6 +6,12 @@
 //!   session's pushes: the reference's tangential force against the model's, one scale through the origin, on the
 //!   readings whose reference push is at least 0.5 N (see `nusense_estimator::calibration::modulus`); the log needs
 //!   `fx` and `fy` for it, and a session without pushes leaves the scale as it was;
+//! - how far a push's contact centre reads behind (or ahead of) the push (`elastic.push_centre_shift_mm`), from the
+//!   same session when the log also says where the probe touched (`x_mm`, `y_mm`, see below): the offset from each
+//!   reading's strongest contact to the probe, against the model's push over load, one factor through the origin on
+//!   the readings pushed by a tenth of their load or more (see `nusense_estimator::calibration::push_centre`). A log
+//!   without those columns, or a session with fewer than two such pushes, leaves the key as it was, and the output
+//!   says why;
 //! - with `--rest FRAME`, the raw px -> pad mm map of this sensor's lens and pose (`[pad_map]`), fitted on a frame
 //!   with nothing touching the pad, and its residual.
 //!
@@ -17,15 +23,28 @@
 //!   `capture_time_us`; lines without an estimate are skipped). Flat lines with `gamma` and a time field
 //!   (`timestamp_s`, `time_s`, `t`, `timestamp_ms` or `timestamp_us`) are read too; those with `ok: false` are
 //!   skipped. The force/torque log is CSV with a time column (`timestamp`, `time`,
-//!   `t`, optional `_s`/`_ms`/`_us` suffix) and `fx, fy, fz`. Each reading takes the force interpolated at its
-//!   time when a force sample lies within `--max-skew-ms`; others are dropped and counted.
+//!   `t`, optional `_s`/`_ms`/`_us` suffix) and `fx, fy, fz`, and optionally `x_mm, y_mm`: the probe's contact
+//!   point in the pad's frame (mm from the pattern's centre, x right and y down as seen in the raw image: the frame
+//!   of the readings' `contact_mm`), both or neither, a finite number on every row. Each reading takes the force
+//!   (and the position) interpolated at its time when a log sample lies within `--max-skew-ms`; others are dropped
+//!   and counted.
 //!
 //! Readings in inverse mode with contact also give the model's force (`force_n`); with at least two of them the
-//! modulus scale is fitted as well, and with at least two pushes the tangential scale.
+//! modulus scale is fitted as well, and with at least two pushes the tangential scale. With `x_mm, y_mm` in the log,
+//! their strongest contact (`contact_mm`, and that contact's `force_vector_n`, or the reading's when it lists no
+//! contacts) gives the push centre shift.
+//!
+//! Readings carry no record of the config they were made with: they are taken to have been made with the
+//! `--config` file's current values (the defaults without one). So the fitted scales are relative to its modulus
+//! and tangential scale, and for the push centre shift the readings' fx, fy are divided by its
+//! `tangential_force_scale` (the shift is in the model's push over load) and their centres moved back by its
+//! `push_centre_shift_mm` before the fit; that moving back is exact (the move depends only on the contact's force
+//! and the config, also where it was cut short at one cell pitch) when the readings were indeed made with it.
 //!
 //! With `--config FILE`, what was fitted is written into that TOML (created if missing; other keys and comments are
-//! kept) unless `--dry-run`; the modulus is the config's own times the fitted scale, and the tangential scale the
-//! config's own times its fitted ratio over the modulus's (the new modulus scales the model's shear as well).
+//! kept) unless `--dry-run`; the modulus is the config's own times the fitted scale, the tangential scale the
+//! config's own times its fitted ratio over the modulus's (the new modulus scales the model's shear as well), and the
+//! push centre shift the fitted one (neither scale changes the model's push over load).
 //! `--json` prints the fits as one JSON object. A line that does not rise with gamma is refused and nothing is written (`--dry-run` still shows
 //! it). Exit code: 0 on a fit, 1 when the data cannot be fitted, the line does not rise or the config cannot be
 //! written.
@@ -36,10 +55,12 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use nusense_capture::read_image_rgb;
 use nusense_estimator::calibration::modulus::{fit_modulus_scale, fit_tangential_scale, ModelForceSample, ModulusFit};
+use nusense_estimator::calibration::push_centre::{fit_push_centre_shift, unshifted_centre, PushCentreSample};
 use nusense_estimator::calibration::{
-    align_by_time, fit_force_line, forces_at_times, parse_force_log_csv, parse_pairs_csv, set_config_pad_map,
-    set_config_shear_modulus, set_config_tangential_force_scale, update_config_toml, CalibrationError,
-    CalibrationSample, FitOptions, ForceComponent, ForceFit, ForceSample, TimedGamma,
+    align_by_time, fit_force_line, forces_at_times, parse_force_log_csv, parse_pairs_csv, parse_position_log_csv,
+    positions_at_times, set_config_pad_map, set_config_push_centre_shift, set_config_shear_modulus,
+    set_config_tangential_force_scale, update_config_toml, CalibrationError, CalibrationSample, FitOptions,
+    ForceComponent, ForceFit, ForceSample, TimedGamma,
 };
 use nusense_estimator::{Estimator, MapResidual, Mode, SensorConfig, StoredPadMap};
 use serde::Serialize;
@@ -123,6 +144,11 @@ struct Report {
     modulus: Option<ModulusReport>,
     /// The pad model's shear against its normal stiffness; null without at least two pushes in the session.
     tangential: Option<TangentialReport>,
+    /// How far a push's centre reads behind it; null unless the log has `x_mm`, `y_mm` and the session at least two
+    /// pushes of a tenth of their load (`push_centre_left_alone` says which).
+    push_centre: Option<PushCentreReport>,
+    /// Why `elastic.push_centre_shift_mm` was not fitted (and so left as it was) in a session; null otherwise.
+    push_centre_left_alone: Option<String>,
     /// The rest frame's pad map; null without `--rest`.
     pad_map: Option<PadMapReport>,
     config_written: Option<String>,
@@ -154,6 +180,17 @@ struct TangentialReport {
 }
 
 #[derive(Serialize)]
+struct PushCentreReport {
+    /// The config's `elastic.push_centre_shift_mm` before and after: mm along the push per unit of the model's push
+    /// over load.
+    push_centre_shift_mm_before: f64,
+    push_centre_shift_mm: f64,
+    /// Inverse-mode readings in contact with a force vector and a logged probe position (pushes and presses alike;
+    /// the fit uses those pushed by a tenth of their load or more).
+    readings: usize,
+}
+
+#[derive(Serialize)]
 struct PadMapReport {
     width: u32,
     height: u32,
@@ -166,6 +203,8 @@ struct Fits {
     modulus: Option<(ModulusFit, f64)>,
     /// The fit and the config's new `elastic.tangential_force_scale`.
     tangential: Option<(ModulusFit, f64)>,
+    /// The config's new `elastic.push_centre_shift_mm`, or why it is left as it was (sessions only).
+    push_centre: Option<Result<PushCentreFit, String>>,
     pad_map: Option<StoredPadMap>,
     readings_dropped: usize,
 }
@@ -223,6 +262,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             if let Some((_, scale)) = fits.tangential {
                 text = set_config_tangential_force_scale(&text, scale).with_context(context)?;
             }
+            if let Some(Ok(fit)) = fits.push_centre {
+                text = set_config_push_centre_shift(&text, fit.shift_mm).with_context(context)?;
+            }
             if let Some(map) = &fits.pad_map {
                 text = set_config_pad_map(&text, map).with_context(context)?;
             }
@@ -257,6 +299,7 @@ fn fit_all(args: &Args, config: &SensorConfig) -> anyhow::Result<Fits> {
         line: None,
         modulus: None,
         tangential: None,
+        push_centre: None,
         pad_map: None,
         readings_dropped: 0,
     };
@@ -266,7 +309,7 @@ fn fit_all(args: &Args, config: &SensorConfig) -> anyhow::Result<Fits> {
         fits.line = Some(fit_force_line(&samples, &options).context("cannot fit the force calibration")?);
     }
     if let (Some(readings_path), Some(log_path)) = (&args.readings, &args.ft_log) {
-        let session = load_session(args, readings_path, log_path)?;
+        let session = load_session(args, config, readings_path, log_path)?;
         fits.line = Some(fit_force_line(&session.samples, &options).context("cannot fit the force calibration")?);
         fits.readings_dropped = session.dropped;
         if session.model.len() >= 2 {
@@ -286,6 +329,20 @@ fn fit_all(args: &Args, config: &SensorConfig) -> anyhow::Result<Fits> {
             Err(CalibrationError::TooFewPoints { .. }) => {}
             Err(e) => return Err(e).context("cannot fit the pad model's tangential force scale"),
         }
+        // The shift is in the model's push over load, which neither the modulus nor the tangential scale changes.
+        fits.push_centre = Some(match &session.push_centres {
+            None => Err("the force/torque log has no x_mm, y_mm columns".to_string()),
+            Some(samples) => match fit_push_centre_shift(samples) {
+                Ok(shift_mm) => Ok(PushCentreFit {
+                    shift_mm,
+                    readings: samples.len(),
+                }),
+                Err(CalibrationError::TooFewPushes { found, needed }) => Err(format!(
+                    "{found} readings with a logged position pushed by a tenth of their load or more, {needed} needed"
+                )),
+                Err(e) => return Err(e).context("cannot fit the push centre shift"),
+            },
+        });
     }
     if let Some(path) = &args.rest {
         let frame = read_image_rgb(path).with_context(|| format!("rest frame {}", path.display()))?;
@@ -301,6 +358,13 @@ fn fit_all(args: &Args, config: &SensorConfig) -> anyhow::Result<Fits> {
     Ok(fits)
 }
 
+/// The push centre shift and the readings it was fitted on.
+#[derive(Clone, Copy)]
+struct PushCentreFit {
+    shift_mm: f64,
+    readings: usize,
+}
+
 /// A session's readings paired with the force log.
 struct Session {
     samples: Vec<CalibrationSample>,
@@ -308,10 +372,18 @@ struct Session {
     model: Vec<ModelForceSample>,
     /// The same readings' tangential force (its size) against the reference's; empty when the log has no fx, fy.
     tangential: Vec<ModelForceSample>,
+    /// The same readings' strongest contact, un-shifted, against the log's probe position; `None` when the log has
+    /// no x_mm, y_mm.
+    push_centres: Option<Vec<PushCentreSample>>,
     dropped: usize,
 }
 
-fn load_session(args: &Args, readings_path: &PathBuf, log_path: &PathBuf) -> anyhow::Result<Session> {
+fn load_session(
+    args: &Args,
+    config: &SensorConfig,
+    readings_path: &PathBuf,
+    log_path: &PathBuf,
+) -> anyhow::Result<Session> {
     let text =
         std::fs::read_to_string(readings_path).with_context(|| format!("cannot read {}", readings_path.display()))?;
     let parsed = parse_readings(&text).with_context(|| format!("in {}", readings_path.display()))?;
@@ -340,12 +412,50 @@ fn load_session(args: &Args, readings_path: &PathBuf, log_path: &PathBuf) -> any
         Err(CalibrationError::MissingColumn { .. }) => Vec::new(),
         Err(e) => return Err(e).with_context(|| format!("in {}", log_path.display())),
     };
+    let push_centres = match parse_position_log_csv(&log).with_context(|| format!("in {}", log_path.display()))? {
+        None => None,
+        Some(mut positions) => {
+            for p in &mut positions {
+                p.time_s += args.time_offset_s;
+            }
+            Some(push_centre_samples(&parsed.model, &positions, config, max_skew_s))
+        }
+    };
     Ok(Session {
         samples: alignment.samples,
         model,
         tangential,
+        push_centres,
         dropped: parsed.skipped + alignment.dropped,
     })
+}
+
+/// Each reading's strongest contact against the log's probe position at its time (those with no position sample
+/// within `max_skew_s`, or without a force vector, are left out). The readings are taken to have been made with
+/// `config`: their fx, fy are divided by its `tangential_force_scale` to give the model's, and their centre is moved
+/// back by its `push_centre_shift_mm` (exactly: the move depends only on the contact's force and the config).
+fn push_centre_samples(
+    readings: &[TimedModelForce],
+    positions: &[nusense_estimator::calibration::PositionSample],
+    config: &SensorConfig,
+    max_skew_s: f64,
+) -> Vec<PushCentreSample> {
+    let times: Vec<f64> = readings.iter().map(|r| r.time_s).collect();
+    let scale = config.elastic.tangential_force_scale;
+    let pitch_mm = config.pad.pitch_x_mm().min(config.pad.pitch_y_mm());
+    readings
+        .iter()
+        .zip(positions_at_times(&times, positions, max_skew_s))
+        .filter_map(|(reading, truth)| {
+            let (centre, [fx, fy, fz]) = reading.strongest?;
+            let model = [fx / scale, fy / scale, fz];
+            Some(PushCentreSample {
+                model_force_vector_n: model,
+                read_centre_mm: unshifted_centre(centre, model, config.elastic.push_centre_shift_mm, pitch_mm),
+                true_centre_mm: truth?,
+            })
+        })
+        .collect()
 }
 
 /// Each (time, model force) paired with the log's force at that time; those with no log sample within `max_skew_s`
@@ -374,13 +484,28 @@ const TIME_FIELDS: [(&str, f64); 6] = [
     ("timestamp_us", 1e-6),
 ];
 
-/// An inverse-mode reading in contact: the model's normal force at a time, and the size of its tangential force
-/// when the reading has a force vector.
+/// An inverse-mode reading in contact: the model's normal force at a time, the size of its tangential force when
+/// the reading has a force vector, and its strongest contact's centre (`contact_mm`) and force vector (the
+/// contact's own, or the reading's when it lists no contacts) when it has both.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct TimedModelForce {
     time_s: f64,
     force_n: f64,
     tangential_n: Option<f64>,
+    strongest: Option<([f64; 2], [f64; 3])>,
+}
+
+/// A JSON array of N finite numbers.
+fn numbers<const N: usize>(value: Option<&serde_json::Value>) -> Option<[f64; N]> {
+    let array = value?.as_array()?;
+    if array.len() != N {
+        return None;
+    }
+    let mut out = [0.0; N];
+    for (o, v) in out.iter_mut().zip(array) {
+        *o = v.as_f64().filter(|v| v.is_finite())?;
+    }
+    Some(out)
 }
 
 /// What a readings file holds for calibration.
@@ -436,10 +561,17 @@ fn parse_readings(text: &str) -> anyhow::Result<ParsedReadings> {
                     .get("force_vector_n")
                     .and_then(serde_json::Value::as_array)
                     .and_then(|v| Some(v.first()?.as_f64()?.hypot(v.get(1)?.as_f64()?)));
+                let strongest_vector = estimate
+                    .get("contacts")
+                    .and_then(serde_json::Value::as_array)
+                    .and_then(|c| c.first())
+                    .map_or(estimate.get("force_vector_n"), |c| c.get("force_vector_n"));
+                let strongest = numbers::<2>(estimate.get("contact_mm")).zip(numbers::<3>(strongest_vector));
                 parsed.model.push(TimedModelForce {
                     time_s,
                     force_n,
                     tangential_n,
+                    strongest,
                 });
             }
             continue;
@@ -496,6 +628,16 @@ fn report(fits: &Fits, config: &SensorConfig, confidence: f64, config_written: O
             points: fit.points,
             outliers: fit.outliers,
         }),
+        push_centre: fits
+            .push_centre
+            .as_ref()
+            .and_then(|r| r.as_ref().ok())
+            .map(|fit| PushCentreReport {
+                push_centre_shift_mm_before: config.elastic.push_centre_shift_mm,
+                push_centre_shift_mm: fit.shift_mm,
+                readings: fit.readings,
+            }),
+        push_centre_left_alone: fits.push_centre.as_ref().and_then(|r| r.as_ref().err().cloned()),
         pad_map: fits.pad_map.map(|m| PadMapReport {
             width: m.width,
             height: m.height,
@@ -551,6 +693,18 @@ fn print_human(fits: &Fits, config: &SensorConfig, config_written: Option<&str>,
             "  tangential force scale {:.4} -> {scale:.4}",
             config.elastic.tangential_force_scale
         );
+    }
+    match &fits.push_centre {
+        Some(Ok(fit)) => println!(
+            "push centre: fitted on the pushes among {} readings with a logged probe position, shift {:.3} -> {:.3} mm \
+             along the push per unit of push over load",
+            fit.readings, config.elastic.push_centre_shift_mm, fit.shift_mm
+        ),
+        Some(Err(why)) => println!(
+            "push centre: {why}; elastic.push_centre_shift_mm left at {:.3} mm",
+            config.elastic.push_centre_shift_mm
+        ),
+        None => {}
     }
     if let Some(map) = &fits.pad_map {
         let r = map.residual;
@@ -618,5 +772,36 @@ mod tests {
         let err = parse_readings(r#"{"ok":true,"gamma":1.0}"#).unwrap_err();
         assert!(format!("{err:#}").contains("line 1 has no time field"), "{err:#}");
         assert!(parse_readings("not json").is_err());
+    }
+
+    #[test]
+    fn a_readings_strongest_contact_is_taken_back_to_the_models_push_and_unshifted_centre() {
+        // The contact's own vector, not the reading's total (which a second contact would change).
+        let messages = r#"{"schema_version":1,"frame_id":0,"capture_time_us":1000000,"estimate":{"mode":"inverse","contact":true,"gamma":0.5,"force_n":5.0,"contact_mm":[1.375,-2.0],"force_vector_n":[3.0,0.0,5.0],"contacts":[{"force_vector_n":[2.0,0.0,4.0]},{"force_vector_n":[1.0,0.0,1.0]}]}}
+{"schema_version":1,"frame_id":1,"capture_time_us":2000000,"estimate":{"mode":"inverse","contact":true,"gamma":0.5,"force_n":4.0,"contact_mm":[0.0,0.0],"force_vector_n":null,"contacts":[]}}
+"#;
+        let parsed = parse_readings(messages).unwrap();
+        assert_eq!(parsed.model[0].strongest, Some(([1.375, -2.0], [2.0, 0.0, 4.0])));
+        assert_eq!(parsed.model[1].strongest, None, "no force vector: no push");
+        // Read with a tangential scale of 2 and a shift of 1.5 mm: the model's push is [1, 0, 4], a quarter of the
+        // load, so the centre was moved 0.375 mm along x.
+        let mut config = SensorConfig::default();
+        config.elastic.tangential_force_scale = 2.0;
+        config.elastic.push_centre_shift_mm = 1.5;
+        let positions = [
+            nusense_estimator::calibration::PositionSample {
+                time_s: 0.99,
+                position_mm: [1.0, -2.0],
+            },
+            nusense_estimator::calibration::PositionSample {
+                time_s: 1.01,
+                position_mm: [2.0, -2.0],
+            },
+        ];
+        let samples = push_centre_samples(&parsed.model, &positions, &config, 0.02);
+        assert_eq!(samples.len(), 1, "{samples:?}");
+        assert_eq!(samples[0].model_force_vector_n, [1.0, 0.0, 4.0]);
+        assert!((samples[0].read_centre_mm[0] - 1.0).abs() < 1e-12 && samples[0].read_centre_mm[1] == -2.0);
+        assert!((samples[0].true_centre_mm[0] - 1.5).abs() < 1e-9 && samples[0].true_centre_mm[1] == -2.0);
     }
 }

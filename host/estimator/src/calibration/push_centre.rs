@@ -24,6 +24,13 @@ pub fn shifted_centre(centre_mm: Point2, [fx, fy, fz]: [f64; 3], shift_mm: f64, 
     [centre_mm[0] + keep * moved[0], centre_mm[1] + keep * moved[1]]
 }
 
+/// The centre [`shifted_centre`] was given, from the centre it returned with the same force, shift and bound: the
+/// move depends on those alone, so this is exact (to rounding) whether or not the bound cut the move short.
+pub fn unshifted_centre(shifted_mm: Point2, force_vector_n: [f64; 3], shift_mm: f64, most_mm: f64) -> Point2 {
+    let moved = shifted_centre([0.0, 0.0], force_vector_n, shift_mm, most_mm);
+    [shifted_mm[0] - moved[0], shifted_mm[1] - moved[1]]
+}
+
 /// One push: the model's force vector (before `tangential_force_scale`), where its contact was read and where it was.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PushCentreSample {
@@ -100,6 +107,24 @@ mod tests {
         // 4 mm asked, 2 allowed: the same direction, 2 mm.
         assert_eq!(shifted_centre([0.0, 0.0], [4.0, 0.0, 2.0], 2.0, 2.0), [2.0, 0.0]);
         assert_eq!(shifted_centre([1.0, 2.0], [1.0, 0.0, 0.0], 2.0, 3.0), [1.0, 2.0]);
+    }
+
+    #[test]
+    fn unshifting_takes_the_centre_back_whether_or_not_the_bound_applied() {
+        for (centre, force, shift, most) in [
+            ([1.0, 2.0], [1.0, -2.0, 4.0], 2.0, 3.0),
+            // Cut short by the bound: 4 mm asked, 2 allowed.
+            ([-3.0, 0.5], [4.0, 0.0, 2.0], 2.0, 2.0),
+            ([0.5, -7.0], [-1.5, 0.8, 3.0], -0.76, 3.0),
+            ([1.0, 2.0], [1.0, 0.0, 0.0], 2.0, 3.0),
+        ] {
+            let back = unshifted_centre(shifted_centre(centre, force, shift, most), force, shift, most);
+            assert!(
+                (back[0] - centre[0]).abs() < 1e-12 && (back[1] - centre[1]).abs() < 1e-12,
+                "{centre:?} -> {back:?}"
+            );
+        }
+        assert_eq!(unshifted_centre([1.5, 1.0], [1.0, -2.0, 4.0], 2.0, 3.0), [1.0, 2.0]);
     }
 
     #[test]
