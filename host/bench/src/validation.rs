@@ -9,7 +9,9 @@ use std::time::Instant;
 
 use image::RgbImage;
 use nusense_estimator::calibration::modulus::{fit_tangential_scale, ModelForceSample};
-use nusense_estimator::calibration::push_centre::{fit_push_centre_shift, shifted_centre, PushCentreSample};
+use nusense_estimator::calibration::push_centre::{
+    fit_push_centre_shift, most_shift_mm, shifted_centre, PushCentreSample,
+};
 use nusense_estimator::calibration::{fit_force_line, CalibrationSample, FitOptions};
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use nusense_sim::validation::{CaseKind, CaseTruth, Profile, ValidationRenderer, ValidationSet, FLOOR_FORCES_N};
@@ -688,14 +690,13 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
 
     // The push shift is fitted on the calibration pushes, near the centre, like the tangential scale.
     let push_shift_mm = calibration.as_ref().map_or(0.0, ForceCalibration::push_shift_mm);
-    let pad = SensorConfig::default().pad;
-    let pitch_mm = pad.pitch_x_mm().min(pad.pitch_y_mm());
+    let most_mm = most_shift_mm(&SensorConfig::default().pad);
     let (push_errors, push_unshifted_errors): (Vec<f64>, Vec<f64>) = of(CaseKind::Tangential)
         .filter_map(|s| {
             let found = s.observed.as_ref().filter(|o| o.contact)?;
             let (read, truth) = (found.contact_mm?, strongest_centre(&s.truth)?);
             let shifted = match found.force_vector_n {
-                Some(f) => shifted_centre(read, f, push_shift_mm, pitch_mm),
+                Some(f) => shifted_centre(read, f, push_shift_mm, most_mm),
                 None => read,
             };
             Some((distance(shifted, truth), distance(read, truth)))

@@ -581,13 +581,13 @@ impl Estimator {
         if kept.is_empty() {
             return (None, Some(zero_map));
         }
-        let pitch_mm = self.config.pad.pitch_x_mm().min(self.config.pad.pitch_y_mm());
+        let most_mm = crate::calibration::push_centre::most_shift_mm(&self.config.pad);
         for region in &mut kept {
             region.centre_mm = crate::calibration::push_centre::shifted_centre(
                 region.centre_mm,
                 region.force_vector_n,
                 self.config.elastic.push_centre_shift_mm,
-                pitch_mm,
+                most_mm,
             );
         }
         let contacts: Vec<ContactRegion> = kept.iter().filter_map(|r| self.region_at(r)).collect();

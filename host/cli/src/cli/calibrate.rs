@@ -55,7 +55,9 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use nusense_capture::read_image_rgb;
 use nusense_estimator::calibration::modulus::{fit_modulus_scale, fit_tangential_scale, ModelForceSample, ModulusFit};
-use nusense_estimator::calibration::push_centre::{fit_push_centre_shift, unshifted_centre, PushCentreSample};
+use nusense_estimator::calibration::push_centre::{
+    fit_push_centre_shift, most_shift_mm, unshifted_centre, PushCentreSample,
+};
 use nusense_estimator::calibration::{
     align_by_time, fit_force_line, forces_at_times, parse_force_log_csv, parse_pairs_csv, parse_position_log_csv,
     positions_at_times, set_config_pad_map, set_config_push_centre_shift, set_config_shear_modulus,
@@ -442,7 +444,7 @@ fn push_centre_samples(
 ) -> Vec<PushCentreSample> {
     let times: Vec<f64> = readings.iter().map(|r| r.time_s).collect();
     let scale = config.elastic.tangential_force_scale;
-    let pitch_mm = config.pad.pitch_x_mm().min(config.pad.pitch_y_mm());
+    let most_mm = most_shift_mm(&config.pad);
     readings
         .iter()
         .zip(positions_at_times(&times, positions, max_skew_s))
@@ -451,7 +453,7 @@ fn push_centre_samples(
             let model = [fx / scale, fy / scale, fz];
             Some(PushCentreSample {
                 model_force_vector_n: model,
-                read_centre_mm: unshifted_centre(centre, model, config.elastic.push_centre_shift_mm, pitch_mm),
+                read_centre_mm: unshifted_centre(centre, model, config.elastic.push_centre_shift_mm, most_mm),
                 true_centre_mm: truth?,
             })
         })

@@ -2,7 +2,7 @@
 //! pushes whose true place is known: true - read = k (fx, fy) / fz, with (fx, fy, fz) the model's force vector, by
 //! least squares through the origin.
 
-use nusense_geometry::Point2;
+use nusense_geometry::{PadGeometry, Point2};
 
 use super::CalibrationError;
 
@@ -11,6 +11,11 @@ use super::CalibrationError;
 pub const MIN_PUSH_RATIO: f64 = 0.1;
 /// Fewest pushes the shift is fitted on.
 pub const MIN_PUSHES: usize = 2;
+
+/// The most a contact's centre is moved (`elastic.push_centre_shift_mm`): one cell pitch (the smaller) of `pad`.
+pub fn most_shift_mm(pad: &PadGeometry) -> f64 {
+    pad.pitch_x_mm().min(pad.pitch_y_mm())
+}
 
 /// A contact's centre moved along its push by `shift_mm` per unit of push over load (the model's (fx, fy) / fz: see
 /// `ElasticConfig::push_centre_shift_mm`), by at most `most_mm`; as it was without a normal force.
