@@ -505,6 +505,18 @@ fn partial_occlusion() {
     );
 }
 
+/// The direction a reading gives its push (degrees, pad frame), and how far it is from `angle_deg` (signed, within
+/// +-180).
+fn push_direction(reading: &Reading, angle_deg: f64) -> (f64, f64) {
+    let v = reading
+        .touch
+        .as_ref()
+        .and_then(|t| t.force_vector_n)
+        .expect("the inverse gives a force vector");
+    let found = v[1].atan2(v[0]).to_degrees();
+    (found, (found - angle_deg + 180.0).rem_euclid(360.0) - 180.0)
+}
+
 #[test]
 fn a_press_with_a_tangential_push_reports_its_direction() {
     for angle in [0.0f64, 130.0, 250.0] {
@@ -513,14 +525,8 @@ fn a_press_with_a_tangential_push_reports_its_direction() {
         contact.tangential_force_n = [1.5 * c, 1.5 * s];
         let (frame, _) = render(&Scene::with_contact(contact), 16);
         let reading = expect_press(&mut estimator(), &frame, [2.0, 1.0], 5.0, LOCATION_MM, "shear");
-        let v = reading
-            .touch
-            .as_ref()
-            .and_then(|t| t.force_vector_n)
-            .expect("the inverse gives a force vector");
-        let found = v[1].atan2(v[0]).to_degrees();
-        let off = (found - angle + 180.0).rem_euclid(360.0) - 180.0;
-        assert!(off.abs() <= 5.0, "push at {angle} deg read at {found:.1} deg ({v:?})");
+        let (found, off) = push_direction(&reading, angle);
+        assert!(off.abs() <= 5.0, "push at {angle} deg read at {found:.1} deg");
     }
 }
 
@@ -545,14 +551,8 @@ fn a_firm_press_pushed_sideways_is_found_in_every_direction() {
             let case = format!("{shape}, 10 N pushed by 4 N at {angle} deg");
             let reading = expect_press(&mut estimator(), &frame, truth, 10.0, location_mm, &case);
             assert_eq!(reading.contacts().len(), 1, "{case}: {:?}", reading.contacts());
-            let v = reading
-                .touch
-                .as_ref()
-                .and_then(|t| t.force_vector_n)
-                .expect("the inverse gives a force vector");
-            let found = v[1].atan2(v[0]).to_degrees();
-            let off = (found - angle + 180.0).rem_euclid(360.0) - 180.0;
-            assert!(off.abs() <= 5.0, "{case}: the push read at {found:.1} deg ({v:?})");
+            let (found, off) = push_direction(&reading, angle);
+            assert!(off.abs() <= 5.0, "{case}: the push read at {found:.1} deg");
         }
     }
 }
