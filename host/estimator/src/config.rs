@@ -281,8 +281,9 @@ pub struct ElasticConfig {
     /// model's (fx, fy) / fz, before `tangential_force_scale`). A pushed contact's pressure centre reads behind the
     /// push, in proportion to the push: on the validation sensor 0.76 mm at a fifth of the load and 1.34 mm at two
     /// fifths, where the model reads the push 2.2-2.4 times the truth's share; the equivalent layer explains part of
-    /// the pad's shear response with pressure. It is the pad's and must be fitted on it (the validation bench fits it
-    /// on its calibration pushes, whose places it knows). Default 0: centres as the pressure puts them. At most one
+    /// the pad's shear response with pressure. It is the pad's and must be fitted on it, where the pushes' places are
+    /// known: the validation bench fits it on its calibration pushes, `nusense calibrate` from a force/torque log
+    /// that says where the probe touched. Default 0: centres as the pressure puts them. At most one
     /// cell pitch of shift is applied.
     pub push_centre_shift_mm: f64,
 }

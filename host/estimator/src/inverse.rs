@@ -902,7 +902,7 @@ impl InverseModel {
         // frame's, and no contact). When the motion and one compact load explain more than
         // `FAR_FIELD_VARIANCE_SHARE` of the squared scatter the test used, on the corners away from that load, the
         // scatter was the load's and not noise, and the test is taken at what the compact fit leaves. One compact
-        // load explains little of a rest frame's errors, spread over the pad: at most 36 % of the squared scatter
+        // load explains little of a rest frame's errors, spread over the pad: at most 37 % of the squared scatter
         // over the validation sets' rest frames and rest frames under camera motion and uneven light.
         let compact = compact.or_else(|| self.compact_scatter_mm(stage, d, valid).map(|c| c.max(floor_mm)));
         let unexplained = 1.0 - FAR_FIELD_VARIANCE_SHARE;
