@@ -11,7 +11,7 @@ use nusense_estimator::detection::FastTracker;
 use nusense_estimator::motion::fit_raw_similarity;
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use nusense_sim::validation::{CameraMotion, Case, CaseKind, ValidationRenderer};
-use nusense_sim::{Scene, NOMINAL_LED_CURRENT_MA};
+use nusense_sim::{Contact, Scene, NOMINAL_LED_CURRENT_MA};
 
 const SIZE: (u32, u32) = (1024, 768);
 /// A square the tracker does not flag follows the camera's rigid motion this closely, px: the squares away from the
@@ -132,6 +132,65 @@ fn squares_moved_under_the_glare_follow_the_camera_or_are_flagged() {
                 relit <= config.pad.yellow_count() / 8,
                 "roll {roll}: {relit} squares flagged; at most those near the two glare spots should be"
             );
+        }
+    }
+}
+
+/// The camera shifted 2 mm along both axes since the rest frame (a knock): each yellow square then lies nearer the
+/// rest frame's next one diagonally (0.6 of a cell along each axis), and choosing the squares' indices by nearness
+/// alone numbered the whole lattice one cell off. Every press was read a cell away, 3.4-6.8 mm, and the camera's
+/// shift as about (-19, -17) px against the true (26, 27), with nothing else amiss but some 25 fewer corners. The
+/// full search sees the pattern from edge to edge, so its indices are the pad's; measured at the fix: the shift
+/// within 1.4 px of the image's, presses 0.02-0.12 mm from the truth.
+#[test]
+fn a_camera_shifted_more_than_half_a_cell_diagonally_keeps_every_square_s_index() {
+    let renderer = ValidationRenderer::new(SIZE).unwrap();
+    let reference = renderer.reference(7).unwrap();
+    for (k, shift_mm) in [[2.0, 2.0], [-2.0, 2.0]].into_iter().enumerate() {
+        let motion = CameraMotion {
+            rotation_deg: [0.0, 0.0, 0.0],
+            shift_mm,
+        };
+        let case = |name: &str, scene: Scene, seed: u64| Case {
+            name: format!("shift {shift_mm:?}: {name}"),
+            kind: CaseKind::CameraMotion,
+            size: SIZE,
+            scene,
+            camera_motion: Some(motion),
+            led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
+            seed,
+        };
+        let rest = case("at rest", Scene::rest(), 40 + k as u64);
+        let (frame, truth) = renderer.render(&rest).unwrap();
+        let mut estimator = Estimator::new(SensorConfig::default(), Mode::Inverse, &reference).unwrap();
+        let reading = estimator.estimate(&frame).unwrap();
+        let seen = truth.camera_motion.expect("a moved camera").1.shift_px;
+        let found = reading.camera_motion.shift_px;
+        assert!(
+            (found[0] - seen[0]).hypot(found[1] - seen[1]) < 3.0,
+            "{}: the camera shifted {found:?} px, the image {seen:?}",
+            rest.name
+        );
+        assert!(
+            !reading.is_contact(),
+            "{}: phantom contact {:?}",
+            rest.name,
+            reading.test
+        );
+        for (j, at) in [[0.0, 0.0], [11.0, -6.5]].into_iter().enumerate() {
+            let press = case(
+                &format!("3 N at {at:?}"),
+                Scene::with_contact(Contact::sphere(5.0, at, 3.0)),
+                50 + 2 * k as u64 + j as u64,
+            );
+            let (frame, _) = renderer.render(&press).unwrap();
+            let mut estimator = Estimator::new(SensorConfig::default(), Mode::Inverse, &reference).unwrap();
+            let reading = estimator.estimate(&frame).unwrap();
+            let contacts = reading.contacts();
+            assert_eq!(contacts.len(), 1, "{}: contacts {contacts:?}", press.name);
+            let read = contacts[0].centre_mm;
+            let off = (read[0] - at[0]).hypot(read[1] - at[1]);
+            assert!(off < 0.5, "{}: read at {read:?}, {off:.2} mm off", press.name);
         }
     }
 }

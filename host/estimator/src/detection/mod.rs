@@ -505,8 +505,15 @@ impl FastTracker {
         lost_fraction > self.thresholds.recovery_lost_fraction || median_move > 0.5
     }
 
-    /// Gives the full search's squares the reference's indices: the whole-lattice index offset that puts them
-    /// nearest to where the reference saw the same squares.
+    /// Gives the full search's squares the reference's indices: of the whole-lattice index offsets that keep the most
+    /// of them on the pad, the one that puts them nearest to where the reference saw the same squares.
+    ///
+    /// Nearest alone is not enough: the yellow squares repeat one cell away diagonally, so a camera that moved more
+    /// than half a cell along both axes since the reference (2 mm diagonally on the validation sensor) brings each
+    /// square nearer the reference's next one, and every contact was then read a cell off (3.4-6.8 mm) with nothing
+    /// to show for it but some 25 fewer corners. Where the full search saw the pattern from edge to edge its indices
+    /// are the pad's own, and any other offset pushes a row or a column of squares off the pad; where it saw less,
+    /// several offsets keep every square on it, and the reference decides among them as before.
     fn align_to_reference(&self, coarse: &[Option<Point2>]) -> Option<Vec<Option<Point2>>> {
         // `coarse` is indexed as if its first row/column were the pad's; try shifting it by whole cells.
         let (rows, cols) = (i32::from(self.pad.rows), i32::from(self.pad.cols));
@@ -527,6 +534,7 @@ impl FastTracker {
                     continue;
                 }
                 let mut distances = Vec::new();
+                let mut on_pad = 0;
                 for (model, found) in self.squares.iter().zip(coarse) {
                     let (Some(p), Some(slot)) = (
                         found,
@@ -534,6 +542,7 @@ impl FastTracker {
                     ) else {
                         continue;
                     };
+                    on_pad += 1;
                     if let Some(r) = self.squares[slot].reference {
                         distances.push(sub(*p, r)[0].hypot(sub(*p, r)[1]));
                     }
@@ -541,10 +550,9 @@ impl FastTracker {
                 if distances.len() < 4 {
                     continue;
                 }
-                let count = distances.len();
                 let cost = median(&mut distances);
-                if best.is_none_or(|(c, n, _, _)| cost < c || (cost == c && count > n)) {
-                    best = Some((cost, count, dr, dc));
+                if best.is_none_or(|(c, n, _, _)| on_pad > n || (on_pad == n && cost < c)) {
+                    best = Some((cost, on_pad, dr, dc));
                 }
             }
         }
