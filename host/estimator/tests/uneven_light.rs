@@ -69,3 +69,43 @@ fn one_led_side_at_150_percent_is_no_contact_and_moves_no_light_press() {
         }
     }
 }
+
+/// Every LED alike at another current than in the rest frame (the user set them so, or they drifted together): a
+/// press beside the glare reads as under the nominal light. The glare clips, so the squares in it keep their light
+/// while every other square's changes; the tracker used to call a square's light changed when it departed from the
+/// rest frame's, which under such light is every square, and a press's squares (whose area a press changes beyond what
+/// their spacing explains) were then flagged as relit and left out of the contact test. A 3 N press 4-5 mm from the
+/// glare was read as two contacts, the strongest 1.6-2.2 mm off, on 19 of 20 noise seeds at 90 % and 17 of 20 at
+/// 110 % (none under the nominal light). The light is now judged against the frame's typical change. Measured at the
+/// fix (model's N): 2.22-2.23 nominal, 2.23-2.27 under these lights, 0.17-0.30 mm from the truth, one contact each.
+#[test]
+fn every_led_alike_at_another_current_leaves_a_press_beside_the_glare_as_it_is() {
+    let renderer = ValidationRenderer::new(SIZE).unwrap();
+    let reference = renderer.reference(7).unwrap();
+    let mut estimator = Estimator::new(SensorConfig::default(), Mode::Inverse, &reference).unwrap();
+    let at = [-11.0, -13.0];
+    let scene = Scene::with_contact(Contact::sphere(5.0, at, 3.0));
+    for seed in [1018, 1019] {
+        let nominal = read(&renderer, &mut estimator, &scene, NOMINAL, seed);
+        let nominal_n = nominal
+            .touch
+            .as_ref()
+            .expect("the press under nominal light is a contact")
+            .force_n;
+        for level in [50.0, 90.0, 110.0] {
+            let case = format!("every LED at {level} %, 3 N at {at:?}, seed {seed}");
+            let reading = read(&renderer, &mut estimator, &scene, [level; 4], seed);
+            let contacts = reading.contacts();
+            assert_eq!(contacts.len(), 1, "{case}: contacts {contacts:?}");
+            let c = contacts[0].centre_mm;
+            let off = (c[0] - at[0]).hypot(c[1] - at[1]);
+            assert!(off <= 0.5, "{case}: read at {c:.2?}, {off:.2} mm off");
+            let ratio = reading.force_n() / nominal_n;
+            assert!(
+                (ratio - 1.0).abs() <= 0.05,
+                "{case}: {:.2} N against {nominal_n:.2} N under the nominal light",
+                reading.force_n()
+            );
+        }
+    }
+}
