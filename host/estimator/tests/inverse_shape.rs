@@ -199,3 +199,22 @@ fn two_presses_ten_mm_apart_in_any_direction_and_force_ratio_are_two_contacts() 
         ([2.0, 8.0], 120.0, 3.5, 3.5),
     ]);
 }
+
+/// A 20 mm edge 15 deg off the grid's rows, at the centre: its cell map peaks three columns and one row apart, and the
+/// pressure midway between them was read at the nearest cell, a low one of the map's checkerboard noise, so the edge
+/// was listed as two contacts 10 mm apart (in 35 of 80 such presses of a sweep at 15 and 165 deg, against 0-4 of 40
+/// at other angles). Read between the cells (`InverseModel::join_cut_lines`' gap test), it is one contact at its
+/// middle.
+#[test]
+fn an_edge_nearly_along_a_row_is_one_contact() {
+    let mut bench = Bench::new();
+    for (k, angle) in [15.0, 165.0].into_iter().enumerate() {
+        let name = format!("3 N edge at {angle} deg");
+        let scene = Scene::with_contact(Contact::edge(20.0, 1.0, angle, [0.0, 0.0], 3.0));
+        let (reading, _) = bench.read(&name, CaseKind::Edge, scene, 5 + k as u64);
+        let listed: Vec<([f64; 2], f64)> = reading.contacts().iter().map(|c| (c.centre_mm, c.force_n)).collect();
+        assert_eq!(listed.len(), 1, "{name}: listed {listed:.2?}");
+        let at = listed[0].0;
+        assert!(at[0].hypot(at[1]) < 1.0, "{name}: read at {at:.2?}");
+    }
+}
