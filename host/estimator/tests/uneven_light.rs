@@ -24,6 +24,15 @@ fn read(renderer: &ValidationRenderer, estimator: &mut Estimator, scene: &Scene,
     estimator.estimate(&frame).unwrap()
 }
 
+/// The force of `scene` under the nominal light, which the press must be read as a contact under.
+fn nominal_force_n(renderer: &ValidationRenderer, estimator: &mut Estimator, scene: &Scene, seed: u64) -> f64 {
+    read(renderer, estimator, scene, NOMINAL, seed)
+        .touch
+        .as_ref()
+        .expect("the press under nominal light is a contact")
+        .force_n
+}
+
 #[test]
 fn one_led_side_at_150_percent_is_no_contact_and_moves_no_light_press() {
     let renderer = ValidationRenderer::new(SIZE).unwrap();
@@ -44,12 +53,7 @@ fn one_led_side_at_150_percent_is_no_contact_and_moves_no_light_press() {
     for (k, at) in [[0.0, 0.0], [6.0, -4.0]].into_iter().enumerate() {
         let scene = Scene::with_contact(Contact::sphere(5.0, at, 1.0));
         let seed = 210 + k as u64;
-        let nominal = read(&renderer, &mut estimator, &scene, NOMINAL, seed);
-        let nominal_n = nominal
-            .touch
-            .as_ref()
-            .expect("the press under nominal light is a contact")
-            .force_n;
+        let nominal_n = nominal_force_n(&renderer, &mut estimator, &scene, seed);
         for leds in ONE_SIDE_BRIGHT {
             let case = format!("LEDs {leds:?}, 1 N at {at:?}");
             let reading = read(&renderer, &mut estimator, &scene, leds, seed);
@@ -86,12 +90,7 @@ fn every_led_alike_at_another_current_leaves_a_press_beside_the_glare_as_it_is()
     let at = [-11.0, -13.0];
     let scene = Scene::with_contact(Contact::sphere(5.0, at, 3.0));
     for seed in [1018, 1019] {
-        let nominal = read(&renderer, &mut estimator, &scene, NOMINAL, seed);
-        let nominal_n = nominal
-            .touch
-            .as_ref()
-            .expect("the press under nominal light is a contact")
-            .force_n;
+        let nominal_n = nominal_force_n(&renderer, &mut estimator, &scene, seed);
         for level in [50.0, 90.0, 110.0] {
             let case = format!("every LED at {level} %, 3 N at {at:?}, seed {seed}");
             let reading = read(&renderer, &mut estimator, &scene, [level; 4], seed);
