@@ -388,6 +388,14 @@ impl FastTracker {
             width: frame.width() as usize,
             height: frame.height() as usize,
         };
+        let outlier: Vec<bool> = unexplained
+            .iter()
+            .map(|u| u.is_some_and(|u| (u - centre).abs() > limit))
+            .collect();
+        // The light matters only for an outlier with the camera still: most frames measure no square's light.
+        if moved || !outlier.contains(&true) {
+            return outlier.iter().map(|&o| o && moved).collect();
+        }
         // The light on each square's middle against the rest frame's, and the frame's typical change: a change of light
         // that is even over the pattern (all LEDs alike, the exposure) changes no square's light against the others'.
         let light_ratio: Vec<Option<f64>> = self
@@ -403,9 +411,8 @@ impl FastTracker {
             .collect();
         let mut ratios: Vec<f64> = light_ratio.iter().flatten().copied().collect();
         let typical = if ratios.is_empty() { 1.0 } else { median(&mut ratios) };
-        for ((flag, u), ratio) in relit.iter_mut().zip(&unexplained).zip(&light_ratio) {
-            *flag = u.is_some_and(|u| (u - centre).abs() > limit)
-                && (moved || ratio.is_some_and(|r| (r / typical - 1.0).abs() > LIGHT_CHANGE));
+        for ((flag, &outlier), ratio) in relit.iter_mut().zip(&outlier).zip(&light_ratio) {
+            *flag = outlier && ratio.is_some_and(|r| (r / typical - 1.0).abs() > LIGHT_CHANGE);
         }
         relit
     }
