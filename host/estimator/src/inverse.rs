@@ -2006,11 +2006,11 @@ impl InverseModel {
     /// The cell whose stage 1 pressure is the most above its noise (the per-cell test's best), if that pressure is
     /// positive. The contact test has found a load when stage 2 runs; when no cell clears [`SUPPORT_SIGMAS`] and no
     /// line is a long contact, that load is still somewhere, most likely there. Without it the line shapes alone may
-    /// pick only what the motion's fit leaves along the far borders: on the validation sensor at 640x480, a 3 N press
-    /// 1 mm inside a hole of 8 mm in the ink near the border (its own corners missing since the rest frame, the best
-    /// cell at 2.7 sigmas) was read on every noise seed tried as one contact 35 mm away, along the opposite border,
-    /// of 0.46-0.90 N (model) where the same press on an intact pad reads 2.40 N; now 2.7 mm off, 1.53 N (the press's
-    /// own corners are gone: tests/damaged_pad.rs).
+    /// pick only cells far from the load: on the validation sensor at 640x480, a 3 N press 1 mm inside a hole of 8 mm
+    /// in the ink near the border (its own corners missing since the rest frame, the best cell at 2.7 sigmas; the
+    /// line shapes lay along the left and bottom borders) was read on every noise seed tried as one contact 35 mm
+    /// away, along the opposite border, of 0.46-0.90 N (model) where the same press on an intact pad reads 2.40 N; now
+    /// 2.7 mm off, 1.53 N (the press's own corners are gone: tests/damaged_pad.rs).
     fn strongest_cell(&self, seed: &Stage1) -> Option<usize> {
         (0..self.cells.len())
             .map(|j| (j, seed.tractions[3 * j + 2] / self.pressure_noise[j]))
