@@ -57,8 +57,8 @@ fn distance(a: [f64; 2], b: [f64; 2]) -> f64 {
 }
 
 /// A 5.8 N flat punch on the pattern's corner cell, the camera rolled 1.9 deg: one contact, at the punch (within the
-/// 2 mm the outermost cells' centres read inwards: README), where a second of 3.0 N (calibrated) was listed 5 mm
-/// beyond the punch's edge, on cells whose corners were all left out of the solve.
+/// 2 mm the outermost cells' centres read inwards: README). A second of 3.0 N (calibrated) is listed 5 mm beyond the
+/// punch's edge, on cells whose corners were all left out of the solve.
 #[test]
 #[ignore = "known failure: a second contact of 1.9 N (model) 5 mm beyond the punch's edge, on cells whose corners \
             were all left out of the solve"]
@@ -82,9 +82,9 @@ fn a_corner_press_after_a_camera_move_lists_no_load_beside_it_that_no_corner_see
 }
 
 /// A 27 mm edge of 6.8 N pushed sideways, near the y axis, the camera rolled 2.2 deg, JPEG at quality 50, a 4.6 mm
-/// hole in the ink 20 mm away: every contact is on the edge, where the strongest, 2.9 N (calibrated), was listed on
-/// the pattern's corner cell 15 mm away (a random scene of a scratch sweep over 700 such scenes; the only one of them
-/// read that far off).
+/// hole in the ink 20 mm away: every contact is on the edge. The strongest, 2.9 N (calibrated), is listed on the
+/// pattern's corner cell 15 mm away (a random scene of a scratch sweep over 700 such scenes; the only one of them read
+/// that far off).
 #[test]
 #[ignore = "known failure: the strongest contact, 2.9 N calibrated, on the pattern's corner cell at (-23.4, -18.0) \
             mm, 15 mm from the edge"]
