@@ -342,7 +342,6 @@ impl FastTracker {
                     > JUMP_CELLS
             })
         });
-        let mut relit = vec![false; measured.len()];
         let slot_of = |row: i32, col: i32| -> Option<usize> {
             let index = SquareIndex {
                 row: u16::try_from(row).ok()?,
@@ -378,24 +377,24 @@ impl FastTracker {
             .collect();
         let mut values: Vec<f64> = unexplained.iter().flatten().copied().collect();
         if values.len() < MIN_NEIGHBOURS * 3 {
-            return relit;
+            return vec![false; measured.len()];
         }
         let centre = median(&mut values);
         let mut deviations: Vec<f64> = values.iter().map(|v| (v - centre).abs()).collect();
         let limit = RELIT_SIGMAS * MAD_TO_SIGMA * median(&mut deviations);
-        let px = Pixels {
-            raw: frame.as_raw(),
-            width: frame.width() as usize,
-            height: frame.height() as usize,
-        };
         let outlier: Vec<bool> = unexplained
             .iter()
             .map(|u| u.is_some_and(|u| (u - centre).abs() > limit))
             .collect();
         // The light matters only for an outlier with the camera still: most frames measure no square's light.
         if moved || !outlier.contains(&true) {
-            return outlier.iter().map(|&o| o && moved).collect();
+            return outlier;
         }
+        let px = Pixels {
+            raw: frame.as_raw(),
+            width: frame.width() as usize,
+            height: frame.height() as usize,
+        };
         // The light on each square's middle against the rest frame's, and the frame's typical change: a change of light
         // that is even over the pattern (all LEDs alike, the exposure) changes no square's light against the others'.
         let light_ratio: Vec<Option<f64>> = self
@@ -411,10 +410,11 @@ impl FastTracker {
             .collect();
         let mut ratios: Vec<f64> = light_ratio.iter().flatten().copied().collect();
         let typical = if ratios.is_empty() { 1.0 } else { median(&mut ratios) };
-        for ((flag, &outlier), ratio) in relit.iter_mut().zip(&outlier).zip(&light_ratio) {
-            *flag = outlier && ratio.is_some_and(|r| (r / typical - 1.0).abs() > LIGHT_CHANGE);
-        }
-        relit
+        outlier
+            .iter()
+            .zip(&light_ratio)
+            .map(|(&outlier, ratio)| outlier && ratio.is_some_and(|r| (r / typical - 1.0).abs() > LIGHT_CHANGE))
+            .collect()
     }
 
     /// Where each square is expected: where it was last seen, else its reference position moved by the median
