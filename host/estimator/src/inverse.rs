@@ -245,6 +245,16 @@ pub struct Region {
     pub floor_scale: f64,
 }
 
+/// One pass of stage 2: its groups of cells, their union (ascending), the motion, the contacts (strongest first)
+/// and the tractions (3 per cell, N).
+struct Solved {
+    groups: Vec<Vec<usize>>,
+    support: Vec<usize>,
+    motion: [f64; MOTION_PARAMETERS],
+    regions: Vec<Region>,
+    tractions: Vec<f64>,
+}
+
 /// Stage 2's result.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Stage2 {
@@ -1033,21 +1043,34 @@ impl InverseModel {
         // whose load no single cell carries above its noise) also those of the line shapes. Picked everywhere, the
         // line shapes also find lines in the smooth errors a moved camera leaves (tried: force over the pad with the
         // camera moved 0.57 -> 1.22 N RMS on the quick set). When no cell clears the per-cell test at all, its
-        // strongest cell joins the line shapes' (see `strongest_cell`).
-        let mut solved = None;
+        // strongest cell joins the line shapes' (see `strongest_cell`). When they hold contacts, only the line
+        // shapes that carry the strongest further are added (see `lines_extending`).
+        let mut solved: Option<Solved> = None;
         // The cells of contacts split in two (see `split_pair`).
         let mut halved: Vec<usize> = Vec::new();
         for pass in 0..2 {
-            let lines = if pass == 0 {
-                Vec::new()
-            } else {
-                let mut lines = self.line_loads(&self.matched(d, valid), noise_mm);
-                if solved.is_none() {
-                    if let Some(strongest) = self.strongest_cell(seed) {
-                        lines[strongest] = true;
+            let extending = solved.as_ref().is_some_and(|found| !found.regions.is_empty());
+            let lines = match &solved {
+                _ if pass == 0 => Vec::new(),
+                Some(found) if extending => self.lines_extending(
+                    &found.regions,
+                    Observed {
+                        d,
+                        valid,
+                        tractions: &found.tractions,
+                    },
+                    &found.support,
+                    noise_mm,
+                ),
+                _ => {
+                    let mut lines = self.line_loads(&self.matched(d, valid), noise_mm);
+                    if solved.is_none() {
+                        if let Some(strongest) = self.strongest_cell(seed) {
+                            lines[strongest] = true;
+                        }
                     }
+                    lines
                 }
-                lines
             };
             if solved.is_some() && !lines.iter().any(|&l| l) {
                 break;
@@ -1080,26 +1103,39 @@ impl InverseModel {
                 valid,
                 tractions: &tractions,
             };
-            halved.clear();
+            let mut halves_of: Vec<usize> = Vec::new();
             let mut regions: Vec<Region> = regions
                 .into_iter()
                 .flat_map(|r| match self.split_pair(&r, observed, noise_mm, min_force_n) {
                     Some(halves) => {
-                        halved.extend(r.cells.iter().map(|c| c.0));
+                        halves_of.extend(r.cells.iter().map(|c| c.0));
                         halves.to_vec()
                     }
                     None => vec![r],
                 })
                 .collect();
-            self.join_cut_lines(&mut regions, &groups, &halved, observed, noise_mm, min_force_n);
+            self.join_cut_lines(&mut regions, &groups, &halves_of, observed, noise_mm, min_force_n);
             regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
-            let found = !regions.is_empty();
-            solved = Some((groups, support, motion, regions, tractions));
-            if found {
+            if extending && regions.is_empty() {
                 break;
             }
+            halved = halves_of;
+            solved = Some(Solved {
+                groups,
+                support,
+                motion,
+                regions,
+                tractions,
+            });
         }
-        let Some((groups, support, motion, regions, solved_tractions)) = solved else {
+        let Some(Solved {
+            groups,
+            support,
+            motion,
+            regions,
+            tractions: solved_tractions,
+        }) = solved
+        else {
             return empty;
         };
         // The strongest contact's shape, from the node solve: its region there that holds the contact's peak cell.
@@ -1979,6 +2015,38 @@ impl InverseModel {
     /// noise alone (stage 1's per-cell test is the matched filter of a single cell, blurred by the prior); a round
     /// one is best explained by a square, so this leaves its cells to the per-cell test.
     fn line_loads(&self, matched: &[f64], noise_mm: f64) -> Vec<bool> {
+        self.line_loads_beyond(matched, noise_mm, None)
+    }
+
+    /// The cells, none of `contacts`' (stage 2's, strongest first, their tractions in `observed`, solved on
+    /// `support`), by which line loads carry the strongest further: those of the line shapes through one of its
+    /// cells that [`Self::line_loads`] picks, in the displacements with the support's shear taken off (the shapes
+    /// are pressure), and that explain them better than the contact's own pressure does. A long light contact's
+    /// stronger part clears the per-cell test and the rest of it does not; on the validation sensor such edges read
+    /// a third to a half of their force (20 mm at 1 N, 30 mm at 2 N) at a part of the line 3-10 mm from its centre,
+    /// often with no direction. A round contact's own pressure explains it better than a line through it; through
+    /// the weaker contacts, lines grew phantoms over lost ink (tried).
+    fn lines_extending(&self, contacts: &[Region], observed: Observed, support: &[usize], noise_mm: f64) -> Vec<bool> {
+        let Some(strongest) = contacts.first() else {
+            return vec![false; self.cells.len()];
+        };
+        let matched = self.matched_without(observed, support);
+        let (force, noise_per_mm) = self.matched_fit(&matched, &strongest.cells);
+        let mut through = vec![false; self.cells.len()];
+        for (j, _) in &strongest.cells {
+            through[*j] = true;
+        }
+        let significance = force / (noise_mm * noise_per_mm);
+        let mut lines = self.line_loads_beyond(&matched, noise_mm, Some((&through, significance)));
+        for (j, _) in contacts.iter().flat_map(|c| &c.cells) {
+            lines[*j] = false;
+        }
+        lines
+    }
+
+    /// [`Self::line_loads`], of only the line shapes through a cell of `beyond.0` (per cell) whose load is more
+    /// significant than `beyond.1` sigmas when given.
+    fn line_loads_beyond(&self, matched: &[f64], noise_mm: f64, beyond: Option<(&[bool], f64)>) -> Vec<bool> {
         let cells = self.cells.len();
         let mut picked = vec![false; cells];
         if !(noise_mm > 0.0) {
@@ -1994,7 +2062,8 @@ impl InverseModel {
         }
         for line in &self.line_shapes {
             let zl = z(line);
-            if zl > self.line_sigmas && line.0.iter().all(|&j| zl > best_block[j]) {
+            let carries = beyond.is_none_or(|(through, least)| zl > least && line.0.iter().any(|&j| through[j]));
+            if carries && zl > self.line_sigmas && line.0.iter().all(|&j| zl > best_block[j]) {
                 for &j in &line.0 {
                     picked[j] = true;
                 }
