@@ -42,7 +42,9 @@
 //! the line shapes a matched filter finds significant and better explained as a line than as a square patch; there
 //! the fragments a line's pressure breaks into are one contact unless the dip between them is significant, and a
 //! group of cells is judged against the floor as a whole, by its unbiased least-squares force (see
-//! `InverseModel::contacts`). Two regions side by side are one long contact when a straight line load explains them
+//! `InverseModel::contacts`). When they do hold contacts, a light long one may have only its stronger part among
+//! them: stage 2 is solved again with the cells of the line shapes through the strongest contact that explain the
+//! displacements better than its own pressure does (`InverseModel::lines_extending`). Two regions side by side are one long contact when a straight line load explains them
 //! better than two round loads by the test's margin and the pressure between them is more than two round presses
 //! leave there (`InverseModel::join_cut_lines`: the cell map cuts some 20 mm edges of the validation pad into lumps
 //! about 10 mm apart). The edge direction (second
@@ -2023,8 +2025,8 @@ impl InverseModel {
     /// cells that [`Self::line_loads`] picks, in the displacements with the support's shear taken off (the shapes
     /// are pressure), and that explain them better than the contact's own pressure does. A long light contact's
     /// stronger part clears the per-cell test and the rest of it does not; on the validation sensor such edges read
-    /// a third to a half of their force (20 mm at 1 N, 30 mm at 2 N) at a part of the line 3-10 mm from its centre,
-    /// often with no direction. A round contact's own pressure explains it better than a line through it; through
+    /// 0.3-0.7 of their force (20 mm at 1 N, 30 mm at 2 N) at a part of the line 2-10 mm from its centre
+    /// (tests/light_edges.rs). A round contact's own pressure explains it better than a line through it; through
     /// the weaker contacts, lines grew phantoms over lost ink (tried).
     fn lines_extending(&self, contacts: &[Region], observed: Observed, support: &[usize], noise_mm: f64) -> Vec<bool> {
         let Some(strongest) = contacts.first() else {
