@@ -23,10 +23,10 @@
 //! motion does not explain, the smooth ones from lighting and JPEG included, which the traction fit's own residuals
 //! cannot show (it explains them away); a contact moves a minority of the corners, so the median corner stays
 //! noise. A load heavy enough to move most of the corners breaks that (its far field is no noise): the scatter is then
-//! measured again on the corners away from the cells stage 1 finds loaded at it, or, when none clears it, from the
-//! cells of the line shapes that explain a load better than a square patch (a long edge's, if the corners away from
-//! them scatter less than half as much); when neither finds a load and the test finds no contact, at the scatter
-//! about the motion and one compact load (which explains such a load's far field). A press pushed sideways
+//! measured again on the corners away from the cells stage 1 finds loaded at it. When none clears it but the test
+//! finds a contact, away from the cells of the line shapes that explain a load better than a square patch (a long
+//! edge's), if the corners there scatter less than half as much; when none clears it and the test finds no contact,
+//! at the scatter about the motion and one compact load (which explains such a load's far field). A press pushed sideways
 //! moves even the far corners; when that compact load explains most of the scatter the test used, the test is taken
 //! at the scatter it leaves (a rest frame's errors, spread over the pad, it barely explains). The corners that a
 //! change of light alone moves (glare: found once per rest frame, see the estimator) are
