@@ -23,12 +23,12 @@
 //! motion does not explain, the smooth ones from lighting and JPEG included, which the traction fit's own residuals
 //! cannot show (it explains them away); a contact moves a minority of the corners, so the median corner stays
 //! noise. A load heavy enough to move most of the corners breaks that (its far field is no noise): the scatter is then
-//! measured again on the corners away from the cells stage 1 finds loaded at it. When none clears it but the test
-//! finds a contact, away from the cells of the line shapes that explain a load better than a square patch (a long
-//! edge's), if the corners there scatter less than half as much; when none clears it and the test finds no contact,
-//! at the scatter about the motion and one compact load (which explains such a load's far field). A press pushed sideways
-//! moves even the far corners; when that compact load explains most of the scatter the test used, the test is taken
-//! at the scatter it leaves (a rest frame's errors, spread over the pad, it barely explains). The corners that a
+//! measured again on the corners away from the cells stage 1 finds loaded at it. When none clears it but the test finds
+//! a contact, away from the cells of the line shapes that explain a load better than a square patch (a long edge's), if
+//! the corners there scatter less than half as much; when none clears it and the test finds no contact, at the scatter
+//! about the motion and one compact load (which explains such a load's far field). A press pushed sideways moves even
+//! the far corners; when that compact load explains most of the scatter the test used, the test is taken at the scatter
+//! it leaves (a rest frame's errors, spread over the pad, it barely explains). The corners that a
 //! change of light alone moves (glare: found once per rest frame, see the estimator) are
 //! left out of the test. The detection floor in N follows from the same threshold: the force of a press at the
 //! pad's centre whose expected E equals it.
@@ -44,12 +44,12 @@
 //! the line shapes a matched filter finds significant and better explained as a line than as a square patch; there
 //! the fragments a line's pressure breaks into are one contact unless the dip between them is significant, and a
 //! group of cells is judged against the floor as a whole, by its unbiased least-squares force (see
-//! `InverseModel::contacts`). When they do hold contacts, a light long one may have only its stronger part among
-//! them: stage 2 is solved again with the cells of the line shapes through the strongest contact that explain the
-//! displacements better than its own pressure does (`InverseModel::lines_extending`). Two regions side by side are one long contact when a straight line load explains them
-//! better than two round loads by the test's margin and the pressure between them is more than two round presses
-//! leave there (`InverseModel::join_cut_lines`: the cell map cuts some 20 mm edges of the validation pad into lumps
-//! about 10 mm apart). The edge direction (second
+//! `InverseModel::contacts`). When they do hold contacts, a light long one may have only its stronger part among them:
+//! stage 2 is solved again with the cells of the line shapes through the strongest contact that explain the
+//! displacements better than its own pressure does (`InverseModel::lines_extending`). Two regions side by side are one
+//! long contact when a straight line load explains them better than two round loads by the test's margin and the
+//! pressure between them is more than two round presses leave there (`InverseModel::join_cut_lines`: the cell map cuts
+//! some 20 mm edges of the validation pad into lumps about 10 mm apart). The edge direction (second
 //! moments of the pressure) comes from a second solve with the pressure's unknowns on the grid's nodes instead of its
 //! cells, which has no checkerboard noise (see [`PressureBasis`]).
 
@@ -892,13 +892,13 @@ impl InverseModel {
         if near.is_empty() && found_at_scatter {
             // A long load spreads over a line of cells, none of which clears that estimate, and moves most of the
             // corners: a 30 mm edge on the validation sensor raised the median corner's scatter with its force (4.8,
-            // 9.3 and 13.6 um at 1, 2 and 3 N, about 1.5 um still), so the test's statistic barely grew with it
-            // (some edges of 1 N were missed) and the reported noise and detection floor did. When the test finds a contact all the same, the
-            // cells of the line shapes that explain a load better than any square patch (see `line_loads`) stand
-            // for its cells if the corners away from them scatter less by the same margin as the compact load's
-            // below. Only then: the line shapes also pick cells on a rest frame, by chance (leaving their corners
-            // out lowered a still one's scatter 1.47 -> 1.27 um) or along the smooth errors of a camera shift (a
-            // real pair's rest frame shifted by (5, -3) px: 4.44 -> 2.24 um, a contact at 1277 against 457).
+            // 9.3 and 13.6 um at 1, 2 and 3 N, about 1.5 um still), so the test's statistic barely grew with it (some
+            // edges of 1 N were missed) and the reported noise and detection floor did. When the test finds a contact
+            // all the same, the cells of the line shapes that explain a load better than any square patch (see
+            // `line_loads`) stand for its cells if the corners away from them scatter less by the same margin as the
+            // compact load's below. Only then: the line shapes also pick cells on a rest frame, by chance (leaving
+            // their corners out lowered a still one's scatter 1.47 -> 1.27 um) or along the smooth errors of a camera
+            // shift (a real pair's rest frame shifted by (5, -3) px: 4.44 -> 2.24 um, a contact at 1277 against 457).
             let lines = self.line_loads(&self.matched(d, valid), scatter);
             if lines.iter().any(|&l| l) {
                 let along = self.near_loads_and(stage, scatter, MEASURED_NOISE_REACH_CELLS, &lines);
