@@ -16,6 +16,15 @@ fn render(renderer: &Renderer, scene: &Scene, seed: u64) -> RgbImage {
         .0
 }
 
+/// The validation sensor at 1024x768 and the inverse estimator on its rest frame.
+fn validation_sensor() -> (Renderer, Estimator) {
+    let renderer = Renderer::new(SensorModel::validation(1024, 768)).expect("the validation sensor model is valid");
+    let reference = render(&renderer, &Scene::rest(), 1);
+    let estimator =
+        Estimator::new(SensorConfig::default(), Mode::Inverse, &reference).expect("the rest frame shows the pattern");
+    (renderer, estimator)
+}
+
 fn read(estimator: &mut Estimator, frame: &RgbImage) -> Reading {
     estimator.estimate(frame).expect("the frame is measurable")
 }
@@ -32,10 +41,7 @@ const EDGES: [(f64, f64, [f64; 2], f64); 3] = [
 
 #[test]
 fn a_light_long_edge_is_one_contact_carrying_the_whole_edge() {
-    let renderer = Renderer::new(SensorModel::validation(1024, 768)).expect("the validation sensor model is valid");
-    let reference = render(&renderer, &Scene::rest(), 1);
-    let mut estimator =
-        Estimator::new(SensorConfig::default(), Mode::Inverse, &reference).expect("the rest frame shows the pattern");
+    let (renderer, mut estimator) = validation_sensor();
     for (k, (length, angle, at, force)) in EDGES.into_iter().enumerate() {
         let seed = 20 + 2 * k as u64;
         let heavy = read(
@@ -90,10 +96,7 @@ fn a_light_long_edge_is_one_contact_carrying_the_whole_edge() {
 /// from the cells of the line shapes that explain a load better than a square patch, if that leaves much less of it.
 #[test]
 fn a_long_edge_does_not_raise_the_noise_its_contact_is_tested_at() {
-    let renderer = Renderer::new(SensorModel::validation(1024, 768)).expect("the validation sensor model is valid");
-    let reference = render(&renderer, &Scene::rest(), 1);
-    let mut estimator =
-        Estimator::new(SensorConfig::default(), Mode::Inverse, &reference).expect("the rest frame shows the pattern");
+    let (renderer, mut estimator) = validation_sensor();
     let rest = read(&mut estimator, &render(&renderer, &Scene::rest(), 20));
     assert!(!rest.is_contact(), "a rest frame: {:?}", rest.contacts());
     let still = rest.test.noise_mm;
