@@ -464,6 +464,20 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
             )
         },
     );
+    row(
+        "pushes' normal force RMS, N (without the push's normal share fitted on the calibration pushes)".into(),
+        "",
+        &|m| {
+            (
+                format!(
+                    "{} ({})",
+                    opt(m.push_force_rms_n, 2),
+                    opt(m.push_force_unshared_rms_n, 2)
+                ),
+                None,
+            )
+        },
+    );
     row("torque RMS, N mm (the tangential scale)".into(), "", &|m| {
         (opt(m.torque_rms_nmm, 2), None)
     });

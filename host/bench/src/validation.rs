@@ -12,6 +12,7 @@ use nusense_estimator::calibration::modulus::{fit_tangential_scale, ModelForceSa
 use nusense_estimator::calibration::push_centre::{
     fit_push_centre_shift, most_shift_mm, shifted_centre, PushCentreSample,
 };
+use nusense_estimator::calibration::push_normal::{corrected_normal_n, fit_push_normal_share, PushNormalSample};
 use nusense_estimator::calibration::{fit_force_line, CalibrationSample, FitOptions};
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use nusense_sim::validation::{CaseKind, CaseTruth, Profile, ValidationRenderer, ValidationSet, FLOOR_FORCES_N};
@@ -45,6 +46,7 @@ pub const TWO_CONTACT_FORCE_TOLERANCE: f64 = 0.2;
 struct ObservedContact {
     centre_mm: Option<[f64; 2]>,
     force_n: Option<f64>,
+    force_vector_n: Option<[f64; 3]>,
 }
 
 #[derive(Clone, Debug, Default, Deserialize)]
@@ -149,6 +151,10 @@ pub struct ModeFigures {
     /// pushes and without it (misses left out: the direction figures count them).
     pub push_localisation_rmse_mm: Option<f64>,
     pub push_localisation_unshifted_rmse_mm: Option<f64>,
+    /// The pushes' normal force against the truth, RMS N (a miss reads 0 N), with the push's normal share fitted on
+    /// the calibration pushes and without it.
+    pub push_force_rms_n: Option<f64>,
+    pub push_force_unshared_rms_n: Option<f64>,
     pub torque_rms_nmm: Option<f64>,
     pub camera_rotation_rms_deg: Option<f64>,
     pub camera_rotation_max_deg: Option<f64>,
@@ -384,12 +390,14 @@ fn strongest_centre(truth: &CaseTruth) -> Option<[f64; 2]> {
 enum ForceCalibration {
     /// The mode reports newtons: one scale factor on fz (least squares through the origin, on the calibration
     /// presses), one on fx, fy and the torque (`nusense calibrate`'s tangential scale, on the calibration pushes;
-    /// the normal one when the set has none), and how far a push's centre reads behind it
-    /// (`elastic.push_centre_shift_mm`, on the calibration pushes, whose places the set knows).
+    /// the normal one when the set has none), how far a push's centre reads behind it
+    /// (`elastic.push_centre_shift_mm`, on the calibration pushes, whose places the set knows) and how much of a push
+    /// its normal force reads (`elastic.push_normal_share`, on the calibration pushes against the normal scale).
     Scale {
         normal: f64,
         tangential: Option<f64>,
         push_shift_mm: Option<f64>,
+        push_normal_share: Option<f64>,
     },
     /// The mode reports gamma: F = a gamma + b, fitted robustly as `nusense calibrate` does.
     GammaLine { a: f64, b: f64 },
@@ -438,10 +446,26 @@ impl ForceCalibration {
                 })
                 .collect();
             let push_shift_mm = fit_push_centre_shift(&centres).ok();
-            return (sxx > 0.0).then(|| Self::Scale {
-                normal: sxy / sxx,
+            if !(sxx > 0.0) {
+                return None;
+            }
+            let normal = sxy / sxx;
+            let loads: Vec<PushNormalSample> = scored
+                .iter()
+                .filter(|s| s.kind == CaseKind::CalibrationPush)
+                .filter_map(|s| {
+                    Some(PushNormalSample {
+                        model_force_vector_n: s.observed.as_ref().filter(|o| o.contact)?.force_vector_n?,
+                        reference_normal_n: s.truth.frame.force_vector_n[2],
+                    })
+                })
+                .collect();
+            let push_normal_share = fit_push_normal_share(&loads, normal).ok();
+            return Some(Self::Scale {
+                normal,
                 tangential,
                 push_shift_mm,
+                push_normal_share,
             });
         }
         let samples: Vec<CalibrationSample> = calibration
@@ -463,6 +487,7 @@ impl ForceCalibration {
                 normal,
                 tangential,
                 push_shift_mm,
+                push_normal_share,
             } => {
                 let mut name = format!("scale {normal:.3}");
                 if let Some(t) = tangential {
@@ -471,22 +496,59 @@ impl ForceCalibration {
                 if let Some(k) = push_shift_mm {
                     name += &format!(", push shift {k:.2} mm");
                 }
+                if let Some(c) = push_normal_share {
+                    name += &format!(", push normal share {c:.3}");
+                }
                 name
             }
             Self::GammaLine { a, b } => format!("gamma line {a:.2} g {b:+.2}"),
         }
     }
 
-    /// The calibrated normal force of a reading; no contact reads 0 N, and a force is never negative.
+    /// The calibrated normal force of a reading; no contact reads 0 N, and a force is never negative. With the
+    /// push's normal share, each listed contact's own push is taken off its own load, as the estimator does with
+    /// `elastic.push_normal_share`.
     fn force_n(&self, o: &Observed) -> Option<f64> {
+        self.force_with_share_n(o, self.push_normal_share())
+    }
+
+    /// [`Self::force_n`] with the push's normal share `share` (0: the solve's normal force).
+    fn force_with_share_n(&self, o: &Observed, share: f64) -> Option<f64> {
         if !o.contact {
             return Some(0.0);
         }
         let f = match self {
+            Self::Scale { normal, .. } if share != 0.0 => {
+                let per_contact: Option<f64> = o.contacts.as_ref().filter(|c| !c.is_empty()).and_then(|c| {
+                    c.iter()
+                        .map(|c| Some(corrected_normal_n(c.force_vector_n?, share)))
+                        .sum()
+                });
+                per_contact.unwrap_or(corrected_normal_n(o.force_vector_n?, share)) * normal
+            }
             Self::Scale { normal, .. } => o.force_vector_n?[2] * normal,
             Self::GammaLine { a, b } => a * o.gamma? + b,
         };
         Some(f.max(0.0))
+    }
+
+    /// The calibrated normal force of one listed contact (its own push's share taken off when it has a force
+    /// vector).
+    fn contact_force_n(&self, c: &ObservedContact) -> Option<f64> {
+        let share = self.push_normal_share();
+        let own = match c.force_vector_n {
+            Some(vector) if share != 0.0 => corrected_normal_n(vector, share),
+            _ => c.force_n?,
+        };
+        Some(own * self.scale())
+    }
+
+    /// N of normal force per N of the model's push, 0 where none was fitted.
+    fn push_normal_share(&self) -> f64 {
+        match self {
+            Self::Scale { push_normal_share, .. } => push_normal_share.unwrap_or(0.0),
+            Self::GammaLine { .. } => 0.0,
+        }
     }
 
     fn scale(&self) -> f64 {
@@ -597,7 +659,6 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
         .iter()
         .any(|s| s.observed.as_ref().is_some_and(|o| o.contacts.is_some()));
     let two_contacts_ok = lists_contacts.then(|| {
-        let scale = calibration.as_ref().map_or(1.0, ForceCalibration::scale);
         two.iter()
             .filter(|s| {
                 let Some(listed) = s.observed.as_ref().and_then(|o| o.contacts.as_ref()) else {
@@ -614,9 +675,12 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
                     match best {
                         Some((i, d)) if d <= TWO_CONTACT_MATCH_MM => {
                             used[i] = true;
-                            listed[i].force_n.is_some_and(|f| {
-                                (f * scale - truth.normal_force_n).abs()
-                                    <= TWO_CONTACT_FORCE_TOLERANCE * truth.normal_force_n
+                            let force = match &calibration {
+                                Some(calibration) => calibration.contact_force_n(&listed[i]),
+                                None => listed[i].force_n,
+                            };
+                            force.is_some_and(|f| {
+                                (f - truth.normal_force_n).abs() <= TWO_CONTACT_FORCE_TOLERANCE * truth.normal_force_n
                             })
                         }
                         _ => false,
@@ -703,6 +767,20 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
         })
         .unzip();
 
+    let push_force_errors = |share: Option<f64>| -> Option<f64> {
+        let calibration = calibration.as_ref()?;
+        let errors: Vec<f64> = of(CaseKind::Tangential)
+            .map(|s| {
+                let found = s.observed.as_ref().and_then(|o| match share {
+                    Some(share) => calibration.force_with_share_n(o, share),
+                    None => calibration.force_n(o),
+                });
+                found.unwrap_or(0.0) - s.truth.frame.force_vector_n[2]
+            })
+            .collect();
+        rms(&errors)
+    };
+
     let torque_errors: Vec<f64> = of(CaseKind::Twist)
         .filter_map(|s| {
             let scale = calibration.as_ref().map_or(1.0, ForceCalibration::tangential_scale);
@@ -761,6 +839,8 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
         tangential_force_rms_n: rms(&tangential_force_errors),
         push_localisation_rmse_mm: rms(&push_errors),
         push_localisation_unshifted_rmse_mm: rms(&push_unshifted_errors),
+        push_force_rms_n: push_force_errors(None),
+        push_force_unshared_rms_n: push_force_errors(Some(0.0)),
         tangential_force_ratio: quantile(&tangential_force_ratios, 0.5),
         torque_rms_nmm: rms(&torque_errors),
         camera_rotation_rms_deg: rms(&rotation_errors),
@@ -866,9 +946,9 @@ mod tests {
     #[test]
     fn the_figures_are_the_known_answers_of_a_scripted_mode() {
         use serde_json::json;
-        // A mode that reports twice the true force in its own units and four times its tangential force, misses one
-        // press, places another 0.3 mm off, detects from 0.5 N, lists two contacts, turns pushes by 10 degrees and
-        // reads the camera's roll 0.1 off.
+        // A mode that reports twice the true force in its own units and four times its tangential force, adds a
+        // tenth of its push to its normal force, misses one press, places another 0.3 mm off, detects from 0.5 N,
+        // lists two contacts, turns pushes by 10 degrees and reads the camera's roll 0.1 off.
         let press = |at: [f64; 2], f: f64| truth(&[(at, [0.0, 0.0, f])], None);
         let reading =
             |at: [f64; 2], fz: f64| json!({"contact": true, "contact_mm": at, "force_vector_n": [0.0, 0.0, fz]});
@@ -881,11 +961,12 @@ mod tests {
             ));
         }
         for (t, f) in [(1.0, 3.0), (2.0, 5.0), (0.8, 4.0)] {
+            let fz = 2.0 * f + 0.1 * 4.0 * t;
             scored.push(case(
                 CaseKind::CalibrationPush,
                 truth(&[([0.0, 0.0], [0.0, t, f])], None),
                 // Read behind the push by 1.5 mm per unit of the model's push over load.
-                Some(json!({"contact": true, "contact_mm": [0.0, -1.5 * 2.0 * t / f], "force_vector_n": [0.0, 4.0 * t, 2.0 * f]})),
+                Some(json!({"contact": true, "contact_mm": [0.0, -1.5 * 4.0 * t / fz], "force_vector_n": [0.0, 4.0 * t, fz]})),
             ));
         }
         scored.push(case(
@@ -943,7 +1024,11 @@ mod tests {
         scored.push(case(CaseKind::Edge, edge.clone(), Some(one)));
         scored.push(case(CaseKind::Edge, edge, Some(fragments)));
         let push = truth(&[([0.0, 0.0], [1.0, 0.0, 4.0])], None);
-        let turned = [4.0 * 10f64.to_radians().cos(), 4.0 * 10f64.to_radians().sin(), 8.0];
+        let turned = [
+            4.0 * 10f64.to_radians().cos(),
+            4.0 * 10f64.to_radians().sin(),
+            8.0 + 0.1 * 4.0,
+        ];
         // Read behind the push as the calibration pushes are, and 0.2 mm across it.
         let behind = [-1.5 * turned[0] / turned[2], -1.5 * turned[1] / turned[2] + 0.2];
         scored.push(case(
@@ -955,7 +1040,7 @@ mod tests {
         let f = score(Mode::Fast, &scored);
         assert_eq!(
             f.calibration.as_deref(),
-            Some("scale 0.500, tangential 0.250, push shift 1.50 mm")
+            Some("scale 0.500, tangential 0.250, push shift 1.50 mm, push normal share 0.100")
         );
         assert!((f.localisation_rmse_mm.unwrap() - 0.3).abs() < 1e-12);
         assert_eq!((f.localisation_misses, f.localisation_frames), (1, 2));
@@ -978,6 +1063,9 @@ mod tests {
         // The push shift takes the push back to its place but for the 0.2 mm across it.
         assert!((f.push_localisation_rmse_mm.unwrap() - 0.2).abs() < 1e-12);
         assert!((f.push_localisation_unshifted_rmse_mm.unwrap() - behind[0].hypot(behind[1])).abs() < 1e-12);
+        // The share takes the push's 0.4 model N (0.2 N) back off its normal force.
+        assert!(f.push_force_rms_n.unwrap().abs() < 1e-12, "{:?}", f.push_force_rms_n);
+        assert!((f.push_force_unshared_rms_n.unwrap() - 0.2).abs() < 1e-12);
         assert!((f.camera_rotation_rms_deg.unwrap() - 0.1).abs() < 1e-9);
         assert_eq!(f.refused, 0);
         assert_eq!(f.median_ms, Some(1.0));

@@ -16,6 +16,7 @@ use thiserror::Error;
 
 pub mod modulus;
 pub mod push_centre;
+pub mod push_normal;
 
 /// One calibration point: the sensor's gamma and the reference force in newtons.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -44,8 +45,13 @@ pub enum CalibrationError {
         forces: usize,
         max_skew_s: f64,
     },
-    #[error("the push centre shift needs at least {needed} pushes of a tenth of their load or more, got {found}")]
+    #[error(
+        "the push centre shift and the push's normal share need at least {needed} pushes of a tenth of their load or \
+         more, got {found}"
+    )]
     TooFewPushes { found: usize, needed: usize },
+    #[error("the normal force scale {0} must be finite and positive")]
+    BadScale(f64),
     #[error("the sensor config: {0}")]
     Config(String),
 }

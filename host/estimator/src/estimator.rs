@@ -582,12 +582,19 @@ impl Estimator {
             return (None, Some(zero_map));
         }
         let most_mm = crate::calibration::push_centre::most_shift_mm(&self.config.pad);
+        // The contacts' centre is weighed by the pressure the solve found, which the push's share leaves in place.
+        let pressure_n: Vec<f64> = kept.iter().map(|r| r.force_vector_n[2]).collect();
         for region in &mut kept {
             region.centre_mm = crate::calibration::push_centre::shifted_centre(
                 region.centre_mm,
                 region.force_vector_n,
                 self.config.elastic.push_centre_shift_mm,
                 most_mm,
+            );
+            // After the shift: both are fitted on the model's force vector as the solve gives it.
+            region.force_vector_n[2] = crate::calibration::push_normal::corrected_normal_n(
+                region.force_vector_n,
+                self.config.elastic.push_normal_share,
             );
         }
         let contacts: Vec<ContactRegion> = kept.iter().filter_map(|r| self.region_at(r)).collect();
@@ -596,10 +603,14 @@ impl Estimator {
         }
         let shear = self.config.elastic.tangential_force_scale;
         let force: [f64; 3] = std::array::from_fn(|k| kept.iter().map(|r| r.force_vector_n[k]).sum());
-        let centre = [
-            kept.iter().map(|r| r.force_vector_n[2] * r.centre_mm[0]).sum::<f64>() / force[2],
-            kept.iter().map(|r| r.force_vector_n[2] * r.centre_mm[1]).sum::<f64>() / force[2],
-        ];
+        let total_pressure_n: f64 = pressure_n.iter().sum();
+        let centre: [f64; 2] = std::array::from_fn(|axis| {
+            kept.iter()
+                .zip(&pressure_n)
+                .map(|(r, p)| p * r.centre_mm[axis])
+                .sum::<f64>()
+                / total_pressure_n
+        });
         let torque = shear
             * kept
                 .iter()
