@@ -286,13 +286,13 @@ pub struct ElasticConfig {
     /// that says where the probe touched. Default 0: centres as the pressure puts them. At most one
     /// cell pitch of shift is applied.
     pub push_centre_shift_mm: f64,
-    /// How much of its push each contact's normal force reads as pressure: its normal force is reduced by this times
-    /// the size of its push (the model's (fx, fy), before `tangential_force_scale`), never below 0. The pressure that
-    /// moves a pushed contact's centre behind the push (`push_centre_shift_mm`) also adds to its load: on the
-    /// validation sensor 0.11-0.12 N per N of the model's push, where the quick set's pushes read their normal force
-    /// 1.06 times the truth on average and up to 1.21 times. It is the pad's and must be fitted on pushes whose normal
-    /// force is known: the validation bench fits it on its calibration pushes, `nusense calibrate` from a force/torque
-    /// log with pushes in it. Default 0: the normal force as the pressure puts it.
+    /// How much of its push each contact's normal force reads as pressure: its normal force fz is reduced by this
+    /// times (fx^2 + fy^2) / fz (the model's force vector, fx, fy before `tangential_force_scale`), never below 0. The
+    /// pressure that moves a pushed contact's centre behind the push (`push_centre_shift_mm`) also adds to its load,
+    /// as the square of the push over the load: on the validation sensor 5, 10, 17 and 27 % of the load at pushes of
+    /// 0.2 to 0.5 of it (`calibration::push_normal`). It is the pad's and must be fitted on pushes whose normal force
+    /// is known: the validation bench fits it on its calibration pushes, `nusense calibrate` from a force/torque log
+    /// with pushes in it. Default 0: the normal force as the pressure puts it.
     pub push_normal_share: f64,
 }
 
