@@ -320,8 +320,8 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
          sensor (`nusense_sim::validation`, docs/validation.md: equisolid decentred lens, tilted pose, layered pad \
          seen through plate and gel, glare, vignetting, shot noise, JPEG 85, LED drift); sizes {}. One force \
          calibration per mode, fitted on the calibration presses and pushes only (N modes: one scale on the normal \
-         force; one on the tangential force and torque, and the pushes' centre shift, both fitted on the pushes; gamma \
-         modes: F = a·gamma + b, which \
+         force; one on the tangential force and torque, the pushes' centre shift and what a push adds to the normal \
+         force, all three fitted on the pushes; gamma modes: F = a·gamma + b, which \
          their estimators are built with, as `nusense calibrate` leaves a sensor's config), applied everywhere; a \
          missed press reads 0 N. Speed: median/p99 of `estimate` on the {main} frames, one thread, speed-up against `{}` in this run. Floor: smallest force from which every level \
          is detected in >= 90 % of presses. \"–\": the mode does not report what the figure needs; ✗: the issue's \

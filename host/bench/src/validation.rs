@@ -391,8 +391,8 @@ enum ForceCalibration {
     /// The mode reports newtons: one scale factor on fz (least squares through the origin, on the calibration
     /// presses), one on fx, fy and the torque (`nusense calibrate`'s tangential scale, on the calibration pushes;
     /// the normal one when the set has none), how far a push's centre reads behind it
-    /// (`elastic.push_centre_shift_mm`, on the calibration pushes, whose places the set knows) and how much of a push
-    /// its normal force reads (`elastic.push_normal_share`, on the calibration pushes against the normal scale).
+    /// (`elastic.push_centre_shift_mm`, on the calibration pushes, whose places the set knows) and what a push adds to
+    /// its normal force (`elastic.push_normal_share`, on the calibration pushes against the normal scale).
     Scale {
         normal: f64,
         tangential: Option<f64>,
@@ -506,8 +506,8 @@ impl ForceCalibration {
     }
 
     /// The calibrated normal force of a reading; no contact reads 0 N, and a force is never negative. With the
-    /// push's normal share, each listed contact's own push is taken off its own load, as the estimator does with
-    /// `elastic.push_normal_share`.
+    /// push's normal share, what each listed contact's own push adds is taken off its own load, as the estimator does
+    /// with `elastic.push_normal_share`.
     fn force_n(&self, o: &Observed) -> Option<f64> {
         self.force_with_share_n(o, self.push_normal_share())
     }
@@ -524,7 +524,11 @@ impl ForceCalibration {
                         .map(|c| Some(corrected_normal_n(c.force_vector_n?, share)))
                         .sum()
                 });
-                per_contact.unwrap_or(corrected_normal_n(o.force_vector_n?, share)) * normal
+                let load = match per_contact {
+                    Some(load) => load,
+                    None => corrected_normal_n(o.force_vector_n?, share),
+                };
+                load * normal
             }
             Self::Scale { normal, .. } => o.force_vector_n?[2] * normal,
             Self::GammaLine { a, b } => a * o.gamma? + b,
@@ -532,7 +536,7 @@ impl ForceCalibration {
         Some(f.max(0.0))
     }
 
-    /// The calibrated normal force of one listed contact (its own push's share taken off when it has a force
+    /// The calibrated normal force of one listed contact (what its own push adds taken off when it has a force
     /// vector).
     fn contact_force_n(&self, c: &ObservedContact) -> Option<f64> {
         let share = self.push_normal_share();
@@ -543,7 +547,7 @@ impl ForceCalibration {
         Some(own * self.scale())
     }
 
-    /// N of normal force per N of the model's push, 0 where none was fitted.
+    /// What a push adds to its normal force (see `calibration::push_normal`), 0 where none was fitted.
     fn push_normal_share(&self) -> f64 {
         match self {
             Self::Scale { push_normal_share, .. } => push_normal_share.unwrap_or(0.0),
@@ -858,6 +862,7 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nusense_estimator::calibration::push_normal::uncorrected_normal_n;
 
     #[test]
     fn new_reading_fields_are_read_when_present_and_absent_ones_stay_empty() {
@@ -947,7 +952,7 @@ mod tests {
     fn the_figures_are_the_known_answers_of_a_scripted_mode() {
         use serde_json::json;
         // A mode that reports twice the true force in its own units and four times its tangential force, adds a
-        // tenth of its push to its normal force, misses one press, places another 0.3 mm off, detects from 0.5 N,
+        // tenth of its push squared over its load to its normal force, misses one press, places another 0.3 mm off, detects from 0.5 N,
         // lists two contacts, turns pushes by 10 degrees and reads the camera's roll 0.1 off.
         let press = |at: [f64; 2], f: f64| truth(&[(at, [0.0, 0.0, f])], None);
         let reading =
@@ -961,7 +966,7 @@ mod tests {
             ));
         }
         for (t, f) in [(1.0, 3.0), (2.0, 5.0), (0.8, 4.0)] {
-            let fz = 2.0 * f + 0.1 * 4.0 * t;
+            let fz = uncorrected_normal_n(2.0 * f, 4.0 * t, 0.1);
             scored.push(case(
                 CaseKind::CalibrationPush,
                 truth(&[([0.0, 0.0], [0.0, t, f])], None),
@@ -1027,7 +1032,7 @@ mod tests {
         let turned = [
             4.0 * 10f64.to_radians().cos(),
             4.0 * 10f64.to_radians().sin(),
-            8.0 + 0.1 * 4.0,
+            uncorrected_normal_n(8.0, 4.0, 0.1),
         ];
         // Read behind the push as the calibration pushes are, and 0.2 mm across it.
         let behind = [-1.5 * turned[0] / turned[2], -1.5 * turned[1] / turned[2] + 0.2];
@@ -1063,9 +1068,11 @@ mod tests {
         // The push shift takes the push back to its place but for the 0.2 mm across it.
         assert!((f.push_localisation_rmse_mm.unwrap() - 0.2).abs() < 1e-12);
         assert!((f.push_localisation_unshifted_rmse_mm.unwrap() - behind[0].hypot(behind[1])).abs() < 1e-12);
-        // The share takes the push's 0.4 model N (0.2 N) back off its normal force.
+        // The share takes what the push added back off its normal force.
         assert!(f.push_force_rms_n.unwrap().abs() < 1e-12, "{:?}", f.push_force_rms_n);
-        assert!((f.push_force_unshared_rms_n.unwrap() - 0.2).abs() < 1e-12);
+        let added = uncorrected_normal_n(8.0, 4.0, 0.1) - 8.0;
+        assert!(added > 0.1, "{added}");
+        assert!((f.push_force_unshared_rms_n.unwrap() - 0.5 * added).abs() < 1e-12);
         assert!((f.camera_rotation_rms_deg.unwrap() - 0.1).abs() < 1e-9);
         assert_eq!(f.refused, 0);
         assert_eq!(f.median_ms, Some(1.0));

@@ -582,7 +582,8 @@ impl Estimator {
             return (None, Some(zero_map));
         }
         let most_mm = crate::calibration::push_centre::most_shift_mm(&self.config.pad);
-        // The contacts' centre is weighed by the pressure the solve found, which the push's share leaves in place.
+        // The contacts' centre is weighed by the pressure the solve found: what a push adds to a load is taken off
+        // its force, not moved.
         let pressure_n: Vec<f64> = kept.iter().map(|r| r.force_vector_n[2]).collect();
         for region in &mut kept {
             region.centre_mm = crate::calibration::push_centre::shifted_centre(
