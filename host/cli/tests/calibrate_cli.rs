@@ -194,3 +194,146 @@ fn a_malformed_probe_position_in_the_log_fails_with_its_line_and_writes_nothing(
     );
     assert_eq!(std::fs::read_to_string(&config).unwrap(), "# untouched\n");
 }
+
+/// The pad's share of a push read as normal force in [`push_session`]'s references, N per N of the model's push.
+const TRUE_SHARE: f64 = 0.12;
+/// Reference normal force per N of the model's (the modulus fit's scale) in [`push_session`].
+const NORMAL_SCALE: f64 = 0.75;
+/// The model's force vectors [fx, fy, fz] (before the tangential scale and the share): plain presses, then pushes of
+/// a quarter to nearly half their load.
+const PRESSES: [[f64; 3]; 5] = [
+    [0.0, 0.0, 2.0],
+    [0.0, 0.0, 3.5],
+    [0.0, 0.0, 5.0],
+    [0.0, 0.0, 6.5],
+    [0.0, 0.0, 8.0],
+];
+const PUSHES: [[f64; 3]; 3] = [[1.5, 0.0, 4.0], [0.0, -1.2, 5.0], [0.9, 1.2, 3.5]];
+
+/// A session of inverse-mode readings of `model` force vectors as the estimator reports them with a tangential force
+/// scale of `scale` and a push normal share of `share` (the normal force less `share` of the push, fx and fy times
+/// `scale`), and its force/torque log (the force on the sensor, fz down): each reference normal force is
+/// [`NORMAL_SCALE`] times the model's less [`TRUE_SHARE`] of its push, held for +-0.1 s around its reading.
+fn push_session(dir: &std::path::Path, model: &[[f64; 3]], scale: f64, share: f64) -> [std::path::PathBuf; 2] {
+    let time_of = |k: usize| 1.0 + 0.5 * k as f64;
+    let mut lines = String::new();
+    let mut references = Vec::new();
+    for (k, &[fx, fy, fz]) in model.iter().enumerate() {
+        let push = fx.hypot(fy);
+        let force_n = (fz - share * push).max(0.0);
+        let reference = [0.6 * fx, 0.6 * fy, NORMAL_SCALE * (fz - TRUE_SHARE * push)];
+        let gamma = reference[2] / 3.0;
+        lines += &format!(
+            "{{\"schema_version\":1,\"frame_id\":{k},\"capture_time_us\":{},\"estimate\":{{\"mode\":\"inverse\",\
+             \"contact\":true,\"gamma\":{gamma},\"force_n\":{force_n},\"force_vector_n\":[{},{},{force_n}]}}}}\n",
+            (time_of(k) * 1e6).round() as u64,
+            scale * fx,
+            scale * fy
+        );
+        references.push(reference);
+    }
+    let mut log = String::from("timestamp,fx,fy,fz\n");
+    for i in 0..(time_of(model.len()) * 200.0) as usize {
+        let t = i as f64 / 200.0;
+        let held = (0..model.len()).find(|&k| (t - time_of(k)).abs() <= 0.1);
+        let [fx, fy, fz] = held.map_or([0.0; 3], |k| references[k]);
+        log += &format!("{t},{fx},{fy},{}\n", -fz);
+    }
+    let paths = [dir.join("readings.jsonl"), dir.join("ft.csv")];
+    std::fs::write(&paths[0], lines).unwrap();
+    std::fs::write(&paths[1], log).unwrap();
+    paths
+}
+
+/// `nusense calibrate ARGS... --readings READINGS --ft-log LOG --config CONFIG`, which must succeed; its stdout.
+fn calibrate_session(args: &[&str], [readings, log]: &[std::path::PathBuf; 2], config: &std::path::Path) -> String {
+    let out = nusense()
+        .arg("calibrate")
+        .args(args)
+        .arg("--readings")
+        .arg(readings)
+        .arg("--ft-log")
+        .arg(log)
+        .arg("--config")
+        .arg(config)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// Pushes that read their normal force too high by a share of their push fit that share, from readings made with no
+/// share and with another share and tangential scale already set (their normal force gets its share back, their push
+/// is taken in the model's terms), and it is written into the config.
+#[test]
+fn a_sessions_pushes_fit_the_share_of_their_push_read_as_normal_force() {
+    let model: Vec<[f64; 3]> = PRESSES.iter().chain(&PUSHES).copied().collect();
+    for (share, scale) in [(0.0, 1.0), (0.3, 2.5)] {
+        let dir = tempfile::tempdir().unwrap();
+        let session = push_session(dir.path(), &model, scale, share);
+        let config = dir.path().join("sensor.toml");
+        std::fs::write(
+            &config,
+            format!("# bench sensor\n[elastic]\npush_normal_share = {share}\ntangential_force_scale = {scale}\n"),
+        )
+        .unwrap();
+        let report: serde_json::Value =
+            serde_json::from_str(&calibrate_session(&["--json"], &session, &config)).unwrap();
+        // The presses are most of the session and read exactly: the modulus fit's scale is theirs.
+        assert_eq!(report["modulus"]["scale"], NORMAL_SCALE, "{report}");
+        let push_normal = &report["push_normal"];
+        assert!(report["push_normal_left_alone"].is_null(), "{report}");
+        assert_eq!(push_normal["pushes"], PUSHES.len(), "{report}");
+        assert_eq!(push_normal["push_normal_share_before"], share, "{report}");
+        let fitted = push_normal["push_normal_share"].as_f64().unwrap();
+        assert!(
+            (fitted - TRUE_SHARE).abs() < 1e-9,
+            "from share {share}, scale {scale}: {fitted}"
+        );
+        let written = nusense_estimator::SensorConfig::load(&config).unwrap();
+        assert_eq!(written.elastic.push_normal_share, fitted);
+        assert!(std::fs::read_to_string(&config).unwrap().starts_with("# bench sensor"));
+    }
+}
+
+/// A session of plain presses, or with one push, leaves `elastic.push_normal_share` as it was and says why; the
+/// normal calibrations still stand.
+#[test]
+fn a_session_without_pushes_leaves_the_push_normal_share_alone() {
+    let original = "# bench sensor\n[elastic]\npush_normal_share = 0.05\n";
+    for (model, found) in [
+        (PRESSES.to_vec(), 0),
+        (PRESSES.iter().chain(&PUSHES[..1]).copied().collect::<Vec<_>>(), 1),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let session = push_session(dir.path(), &model, 1.0, 0.05);
+        let config = dir.path().join("sensor.toml");
+        std::fs::write(&config, original).unwrap();
+        let report: serde_json::Value =
+            serde_json::from_str(&calibrate_session(&["--json"], &session, &config)).unwrap();
+        assert!(
+            report["push_normal"].is_null() && report["modulus"].is_object(),
+            "{report}"
+        );
+        let why = report["push_normal_left_alone"].as_str().unwrap();
+        assert_eq!(
+            why,
+            format!("{found} inverse-mode readings pushed by a tenth of their load or more, 2 needed")
+        );
+        let written = nusense_estimator::SensorConfig::load(&config).unwrap();
+        assert_eq!(written.elastic.push_normal_share, 0.05);
+        assert_eq!(
+            written.elastic.shear_modulus_kpa,
+            report["modulus"]["shear_modulus_kpa"]
+        );
+        std::fs::write(&config, original).unwrap();
+        let text = calibrate_session(&["--dry-run"], &session, &config);
+        assert!(
+            text.contains(&format!(
+                "push normal share: {why}; elastic.push_normal_share left at 0.0500"
+            )),
+            "{text}"
+        );
+        assert_eq!(std::fs::read_to_string(&config).unwrap(), original);
+    }
+}

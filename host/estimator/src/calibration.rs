@@ -788,6 +788,20 @@ pub fn set_config_push_centre_shift(text: &str, shift_mm: f64) -> Result<String,
     })
 }
 
+/// Sets `elastic.push_normal_share` (what [`push_normal::fit_push_normal_share`] calibrates), keeping everything
+/// else; a share the config refuses (beyond +-1) is refused.
+pub fn set_config_push_normal_share(text: &str, share: f64) -> Result<String, CalibrationError> {
+    if !share.is_finite() {
+        return Err(CalibrationError::Config(format!(
+            "refusing to write a push normal share of {share}"
+        )));
+    }
+    edit_config(text, |document| {
+        table_mut(document, "elastic")?.insert("push_normal_share", toml_edit::value(share));
+        Ok(())
+    })
+}
+
 /// Replaces the config's `[pad_map]` with `map` (the rest frame's fitted raw px -> pad mm map), keeping everything
 /// else.
 pub fn set_config_pad_map(text: &str, map: &crate::StoredPadMap) -> Result<String, CalibrationError> {
@@ -1233,6 +1247,13 @@ mod tests {
         assert!(shifted.contains("# bench sensor"), "{shifted}");
         assert!(set_config_push_centre_shift(text, f64::NAN).is_err());
         assert!(set_config_push_centre_shift(text, 12.0).is_err(), "the config's bound");
+        let shared = set_config_push_normal_share(&shifted, 0.115).unwrap();
+        let config = crate::SensorConfig::from_toml_str(&shared).unwrap();
+        assert_eq!(config.elastic.push_normal_share, 0.115);
+        assert_eq!(config.elastic.push_centre_shift_mm, -0.76, "the other keys are kept");
+        assert!(shared.contains("# bench sensor"), "{shared}");
+        assert!(set_config_push_normal_share(text, f64::INFINITY).is_err());
+        assert!(set_config_push_normal_share(text, -1.5).is_err(), "the config's bound");
         let broken = crate::StoredPadMap { width: 0, ..map };
         assert!(set_config_pad_map(text, &broken).is_err());
     }

@@ -12,6 +12,11 @@
 //!   the readings pushed by a tenth of their load or more (see `nusense_estimator::calibration::push_centre`). A log
 //!   without those columns, or a session with fewer than two such pushes, leaves the key as it was, and the output
 //!   says why;
+//! - how much of a push its normal force reads as pressure (`elastic.push_normal_share`), from the same session's
+//!   pushes: the model's normal force less the reference's over the modulus fit's scale, against the model's push, one
+//!   share through the origin on the readings pushed by a tenth of their load or more (see
+//!   `nusense_estimator::calibration::push_normal`). A session without a modulus fit, or with fewer than two such
+//!   pushes, leaves the key as it was, and the output says why;
 //! - with `--rest FRAME`, the raw px -> pad mm map of this sensor's lens and pose (`[pad_map]`), fitted on a frame
 //!   with nothing touching the pad, and its residual.
 //!
@@ -32,19 +37,24 @@
 //! Readings in inverse mode with contact also give the model's force (`force_n`); with at least two of them the
 //! modulus scale is fitted as well, and with at least two pushes the tangential scale. With `x_mm, y_mm` in the log,
 //! their strongest contact (`contact_mm`, and that contact's `force_vector_n`, or the reading's when it lists no
-//! contacts) gives the push centre shift.
+//! contacts) gives the push centre shift. Their force vector and normal force, against the reference the modulus is
+//! fitted on, give the push normal share.
 //!
 //! Readings carry no record of the config they were made with: they are taken to have been made with the
 //! `--config` file's current values (the defaults without one). So the fitted scales are relative to its modulus
 //! and tangential scale, and for the push centre shift the readings' fx, fy are divided by its
 //! `tangential_force_scale` (the shift is in the model's push over load) and their centres moved back by its
 //! `push_centre_shift_mm` before the fit; that moving back is exact (the move depends only on the contact's force
-//! and the config, also where it was cut short at one cell pitch) when the readings were indeed made with it.
+//! and the config, also where it was cut short at one cell pitch) when the readings were indeed made with it. For the
+//! push normal share the readings' normal force gets back its `push_normal_share` of their push (fx, fy over the
+//! tangential scale); that is exact for one contact at a time (a session of one probe), and readings whose normal
+//! force reads 0 (where the share may have cut it off) are left out.
 //!
 //! With `--config FILE`, what was fitted is written into that TOML (created if missing; other keys and comments are
 //! kept) unless `--dry-run`; the modulus is the config's own times the fitted scale, the tangential scale the
 //! config's own times its fitted ratio over the modulus's (the new modulus scales the model's shear as well), and the
-//! push centre shift the fitted one (neither scale changes the model's push over load).
+//! push centre shift and the push normal share the fitted ones (neither scale changes the model's push over load, or
+//! its normal force over its push).
 //! `--json` prints the fits as one JSON object. A line that does not rise with gamma is refused and nothing is written (`--dry-run` still shows
 //! it). Exit code: 0 on a fit, 1 when the data cannot be fitted, the line does not rise or the config cannot be
 //! written.
@@ -56,13 +66,14 @@ use anyhow::{bail, Context};
 use nusense_capture::read_image_rgb;
 use nusense_estimator::calibration::modulus::{fit_modulus_scale, fit_tangential_scale, ModelForceSample, ModulusFit};
 use nusense_estimator::calibration::push_centre::{
-    fit_push_centre_shift, most_shift_mm, unshifted_centre, PushCentreSample,
+    fit_push_centre_shift, most_shift_mm, unshifted_centre, PushCentreSample, MIN_PUSH_RATIO,
 };
+use nusense_estimator::calibration::push_normal::{fit_push_normal_share, PushNormalSample};
 use nusense_estimator::calibration::{
     align_by_time, fit_force_line, forces_at_times, parse_force_log_csv, parse_pairs_csv, parse_position_log_csv,
-    positions_at_times, set_config_pad_map, set_config_push_centre_shift, set_config_shear_modulus,
-    set_config_tangential_force_scale, update_config_toml, CalibrationError, CalibrationSample, FitOptions,
-    ForceComponent, ForceFit, ForceSample, TimedGamma,
+    positions_at_times, set_config_pad_map, set_config_push_centre_shift, set_config_push_normal_share,
+    set_config_shear_modulus, set_config_tangential_force_scale, update_config_toml, CalibrationError,
+    CalibrationSample, FitOptions, ForceComponent, ForceFit, ForceSample, TimedGamma,
 };
 use nusense_estimator::{Estimator, MapResidual, Mode, SensorConfig, StoredPadMap};
 use serde::Serialize;
@@ -151,6 +162,11 @@ struct Report {
     push_centre: Option<PushCentreReport>,
     /// Why `elastic.push_centre_shift_mm` was not fitted (and so left as it was) in a session; null otherwise.
     push_centre_left_alone: Option<String>,
+    /// How much of a push its normal force reads as pressure; null unless the session has a modulus fit and at least
+    /// two pushes of a tenth of their load (`push_normal_left_alone` says which).
+    push_normal: Option<PushNormalReport>,
+    /// Why `elastic.push_normal_share` was not fitted (and so left as it was) in a session; null otherwise.
+    push_normal_left_alone: Option<String>,
     /// The rest frame's pad map; null without `--rest`.
     pad_map: Option<PadMapReport>,
     config_written: Option<String>,
@@ -193,6 +209,15 @@ struct PushCentreReport {
 }
 
 #[derive(Serialize)]
+struct PushNormalReport {
+    /// The config's `elastic.push_normal_share` before and after: N of normal force per N of the model's push.
+    push_normal_share_before: f64,
+    push_normal_share: f64,
+    /// Inverse-mode readings pushed by a tenth of their load or more: those the share was fitted on.
+    pushes: usize,
+}
+
+#[derive(Serialize)]
 struct PadMapReport {
     width: u32,
     height: u32,
@@ -207,6 +232,8 @@ struct Fits {
     tangential: Option<(ModulusFit, f64)>,
     /// The config's new `elastic.push_centre_shift_mm`, or why it is left as it was (sessions only).
     push_centre: Option<Result<PushCentreFit, String>>,
+    /// The config's new `elastic.push_normal_share`, or why it is left as it was (sessions only).
+    push_normal: Option<Result<PushNormalFit, String>>,
     pad_map: Option<StoredPadMap>,
     readings_dropped: usize,
 }
@@ -267,6 +294,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             if let Some(Ok(fit)) = fits.push_centre {
                 text = set_config_push_centre_shift(&text, fit.shift_mm).with_context(context)?;
             }
+            if let Some(Ok(fit)) = fits.push_normal {
+                text = set_config_push_normal_share(&text, fit.share).with_context(context)?;
+            }
             if let Some(map) = &fits.pad_map {
                 text = set_config_pad_map(&text, map).with_context(context)?;
             }
@@ -302,6 +332,7 @@ fn fit_all(args: &Args, config: &SensorConfig) -> anyhow::Result<Fits> {
         modulus: None,
         tangential: None,
         push_centre: None,
+        push_normal: None,
         pad_map: None,
         readings_dropped: 0,
     };
@@ -345,6 +376,22 @@ fn fit_all(args: &Args, config: &SensorConfig) -> anyhow::Result<Fits> {
                 Err(e) => return Err(e).context("cannot fit the push centre shift"),
             },
         });
+        // The pushes' excess normal force is measured against the normal scale as the session's readings reported it
+        // (the modulus fit's): the share is a ratio of model forces, which neither the modulus nor the tangential
+        // scale changes.
+        fits.push_normal = Some(match &fits.modulus {
+            None => Err("no pad model fit (fewer than two inverse-mode readings in contact)".to_string()),
+            Some((modulus, _)) => match fit_push_normal_share(&session.push_normals, modulus.scale) {
+                Ok(share) => Ok(PushNormalFit {
+                    share,
+                    pushes: session.push_normals.iter().filter(|s| is_push(s)).count(),
+                }),
+                Err(CalibrationError::TooFewPushes { found, needed }) => Err(format!(
+                    "{found} inverse-mode readings pushed by a tenth of their load or more, {needed} needed"
+                )),
+                Err(e) => return Err(e).context("cannot fit the push normal share"),
+            },
+        });
     }
     if let Some(path) = &args.rest {
         let frame = read_image_rgb(path).with_context(|| format!("rest frame {}", path.display()))?;
@@ -367,6 +414,22 @@ struct PushCentreFit {
     readings: usize,
 }
 
+/// The push normal share and the pushes it was fitted on.
+#[derive(Clone, Copy)]
+struct PushNormalFit {
+    share: f64,
+    pushes: usize,
+}
+
+/// Whether [`fit_push_normal_share`] uses a sample: pushed by [`MIN_PUSH_RATIO`] of its load or more, all finite.
+fn is_push(sample: &PushNormalSample) -> bool {
+    let [fx, fy, fz] = sample.model_force_vector_n;
+    sample.model_force_vector_n.iter().all(|v| v.is_finite())
+        && sample.reference_normal_n.is_finite()
+        && fz > 0.0
+        && fx.hypot(fy) >= MIN_PUSH_RATIO * fz
+}
+
 /// A session's readings paired with the force log.
 struct Session {
     samples: Vec<CalibrationSample>,
@@ -377,6 +440,9 @@ struct Session {
     /// The same readings' strongest contact, un-shifted, against the log's probe position; `None` when the log has
     /// no x_mm, y_mm.
     push_centres: Option<Vec<PushCentreSample>>,
+    /// The same readings' model force vector, their push's share put back, against the reference normal force the
+    /// modulus is fitted on.
+    push_normals: Vec<PushNormalSample>,
     dropped: usize,
 }
 
@@ -404,6 +470,7 @@ fn load_session(
     let alignment = align_by_time(&parsed.readings, &forces, max_skew_s)
         .context("cannot align the readings with the force log (check the clocks, --time-offset-s, --max-skew-ms)")?;
     let model = with_reference(parsed.model.iter().map(|m| (m.time_s, m.force_n)), &forces, max_skew_s);
+    let push_normals = push_normal_samples(&parsed.model, &forces, config, max_skew_s);
     let tangential = match read_log(ForceComponent::Tangential) {
         Ok(pushes) => with_reference(
             parsed.model.iter().filter_map(|m| Some((m.time_s, m.tangential_n?))),
@@ -428,6 +495,7 @@ fn load_session(
         model,
         tangential,
         push_centres,
+        push_normals,
         dropped: parsed.skipped + alignment.dropped,
     })
 }
@@ -455,6 +523,40 @@ fn push_centre_samples(
                 model_force_vector_n: model,
                 read_centre_mm: unshifted_centre(centre, model, config.elastic.push_centre_shift_mm, most_mm),
                 true_centre_mm: truth?,
+            })
+        })
+        .collect()
+}
+
+/// Each reading with a force vector against the log's reference force at its time (the one the modulus is fitted on;
+/// those with no log sample within `max_skew_s` are left out). The readings are taken to have been made with
+/// `config`: the model's push is their tangential force over its `tangential_force_scale`, and their normal force gets
+/// back the `push_normal_share` of that push it had taken off. That is exact for one contact at a time (a session of
+/// one probe: the reading's total is then the contact's own; with several, the total push is not the sum of theirs)
+/// unless the share cut the normal force off at 0, so readings that read 0 N are left out. The push's direction is not
+/// kept: the share needs only its size.
+fn push_normal_samples(
+    readings: &[TimedModelForce],
+    log: &[ForceSample],
+    config: &SensorConfig,
+    max_skew_s: f64,
+) -> Vec<PushNormalSample> {
+    let pushed: Vec<(f64, f64, f64)> = readings
+        .iter()
+        .filter(|r| r.force_n > 0.0)
+        .filter_map(|r| Some((r.time_s, r.force_n, r.tangential_n?)))
+        .collect();
+    let times: Vec<f64> = pushed.iter().map(|p| p.0).collect();
+    let scale = config.elastic.tangential_force_scale;
+    let share = config.elastic.push_normal_share;
+    pushed
+        .iter()
+        .zip(forces_at_times(&times, log, max_skew_s))
+        .filter_map(|(&(_, force_n, tangential_n), reference)| {
+            let push = tangential_n / scale;
+            Some(PushNormalSample {
+                model_force_vector_n: [push, 0.0, force_n + share * push],
+                reference_normal_n: reference?,
             })
         })
         .collect()
@@ -640,6 +742,16 @@ fn report(fits: &Fits, config: &SensorConfig, confidence: f64, config_written: O
                 readings: fit.readings,
             }),
         push_centre_left_alone: fits.push_centre.as_ref().and_then(|r| r.as_ref().err().cloned()),
+        push_normal: fits
+            .push_normal
+            .as_ref()
+            .and_then(|r| r.as_ref().ok())
+            .map(|fit| PushNormalReport {
+                push_normal_share_before: config.elastic.push_normal_share,
+                push_normal_share: fit.share,
+                pushes: fit.pushes,
+            }),
+        push_normal_left_alone: fits.push_normal.as_ref().and_then(|r| r.as_ref().err().cloned()),
         pad_map: fits.pad_map.map(|m| PadMapReport {
             width: m.width,
             height: m.height,
@@ -705,6 +817,17 @@ fn print_human(fits: &Fits, config: &SensorConfig, config_written: Option<&str>,
         Some(Err(why)) => println!(
             "push centre: {why}; elastic.push_centre_shift_mm left at {:.3} mm",
             config.elastic.push_centre_shift_mm
+        ),
+        None => {}
+    }
+    match &fits.push_normal {
+        Some(Ok(fit)) => println!(
+            "push normal share: fitted on {} pushes, share {:.4} -> {:.4} N of normal force per N of the model's push",
+            fit.pushes, config.elastic.push_normal_share, fit.share
+        ),
+        Some(Err(why)) => println!(
+            "push normal share: {why}; elastic.push_normal_share left at {:.4}",
+            config.elastic.push_normal_share
         ),
         None => {}
     }
@@ -805,5 +928,48 @@ mod tests {
         assert_eq!(samples[0].model_force_vector_n, [1.0, 0.0, 4.0]);
         assert!((samples[0].read_centre_mm[0] - 1.0).abs() < 1e-12 && samples[0].read_centre_mm[1] == -2.0);
         assert!((samples[0].true_centre_mm[0] - 1.5).abs() < 1e-9 && samples[0].true_centre_mm[1] == -2.0);
+    }
+
+    #[test]
+    fn a_readings_normal_force_gets_back_the_share_of_its_push_the_config_took_off() {
+        // Read with a tangential scale of 2 and a share of 0.1: a model push of 1.5 N read as 3 N, and the model's
+        // 4 N normal force read as 4 - 0.15 N.
+        let mut config = SensorConfig::default();
+        config.elastic.tangential_force_scale = 2.0;
+        config.elastic.push_normal_share = 0.1;
+        let reading = |time_s: f64, force_n: f64, tangential_n: Option<f64>| TimedModelForce {
+            time_s,
+            force_n,
+            tangential_n,
+            strongest: None,
+        };
+        let readings = [
+            reading(1.0, 3.85, Some(3.0)),
+            // Cut off at 0 by the share: its model normal force is not known.
+            reading(2.0, 0.0, Some(3.0)),
+            // No force vector: no push.
+            reading(3.0, 5.0, None),
+            // No log sample within the skew.
+            reading(9.0, 5.0, Some(1.0)),
+            reading(4.0, 6.0, Some(0.0)),
+        ];
+        let log: Vec<ForceSample> = [1.0, 2.0, 3.0, 4.0]
+            .iter()
+            .map(|&time_s| ForceSample {
+                time_s,
+                force_n: 2.0 * time_s,
+            })
+            .collect();
+        let samples = push_normal_samples(&readings, &log, &config, 0.02);
+        assert_eq!(samples.len(), 2, "{samples:?}");
+        assert_eq!(samples[0].reference_normal_n, 2.0);
+        let [fx, fy, fz] = samples[0].model_force_vector_n;
+        assert!(
+            (fx - 1.5).abs() < 1e-12 && fy == 0.0 && (fz - 4.0).abs() < 1e-12,
+            "{samples:?}"
+        );
+        assert_eq!(samples[1].model_force_vector_n, [0.0, 0.0, 6.0]);
+        assert_eq!(samples[1].reference_normal_n, 8.0);
+        assert!(is_push(&samples[0]) && !is_push(&samples[1]));
     }
 }
