@@ -952,8 +952,8 @@ mod tests {
     fn the_figures_are_the_known_answers_of_a_scripted_mode() {
         use serde_json::json;
         // A mode that reports twice the true force in its own units and four times its tangential force, adds a
-        // tenth of its push squared over its load to its normal force, misses one press, places another 0.3 mm off, detects from 0.5 N,
-        // lists two contacts, turns pushes by 10 degrees and reads the camera's roll 0.1 off.
+        // tenth of its push squared over its load to its normal force, misses one press, places another 0.3 mm off,
+        // detects from 0.5 N, lists two contacts, turns pushes by 10 degrees and reads the camera's roll 0.1 off.
         let press = |at: [f64; 2], f: f64| truth(&[(at, [0.0, 0.0, f])], None);
         let reading =
             |at: [f64; 2], fz: f64| json!({"contact": true, "contact_mm": at, "force_vector_n": [0.0, 0.0, fz]});

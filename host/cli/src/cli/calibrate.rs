@@ -12,9 +12,9 @@
 //!   the readings pushed by a tenth of their load or more (see `nusense_estimator::calibration::push_centre`). A log
 //!   without those columns, or a session with fewer than two such pushes, leaves the key as it was, and the output
 //!   says why;
-//! - how much of a push its normal force reads as pressure (`elastic.push_normal_share`), from the same session's
-//!   pushes: the model's normal force less the reference's over the modulus fit's scale, against the model's push, one
-//!   share through the origin on the readings pushed by a tenth of their load or more (see
+//! - what a push adds to its normal force (`elastic.push_normal_share`), from the same session's pushes: the model's
+//!   normal force less the reference's over the modulus fit's scale, against the model's push squared over its normal
+//!   force, one share through the origin on the readings pushed by a tenth of their load or more (see
 //!   `nusense_estimator::calibration::push_normal`). A session without a modulus fit, or with fewer than two such
 //!   pushes, leaves the key as it was, and the output says why;
 //! - with `--rest FRAME`, the raw px -> pad mm map of this sensor's lens and pose (`[pad_map]`), fitted on a frame
@@ -46,15 +46,16 @@
 //! `tangential_force_scale` (the shift is in the model's push over load) and their centres moved back by its
 //! `push_centre_shift_mm` before the fit; that moving back is exact (the move depends only on the contact's force
 //! and the config, also where it was cut short at one cell pitch) when the readings were indeed made with it. For the
-//! push normal share the readings' normal force gets back its `push_normal_share` of their push (fx, fy over the
-//! tangential scale); that is exact for one contact at a time (a session of one probe), and readings whose normal
-//! force reads 0 (where the share may have cut it off) are left out.
+//! push normal share the readings' normal force gets back what their `push_normal_share` took off for their push
+//! (fx, fy over the tangential scale; `calibration::push_normal::uncorrected_normal_n`); that is exact for one contact
+//! at a time (a session of one probe), and readings whose normal force reads 0 (where the share may have cut it off)
+//! are left out.
 //!
 //! With `--config FILE`, what was fitted is written into that TOML (created if missing; other keys and comments are
 //! kept) unless `--dry-run`; the modulus is the config's own times the fitted scale, the tangential scale the
 //! config's own times its fitted ratio over the modulus's (the new modulus scales the model's shear as well), and the
 //! push centre shift and the push normal share the fitted ones (neither scale changes the model's push over load, or
-//! its normal force over its push).
+//! the model's normal force against its push).
 //! `--json` prints the fits as one JSON object. A line that does not rise with gamma is refused and nothing is written (`--dry-run` still shows
 //! it). Exit code: 0 on a fit, 1 when the data cannot be fitted, the line does not rise or the config cannot be
 //! written.
@@ -68,7 +69,7 @@ use nusense_estimator::calibration::modulus::{fit_modulus_scale, fit_tangential_
 use nusense_estimator::calibration::push_centre::{
     fit_push_centre_shift, most_shift_mm, unshifted_centre, PushCentreSample, MIN_PUSH_RATIO,
 };
-use nusense_estimator::calibration::push_normal::{fit_push_normal_share, PushNormalSample};
+use nusense_estimator::calibration::push_normal::{fit_push_normal_share, uncorrected_normal_n, PushNormalSample};
 use nusense_estimator::calibration::{
     align_by_time, fit_force_line, forces_at_times, parse_force_log_csv, parse_pairs_csv, parse_position_log_csv,
     positions_at_times, set_config_pad_map, set_config_push_centre_shift, set_config_push_normal_share,
@@ -210,7 +211,8 @@ struct PushCentreReport {
 
 #[derive(Serialize)]
 struct PushNormalReport {
-    /// The config's `elastic.push_normal_share` before and after: N of normal force per N of the model's push.
+    /// The config's `elastic.push_normal_share` before and after: the model's normal force less the reference's (over
+    /// the normal scale) per unit of its push squared over its normal force.
     push_normal_share_before: f64,
     push_normal_share: f64,
     /// Inverse-mode readings pushed by a tenth of their load or more: those the share was fitted on.
@@ -531,7 +533,7 @@ fn push_centre_samples(
 /// Each reading with a force vector against the log's reference force at its time (the one the modulus is fitted on;
 /// those with no log sample within `max_skew_s` are left out). The readings are taken to have been made with
 /// `config`: the model's push is their tangential force over its `tangential_force_scale`, and their normal force gets
-/// back the `push_normal_share` of that push it had taken off. That is exact for one contact at a time (a session of
+/// back what its `push_normal_share` had taken off for that push. That is exact for one contact at a time (a session of
 /// one probe: the reading's total is then the contact's own; with several, the total push is not the sum of theirs)
 /// unless the share cut the normal force off at 0, so readings that read 0 N are left out. The push's direction is not
 /// kept: the share needs only its size.
@@ -555,7 +557,7 @@ fn push_normal_samples(
         .filter_map(|(&(_, force_n, tangential_n), reference)| {
             let push = tangential_n / scale;
             Some(PushNormalSample {
-                model_force_vector_n: [push, 0.0, force_n + share * push],
+                model_force_vector_n: [push, 0.0, uncorrected_normal_n(force_n, push, share)],
                 reference_normal_n: reference?,
             })
         })
@@ -822,7 +824,8 @@ fn print_human(fits: &Fits, config: &SensorConfig, config_written: Option<&str>,
     }
     match &fits.push_normal {
         Some(Ok(fit)) => println!(
-            "push normal share: fitted on {} pushes, share {:.4} -> {:.4} N of normal force per N of the model's push",
+            "push normal share: fitted on {} pushes, share {:.4} -> {:.4} (the model's normal force reads this times its \
+             push squared over itself too much)",
             fit.pushes, config.elastic.push_normal_share, fit.share
         ),
         Some(Err(why)) => println!(
@@ -931,9 +934,9 @@ mod tests {
     }
 
     #[test]
-    fn a_readings_normal_force_gets_back_the_share_of_its_push_the_config_took_off() {
+    fn a_readings_normal_force_gets_back_what_the_configs_share_took_off_for_its_push() {
         // Read with a tangential scale of 2 and a share of 0.1: a model push of 1.5 N read as 3 N, and the model's
-        // 4 N normal force read as 4 - 0.15 N.
+        // 4 N normal force read as 4 - 0.1 * 1.5^2 / 4 N.
         let mut config = SensorConfig::default();
         config.elastic.tangential_force_scale = 2.0;
         config.elastic.push_normal_share = 0.1;
@@ -944,7 +947,7 @@ mod tests {
             strongest: None,
         };
         let readings = [
-            reading(1.0, 3.85, Some(3.0)),
+            reading(1.0, 4.0 - 0.1 * 1.5 * 1.5 / 4.0, Some(3.0)),
             // Cut off at 0 by the share: its model normal force is not known.
             reading(2.0, 0.0, Some(3.0)),
             // No force vector: no push.

@@ -39,7 +39,8 @@ pub struct PushNormalSample {
     pub reference_normal_n: f64,
 }
 
-/// The share (see [`corrected_normal_n`]) for a normal force calibration of `normal_scale` reference N per model N. Errors with fewer than [`MIN_PUSHES`] usable pushes (pushed by at least [`MIN_PUSH_RATIO`] of their model load,
+/// The share (see [`corrected_normal_n`]) for a normal force calibration of `normal_scale` reference N per model N.
+/// Errors with fewer than [`MIN_PUSHES`] usable pushes (pushed by at least [`MIN_PUSH_RATIO`] of their model load,
 /// everything finite) or a scale that is not finite and positive.
 pub fn fit_push_normal_share(samples: &[PushNormalSample], normal_scale: f64) -> Result<f64, CalibrationError> {
     if !(normal_scale.is_finite() && normal_scale > 0.0) {
