@@ -286,7 +286,7 @@ pub struct ElasticConfig {
     /// that says where the probe touched. Default 0: centres as the pressure puts them. At most one
     /// cell pitch of shift is applied.
     pub push_centre_shift_mm: f64,
-    /// How much of its push each contact's normal force reads as pressure: its normal force fz is reduced by this
+    /// What a push adds to each contact's normal force, read as pressure: its normal force fz is reduced by this
     /// times (fx^2 + fy^2) / fz (the model's force vector, fx, fy before `tangential_force_scale`), never below 0. The
     /// pressure that moves a pushed contact's centre behind the push (`push_centre_shift_mm`) also adds to its load,
     /// as the square of the push over the load: on the validation sensor 5, 10, 17 and 27 % of the load at pushes of
@@ -638,7 +638,7 @@ impl SensorConfig {
             return Err(invalid(
                 "elastic.push_normal_share",
                 e.push_normal_share,
-                "-1 ..= 1 (N of normal force per N of the model's push)",
+                "-1 ..= 1 (the normal force read too much per unit of push squared over load)",
             ));
         }
         let i = &self.inverse;
