@@ -67,9 +67,11 @@ use anyhow::{bail, Context};
 use nusense_capture::read_image_rgb;
 use nusense_estimator::calibration::modulus::{fit_modulus_scale, fit_tangential_scale, ModelForceSample, ModulusFit};
 use nusense_estimator::calibration::push_centre::{
-    fit_push_centre_shift, most_shift_mm, unshifted_centre, PushCentreSample, MIN_PUSH_RATIO,
+    fit_push_centre_shift, most_shift_mm, unshifted_centre, PushCentreSample,
 };
-use nusense_estimator::calibration::push_normal::{fit_push_normal_share, uncorrected_normal_n, PushNormalSample};
+use nusense_estimator::calibration::push_normal::{
+    fit_push_normal_share, is_push, uncorrected_normal_n, PushNormalSample,
+};
 use nusense_estimator::calibration::{
     align_by_time, fit_force_line, forces_at_times, parse_force_log_csv, parse_pairs_csv, parse_position_log_csv,
     positions_at_times, set_config_pad_map, set_config_push_centre_shift, set_config_push_normal_share,
@@ -421,15 +423,6 @@ struct PushCentreFit {
 struct PushNormalFit {
     share: f64,
     pushes: usize,
-}
-
-/// Whether [`fit_push_normal_share`] uses a sample: pushed by [`MIN_PUSH_RATIO`] of its load or more, all finite.
-fn is_push(sample: &PushNormalSample) -> bool {
-    let [fx, fy, fz] = sample.model_force_vector_n;
-    sample.model_force_vector_n.iter().all(|v| v.is_finite())
-        && sample.reference_normal_n.is_finite()
-        && fz > 0.0
-        && fx.hypot(fy) >= MIN_PUSH_RATIO * fz
 }
 
 /// A session's readings paired with the force log.

@@ -39,6 +39,16 @@ pub struct PushNormalSample {
     pub reference_normal_n: f64,
 }
 
+/// Whether [`fit_push_normal_share`] uses a sample: pushed by [`MIN_PUSH_RATIO`] of its load or more, everything
+/// finite.
+pub fn is_push(sample: &PushNormalSample) -> bool {
+    let [fx, fy, fz] = sample.model_force_vector_n;
+    sample.model_force_vector_n.iter().all(|v| v.is_finite())
+        && sample.reference_normal_n.is_finite()
+        && fz > 0.0
+        && fx.hypot(fy) >= MIN_PUSH_RATIO * fz
+}
+
 /// The share (see [`corrected_normal_n`]) for a normal force calibration of `normal_scale` reference N per model N.
 /// Errors with fewer than [`MIN_PUSHES`] usable pushes (pushed by at least [`MIN_PUSH_RATIO`] of their model load,
 /// everything finite) or a scale that is not finite and positive.
@@ -48,12 +58,11 @@ pub fn fit_push_normal_share(samples: &[PushNormalSample], normal_scale: f64) ->
     }
     let used: Vec<(f64, f64)> = samples
         .iter()
-        .filter(|s| s.model_force_vector_n.iter().all(|v| v.is_finite()) && s.reference_normal_n.is_finite())
-        .filter_map(|s| {
+        .filter(|s| is_push(s))
+        .map(|s| {
             let [fx, fy, fz] = s.model_force_vector_n;
             let push = fx.hypot(fy);
-            (fz > 0.0 && push >= MIN_PUSH_RATIO * fz)
-                .then(|| (push * push / fz, fz - s.reference_normal_n / normal_scale))
+            (push * push / fz, fz - s.reference_normal_n / normal_scale)
         })
         .collect();
     if used.len() < MIN_PUSHES {
