@@ -77,7 +77,11 @@ const BLOCK_SIDES_CELLS: [usize; 3] = [1, 2, 3];
 /// pressure. On the quick validation set stage 1 reads the plain presses' net shear at 0.01-0.58 of their pressure
 /// (median 0.1) and pushes of 0.2-0.5 of their load at 0.7-2.1. Given to every contact, the second shape fits the
 /// model's error on plain presses too: a press halfway to the pattern's corner in a 16:9 frame scaled from the sensor
-/// read 7 % lighter than in the 4:3 frame (tests/frame_shapes.rs asks 5 %).
+/// read 7 % lighter than in the 4:3 frame (tests/frame_shapes.rs asks 5 %). The switch is a step: a 4 N press at (-12,
+/// 6) mm pushed from 0 to 0.25 of its load in steps of 0.0125 (a scratch ramp at 640x480) crosses it at 0.15 of its
+/// load, from where it reads 3 % less normal force and 5-7 % more push than without the shape; the support's own
+/// changes make steps as large (5.5 % of the normal force at 0.075, with or without the shape). The same ramp at (2, 1)
+/// mm shows no step.
 const PUSH_SHAPE_MIN_RATIO: f64 = 0.5;
 /// Most active-set iterations of stage 2 (it converges in a few).
 const MAX_ACTIVE_SET_ITERATIONS: usize = 50;
