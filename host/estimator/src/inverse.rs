@@ -2222,6 +2222,7 @@ impl InverseModel {
             }
         }
         let pressures = unknowns.len();
+        let stage1_dual = Self::stage1_dual(seed, self.lambda);
         for group in groups {
             let raw: Vec<f64> = group.iter().map(|&j| seed.tractions[3 * j + 2].max(0.0)).collect();
             let total: f64 = raw.iter().sum();
@@ -2260,7 +2261,7 @@ impl InverseModel {
             // 0.36 -> 0.25 N, the pushes' normal force 0.56 -> 0.26 N RMS before `push_normal_share`, tangential
             // direction worst 6.1 -> 3.1 deg).
             let n = group.len() as f64;
-            let along = self.shear_along_push(seed, group);
+            let along = self.shear_along_push(seed, &stage1_dual, group);
             for shape in std::iter::once(&weights).chain(along.as_ref()) {
                 unknowns.push(group.iter().zip(shape).map(|(&j, &w)| (3 * j, w)).collect());
                 unknowns.push(group.iter().zip(shape).map(|(&j, &w)| (3 * j + 1, w)).collect());
@@ -2344,21 +2345,25 @@ impl InverseModel {
         Some((tractions, motion, covariance))
     }
 
+    /// Stage 1's kriging solution y (its tractions are Aᵀ y), from its residuals: lambda y on the corners it used, 0
+    /// on the others.
+    fn stage1_dual(seed: &Stage1, lambda: f64) -> Vec<f64> {
+        seed.residuals
+            .iter()
+            .flat_map(|r| r.map_or([0.0, 0.0], |[x, y]| [x / lambda, y / lambda]))
+            .collect()
+    }
+
     /// Stage 1's shear on a group's cells along the group's net shear (the push), cut at 0, as shares that sum to 1;
     /// none unless stage 1 finds a push there: a net shear of at least [`PUSH_SHAPE_MIN_RATIO`] of the group's net
-    /// pressure. Stage 1 computes only pressure; its shear t = Aᵀ y is read here, for the group's cells alone, from
-    /// its residuals (lambda y on the corners it used, y = 0 on the others).
-    fn shear_along_push(&self, seed: &Stage1, group: &[usize]) -> Option<Vec<f64>> {
-        let y: Vec<f64> = seed
-            .residuals
-            .iter()
-            .flat_map(|r| r.map_or([0.0, 0.0], |[x, y]| [x / self.lambda, y / self.lambda]))
-            .collect();
+    /// pressure. Stage 1 computes only pressure; its shear Aᵀ y is read here, for the group's cells alone, from its
+    /// kriging solution `y` ([`Self::stage1_dual`]).
+    fn shear_along_push(&self, seed: &Stage1, y: &[f64], group: &[usize]) -> Option<Vec<f64>> {
         let shear: Vec<[f64; 2]> = group
             .iter()
-            .map(|&j| [dot(self.a_t.row(3 * j), &y), dot(self.a_t.row(3 * j + 1), &y)])
+            .map(|&j| [dot(self.a_t.row(3 * j), y), dot(self.a_t.row(3 * j + 1), y)])
             .collect();
-        let pressure: f64 = group.iter().map(|&j| dot(self.a_t.row(3 * j + 2), &y)).sum();
+        let pressure: f64 = group.iter().map(|&j| seed.tractions[3 * j + 2]).sum();
         let net = shear.iter().fold([0.0, 0.0], |a, t| [a[0] + t[0], a[1] + t[1]]);
         let length = net[0].hypot(net[1]);
         if !(pressure > 0.0 && length >= PUSH_SHAPE_MIN_RATIO * pressure) {
