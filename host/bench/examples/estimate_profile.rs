@@ -14,7 +14,9 @@
 //! - `... -- time MODE CACHE_DIR PASSES [quick|full]` times MODE alone on the set's main-size frames (those of
 //!   `dump`'s cache, rendered there if missing), PASSES times over the set, the frames read in batches of 32 (not
 //!   in the cache, as in `dump`), and prints the per-frame CPU ms's median and p99 per pass: two builds run one after
-//!   the other this way give a speed ratio on a busy machine.
+//!   the other this way give a speed ratio on a busy machine. With `cold` it writes 64 MB between two frames, so that
+//!   each estimate starts with none of its own data cached, as after a frame's decoding in the daemon, or after the
+//!   other modes and the renderer in the validation bench.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -168,7 +170,8 @@ fn dump(out: &str, cache: &std::path::Path, profile: Profile) -> Result<(), Erro
     Ok(())
 }
 
-fn time(mode: Mode, cache: &std::path::Path, passes: usize, profile: Profile) -> Result<(), Error> {
+fn time(mode: Mode, cache: &std::path::Path, passes: usize, profile: Profile, cold: bool) -> Result<(), Error> {
+    let mut evictor = if cold { vec![0u8; EVICTION_BYTES] } else { Vec::new() };
     let set = ValidationSet::new(profile, 7);
     let size = set.sizes()[0];
     let renderer = ValidationRenderer::new(size)?;
@@ -186,6 +189,7 @@ fn time(mode: Mode, cache: &std::path::Path, passes: usize, profile: Profile) ->
                 .map(|case| validation_frame(&renderer, case, cache))
                 .collect::<Result<Vec<_>, Error>>()?;
             for frame in &frames {
+                evict_caches(&mut evictor);
                 let started = thread_cpu_s();
                 let reading = estimator.estimate(frame);
                 cpu_ms.push((thread_cpu_s() - started) * 1e3);
@@ -205,6 +209,19 @@ fn time(mode: Mode, cache: &std::path::Path, passes: usize, profile: Profile) ->
         );
     }
     Ok(())
+}
+
+/// Twice the last-level cache of the machine these figures come from (32 MB): writing it all leaves none of the
+/// estimator's own data cached.
+const EVICTION_BYTES: usize = 64 << 20;
+
+/// Writes every cache line of `buffer` (empty: nothing), as a frame's decoding and the daemon's other work do
+/// between two frames: each estimate then starts with its model's matrices out of the caches.
+fn evict_caches(buffer: &mut [u8]) {
+    for line in buffer.chunks_mut(64) {
+        line[0] = line[0].wrapping_add(1);
+    }
+    std::hint::black_box(&buffer);
 }
 
 fn profile_arg(arg: Option<&String>) -> Result<Profile, Error> {
@@ -228,15 +245,20 @@ fn main() -> Result<(), Error> {
         Some("dump") if args.len() == 3 || args.len() == 4 => {
             dump(&args[1], std::path::Path::new(&args[2]), profile_arg(args.get(3))?)
         }
-        Some("time") if args.len() == 4 || args.len() == 5 => time(
+        Some("time") if (4..=6).contains(&args.len()) => time(
             args[1].parse()?,
             std::path::Path::new(&args[2]),
             args[3].parse()?,
             profile_arg(args.get(4))?,
+            match args.get(5).map(String::as_str) {
+                None => false,
+                Some("cold") => true,
+                Some(other) => return Err(format!("unknown option {other} (cold)").into()),
+            },
         ),
         _ => Err(
             "usage: estimate_profile run MODE WxH REPEATS [DECODE_SCALE] | dump OUT CACHE_DIR [quick|full] \
-             | time MODE CACHE_DIR PASSES [quick|full]"
+             | time MODE CACHE_DIR PASSES [quick|full] [cold]"
                 .into(),
         ),
     }
