@@ -2908,22 +2908,6 @@ pub fn normal_quantile(p: f64) -> f64 {
     }
 }
 
-/// Chi-square quantile with `dof` degrees of freedom at standard normal quantile `z` (Wilson-Hilferty).
-pub fn chi_square_quantile(dof: f64, z: f64) -> f64 {
-    let v = 2.0 / (9.0 * dof);
-    dof * (1.0 - v + z * v.sqrt()).max(0.0).powi(3)
-}
-
-/// Upper tail probability of chi-square (Wilson-Hilferty).
-pub fn chi_square_upper_tail(dof: f64, x: f64) -> f64 {
-    if !(x > 0.0) {
-        return 1.0;
-    }
-    let v = 2.0 / (9.0 * dof);
-    let z = ((x / dof).cbrt() - (1.0 - v)) / v.sqrt();
-    0.5 * libm::erfc(z / std::f64::consts::SQRT_2)
-}
-
 /// A noise level (mm per axis) and how well it is known: the degrees of freedom of the chi-square that a sum of
 /// squares as precise would have (infinite for a noise that is given, not measured).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -2962,7 +2946,7 @@ impl NoiseEstimate {
 }
 
 /// The quantile of F(k, m) at standard normal quantile `z` (Paulson's normal approximation, Wilson-Hilferty's for
-/// both chi-squares; m infinite gives chi-square(k) / k as `chi_square_quantile` does).
+/// both chi-squares; m infinite gives chi-square(k) / k, a noise known exactly).
 pub fn f_quantile(k: f64, m: f64, z: f64) -> f64 {
     let (c, d) = (2.0 / (9.0 * m), 2.0 / (9.0 * k));
     let (a, b) = (1.0 - c, 1.0 - d);
@@ -2979,7 +2963,7 @@ pub fn f_quantile(k: f64, m: f64, z: f64) -> f64 {
     u.max(0.0).powi(3)
 }
 
-/// Upper tail probability of F(k, m) at `x` (Paulson).
+/// Upper tail probability of F(k, m) at `x` (Paulson; m infinite: chi-square(k) / k).
 pub fn f_upper_tail(k: f64, m: f64, x: f64) -> f64 {
     if !(x > 0.0) {
         return 1.0;
@@ -3263,10 +3247,10 @@ mod tests {
     fn quantiles_match_tables() {
         assert!((normal_quantile(0.975) - 1.959_964).abs() < 1e-6);
         assert!((normal_quantile(1.0 - 1e-6) - 4.753_424).abs() < 1e-5);
-        assert!((chi_square_quantile(10.0, normal_quantile(0.95)) - 18.307).abs() < 0.05);
-        assert!((chi_square_upper_tail(10.0, 18.307) - 0.05).abs() < 0.003);
-        // F(10, 20) and F(300, 150) at 95 % and 1 - 1e-6 (tables; Paulson's approximation is within 1 %), and an
-        // infinite second dof is chi-square(k) / k.
+        // An infinite second dof is chi-square(k) / k: chi-square(10) at 95 % is 18.307.
+        assert!((10.0 * f_quantile(10.0, f64::INFINITY, normal_quantile(0.95)) - 18.307).abs() < 0.05);
+        assert!((f_upper_tail(10.0, f64::INFINITY, 18.307 / 10.0) - 0.05).abs() < 0.003);
+        // F(10, 20) and F(300, 150) at 95 % and 1 - 1e-6 (tables; Paulson's approximation is within 1 %).
         for (k, m, p, table) in [
             (10.0, 20.0, 0.95, 2.348),
             (300.0, 150.0, 0.95, 1.2693),
@@ -3282,8 +3266,6 @@ mod tests {
                 "tail at {q}"
             );
         }
-        let z = normal_quantile(1.0 - 1e-6);
-        assert!((f_quantile(330.0, f64::INFINITY, z) * 330.0 - chi_square_quantile(330.0, z)).abs() < 1e-9);
     }
 
     #[test]
