@@ -17,6 +17,7 @@
 //! newtons over the truth (median: the calibration this sensor would need) and the scatter of that ratio about its
 //! median (RMS), and the edges' direction errors. Every frame is seeded: two runs print the same table.
 
+use nusense_bench::metrics::{distance, edge_angle_error_deg, rms};
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use nusense_geometry::Point2;
 use nusense_sim::{Contact, Damage, Occlusion, Renderer, Scene, SensorModel, NOMINAL_LED_CURRENT_MA};
@@ -106,26 +107,20 @@ impl Row {
             Truth::Press(at, force) => match reading.contact_mm() {
                 None => self.missed += 1,
                 Some(found) => {
-                    self.location_mm.push((found[0] - at[0]).hypot(found[1] - at[1]));
+                    self.location_mm.push(distance(found, at));
                     self.force_ratio.push(reading.force_n() / force);
                     self.split += usize::from(reading.contacts().len() > 1);
                 }
             },
             Truth::Edge(angle) => match reading.contact_mm() {
                 None => self.missed += 1,
-                Some(_) => self.edge_deg.push(
-                    reading
-                        .edge_angle_deg()
-                        .map(|found| ((found - angle + 90.0).rem_euclid(180.0) - 90.0).abs()),
-                ),
+                Some(_) => self
+                    .edge_deg
+                    .push(reading.edge_angle_deg().map(|found| edge_angle_error_deg(found, angle))),
             },
             Truth::Two(presses) => {
                 let listed = reading.contacts();
-                let found = |(at, _): (Point2, f64)| {
-                    listed
-                        .iter()
-                        .any(|c| (c.centre_mm[0] - at[0]).hypot(c.centre_mm[1] - at[1]) < 2.0)
-                };
+                let found = |(at, _): (Point2, f64)| listed.iter().any(|c| distance(c.centre_mm, at) < 2.0);
                 self.pairs_listed.1 += 1;
                 self.pairs_listed.0 += usize::from(presses.into_iter().all(found));
             }
@@ -134,7 +129,6 @@ impl Row {
     }
 
     fn markdown(&self) -> String {
-        let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
         let worst = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
         let mut ratios = self.force_ratio.clone();
         ratios.sort_by(f64::total_cmp);
@@ -153,12 +147,16 @@ impl Row {
         let located = if self.location_mm.is_empty() {
             String::new()
         } else {
-            format!("{:.2} / {:.2}", rms(&self.location_mm), worst(&self.location_mm))
+            format!(
+                "{:.2} / {:.2}",
+                rms(&self.location_mm).unwrap_or(f64::NAN),
+                worst(&self.location_mm)
+            )
         };
         let force = if ratios.is_empty() {
             String::new()
         } else {
-            format!("{median:.3} / {:.1} %", 100.0 * rms(&scatter))
+            format!("{median:.3} / {:.1} %", 100.0 * rms(&scatter).unwrap_or(f64::NAN))
         };
         format!(
             "| {} | {} | {} | {} | {} | {} | {located} | {force} | {} | {pairs} |",
