@@ -311,7 +311,17 @@ struct Row {
 /// Issue 12's table: every estimator mode on the validation set, one row per figure with the issue's target, one
 /// column per mode.
 pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
-    let main = v.sizes.first().map_or_else(String::new, |(w, h)| format!("{w}x{h}"));
+    let mut out = validation_header(v);
+    let mut rows = target_rows(v);
+    rows.extend(other_rows(v));
+    out += &markdown_table(v, &rows);
+    out += &notes_and_rates(v);
+    out
+}
+
+/// The table's heading and what the set, the calibration and the columns are.
+fn validation_header(v: &crate::validation::ValidationReport) -> String {
+    let main = main_size(v);
     let mut out = String::new();
     let _ =
         writeln!(
@@ -332,14 +342,36 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
         v.sizes.iter().map(|(w, h)| format!("{w}x{h}")).collect::<Vec<_>>().join(", "),
         v.baseline
     );
+    out
+}
+
+/// The main size's name, e.g. "2048x1536".
+fn main_size(v: &crate::validation::ValidationReport) -> String {
+    v.sizes.first().map_or_else(String::new, |(w, h)| format!("{w}x{h}"))
+}
+
+/// Adds a row to `rows`: `value` gives each mode's text and whether it meets `target`.
+fn push_row(
+    rows: &mut Vec<Row>,
+    v: &crate::validation::ValidationReport,
+    figure: String,
+    target: &'static str,
+    value: &dyn Fn(&ModeFigures) -> (String, Option<bool>),
+) {
+    rows.push(Row {
+        figure,
+        target,
+        values: v.modes.iter().map(value).collect(),
+    });
+}
+
+/// The rows of the figures issue 12 sets a target for.
+fn target_rows(v: &crate::validation::ValidationReport) -> Vec<Row> {
+    let main = main_size(v);
     let within = |value: Option<f64>, limit: f64| Some(value.is_some_and(|x| x <= limit));
     let mut rows: Vec<Row> = Vec::new();
-    let mut row = |figure: String, target: &'static str, value: &dyn Fn(&ModeFigures) -> (String, Option<bool>)| {
-        rows.push(Row {
-            figure,
-            target,
-            values: v.modes.iter().map(value).collect(),
-        });
+    let mut row = |figure, target, value: &dyn Fn(&ModeFigures) -> (String, Option<bool>)| {
+        push_row(&mut rows, v, figure, target, value)
     };
     row(
         format!("median / p99 ms per {main} frame"),
@@ -435,6 +467,16 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
             within(m.tangential_direction_max_deg, 5.0),
         )
     });
+    rows
+}
+
+/// The rows of the figures beside issue 12's targets: pushes, torque, damaged pads, other sizes, refusals and the
+/// calibration.
+fn other_rows(v: &crate::validation::ValidationReport) -> Vec<Row> {
+    let mut rows: Vec<Row> = Vec::new();
+    let mut row = |figure, target, value: &dyn Fn(&ModeFigures) -> (String, Option<bool>)| {
+        push_row(&mut rows, v, figure, target, value)
+    };
     row(
         "tangential force RMS, N (read / true, median): pushes, the tangential scale fitted on the calibration pushes"
             .into(),
@@ -493,7 +535,12 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
     row("force calibration".into(), "", &|m| {
         (m.calibration.clone().unwrap_or_else(|| "–".into()), None)
     });
+    rows
+}
 
+/// The rows as a markdown table, one column per mode, a missed target marked ✗.
+fn markdown_table(v: &crate::validation::ValidationReport, rows: &[Row]) -> String {
+    let mut out = String::new();
     let _ = writeln!(
         out,
         "| figure | target | {} |",
@@ -504,7 +551,7 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
             .join(" | ")
     );
     let _ = writeln!(out, "|---|---|{}", "---|".repeat(v.modes.len()));
-    for r in &rows {
+    for r in rows {
         let cells: Vec<String> = r
             .values
             .iter()
@@ -515,6 +562,12 @@ pub fn validation_markdown(v: &crate::validation::ValidationReport) -> String {
             .collect();
         let _ = writeln!(out, "| {} | {} | {} |", r.figure, r.target, cells.join(" | "));
     }
+    out
+}
+
+/// The modes' errors, if any, and each mode's detection rate per force.
+fn notes_and_rates(v: &crate::validation::ValidationReport) -> String {
+    let mut out = String::new();
     let notes: Vec<String> = v
         .modes
         .iter()

@@ -610,97 +610,171 @@ fn detection_floor(scored: &[Scored], kind: CaseKind) -> (Vec<(f64, f64)>, Optio
 }
 
 pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
-    let of = |kind: CaseKind| scored.iter().filter(move |s| s.kind == kind);
-    let times: Vec<f64> = scored.iter().filter_map(|s| s.elapsed_ms).collect();
-    let calibration = ForceCalibration::fit(scored);
-
-    let mut location_errors = Vec::new();
-    let mut localisation_misses = 0;
-    for s in of(CaseKind::Press) {
-        match (
-            s.observed.as_ref().filter(|o| o.contact).and_then(|o| o.contact_mm),
-            strongest_centre(&s.truth),
-        ) {
-            (Some(found), Some(truth)) => location_errors.push(distance(found, truth)),
-            _ => localisation_misses += 1,
-        }
-    }
-
-    let force_errors = |kinds: &[CaseKind]| -> Option<f64> {
-        let calibration = calibration.as_ref()?;
-        let errors: Vec<f64> = scored
-            .iter()
-            .filter(|s| kinds.contains(&s.kind))
-            .map(|s| {
-                let truth = s.truth.frame.force_vector_n[2];
-                let found = s.observed.as_ref().and_then(|o| calibration.force_n(o)).unwrap_or(0.0);
-                found - truth
-            })
-            .collect();
-        rms(&errors)
+    let cases = Cases {
+        scored,
+        calibration: ForceCalibration::fit(scored),
     };
-
+    let times: Vec<f64> = scored.iter().filter_map(|s| s.elapsed_ms).collect();
+    let (location_errors, localisation_misses) = cases.localisation_errors();
     let (detection_rates, detection_floor_n) = detection_floor(scored, CaseKind::Floor);
     let (edge_detection_rates, edge_detection_floor_n) = detection_floor(scored, CaseKind::EdgeFloor);
-    let rests: Vec<&Scored> = of(CaseKind::Rest).collect();
-    let false_contacts = rests
-        .iter()
-        .filter(|s| s.observed.as_ref().is_some_and(|o| o.contact))
-        .count();
-
-    let mut edge_errors = Vec::new();
-    let mut edge_misses = 0;
-    for s in of(CaseKind::Edge) {
-        let truth = s.truth.frame.contacts.first().and_then(|c| c.edge_angle_deg);
-        match (s.observed.as_ref().and_then(|o| o.edge_angle_deg), truth) {
-            (Some(found), Some(truth)) => edge_errors.push(edge_angle_error_deg(found, truth)),
-            _ => edge_misses += 1,
-        }
-    }
-
-    let two: Vec<&Scored> = of(CaseKind::TwoContacts).collect();
+    let (edge_errors, edge_misses) = cases.edge_errors();
     let lists_contacts = scored
         .iter()
         .any(|s| s.observed.as_ref().is_some_and(|o| o.contacts.is_some()));
-    let two_contacts_ok = lists_contacts.then(|| {
-        two.iter()
-            .filter(|s| {
-                let Some(listed) = s.observed.as_ref().and_then(|o| o.contacts.as_ref()) else {
-                    return false;
-                };
-                let mut used = vec![false; listed.len()];
-                s.truth.frame.contacts.iter().all(|truth| {
-                    let best = listed
-                        .iter()
-                        .enumerate()
-                        .filter(|(i, c)| !used[*i] && c.centre_mm.is_some())
-                        .map(|(i, c)| (i, distance(c.centre_mm.unwrap_or_default(), truth.centre_mm)))
-                        .min_by(|a, b| a.1.total_cmp(&b.1));
-                    match best {
-                        Some((i, d)) if d <= TWO_CONTACT_MATCH_MM => {
-                            used[i] = true;
-                            let force = match &calibration {
-                                Some(calibration) => calibration.contact_force_n(&listed[i]),
-                                None => listed[i].force_n,
-                            };
-                            force.is_some_and(|f| {
-                                (f - truth.normal_force_n).abs() <= TWO_CONTACT_FORCE_TOLERANCE * truth.normal_force_n
-                            })
-                        }
-                        _ => false,
-                    }
-                })
-            })
+    let direction_errors = cases.tangential_direction_errors();
+    let (tangential_force_errors, tangential_force_ratios) = cases.tangential_force_errors();
+    let (push_errors, push_unshifted_errors) = cases.push_localisation_errors();
+    let rotation_errors = cases.rotation_errors();
+    ModeFigures {
+        mode,
+        frames: scored.len(),
+        refused: scored.iter().filter(|s| s.observed.is_none()).count(),
+        median_ms: quantile(&times, 0.5),
+        p99_ms: quantile(&times, 0.99),
+        speedup: None,
+        calibration: cases.calibration.as_ref().map(ForceCalibration::name),
+        localisation_rmse_mm: rms(&location_errors),
+        localisation_misses,
+        localisation_frames: cases.of(CaseKind::Press).count(),
+        force_rms_n: cases.force_rms_n(&[CaseKind::Press]),
+        force_rms_with_motion_n: cases.force_rms_n(&[CaseKind::Press, CaseKind::CameraMotion]),
+        detection_floor_n,
+        detection_rates,
+        edge_detection_floor_n,
+        edge_detection_rates,
+        false_contacts: cases.contacts_found(CaseKind::Rest),
+        rest_frames: cases.of(CaseKind::Rest).count(),
+        edge_mae_deg: nusense_estimator::stats::mean(&edge_errors),
+        edge_max_deg: edge_errors.iter().copied().reduce(f64::max),
+        edge_misses,
+        edge_frames: cases.of(CaseKind::Edge).count(),
+        two_contacts_ok: lists_contacts.then(|| {
+            cases
+                .of(CaseKind::TwoContacts)
+                .filter(|s| cases.lists_each_contact(s))
+                .count()
+        }),
+        two_contact_frames: cases.of(CaseKind::TwoContacts).count(),
+        edges_one_contact: lists_contacts.then(|| cases.edges_listed_as_one()),
+        round_pairs_with_edge: cases
+            .of(CaseKind::TwoContacts)
+            .filter(|s| s.observed.as_ref().is_some_and(|o| o.edge_angle_deg.is_some()))
+            .count(),
+        tangential_direction_mae_deg: nusense_estimator::stats::mean(&direction_errors),
+        tangential_direction_max_deg: direction_errors.iter().copied().reduce(f64::max),
+        tangential_force_rms_n: rms(&tangential_force_errors),
+        push_localisation_rmse_mm: rms(&push_errors),
+        push_localisation_unshifted_rmse_mm: rms(&push_unshifted_errors),
+        push_force_rms_n: cases.push_force_rms_n(None),
+        push_force_unshared_rms_n: cases.push_force_rms_n(Some(0.0)),
+        tangential_force_ratio: quantile(&tangential_force_ratios, 0.5),
+        torque_rms_nmm: rms(&cases.torque_errors()),
+        camera_rotation_rms_deg: rms(&rotation_errors),
+        camera_rotation_max_deg: rotation_errors.iter().map(|e| e.abs()).reduce(f64::max),
+        damaged_detected: cases.contacts_found(CaseKind::Damaged),
+        damaged_frames: cases.of(CaseKind::Damaged).count(),
+        resolution_rmse_mm: rms(&cases.resolution_errors()),
+        error: None,
+    }
+}
+
+/// One mode's scored cases and the force calibration fitted on them: what each figure of the table is read from.
+struct Cases<'a> {
+    scored: &'a [Scored],
+    calibration: Option<ForceCalibration>,
+}
+
+impl<'a> Cases<'a> {
+    fn of(&self, kind: CaseKind) -> impl Iterator<Item = &'a Scored> {
+        self.scored.iter().filter(move |s| s.kind == kind)
+    }
+
+    /// How many of the cases of `kind` the mode reads as a contact.
+    fn contacts_found(&self, kind: CaseKind) -> usize {
+        self.of(kind)
+            .filter(|s| s.observed.as_ref().is_some_and(|o| o.contact))
             .count()
-    });
+    }
 
-    let round_pairs_with_edge = two
-        .iter()
-        .filter(|s| s.observed.as_ref().is_some_and(|o| o.edge_angle_deg.is_some()))
-        .count();
+    /// The presses' distances from the strongest true contact (mm), and how many presses had no contact read.
+    fn localisation_errors(&self) -> (Vec<f64>, usize) {
+        let mut errors = Vec::new();
+        let mut misses = 0;
+        for s in self.of(CaseKind::Press) {
+            match (
+                s.observed.as_ref().filter(|o| o.contact).and_then(|o| o.contact_mm),
+                strongest_centre(&s.truth),
+            ) {
+                (Some(found), Some(truth)) => errors.push(distance(found, truth)),
+                _ => misses += 1,
+            }
+        }
+        (errors, misses)
+    }
 
-    let edges_one_contact = lists_contacts.then(|| {
-        of(CaseKind::Edge)
+    /// RMS of the calibrated normal force's error over the cases of `kinds` (a missed press reads 0 N); `None`
+    /// without a calibration.
+    fn force_rms_n(&self, kinds: &[CaseKind]) -> Option<f64> {
+        let calibration = self.calibration.as_ref()?;
+        let errors: Vec<f64> = self
+            .scored
+            .iter()
+            .filter(|s| kinds.contains(&s.kind))
+            .map(|s| {
+                let found = s.observed.as_ref().and_then(|o| calibration.force_n(o)).unwrap_or(0.0);
+                found - s.truth.frame.force_vector_n[2]
+            })
+            .collect();
+        rms(&errors)
+    }
+
+    /// The edges' direction errors (deg), and how many edges had no direction read.
+    fn edge_errors(&self) -> (Vec<f64>, usize) {
+        let mut errors = Vec::new();
+        let mut misses = 0;
+        for s in self.of(CaseKind::Edge) {
+            let truth = s.truth.frame.contacts.first().and_then(|c| c.edge_angle_deg);
+            match (s.observed.as_ref().and_then(|o| o.edge_angle_deg), truth) {
+                (Some(found), Some(truth)) => errors.push(edge_angle_error_deg(found, truth)),
+                _ => misses += 1,
+            }
+        }
+        (errors, misses)
+    }
+
+    /// Whether every true contact of a case has a listed contact of its own within TWO_CONTACT_MATCH_MM whose
+    /// calibrated force is within TWO_CONTACT_FORCE_TOLERANCE of its own.
+    fn lists_each_contact(&self, s: &Scored) -> bool {
+        let Some(listed) = s.observed.as_ref().and_then(|o| o.contacts.as_ref()) else {
+            return false;
+        };
+        let mut used = vec![false; listed.len()];
+        s.truth.frame.contacts.iter().all(|truth| {
+            let best = listed
+                .iter()
+                .enumerate()
+                .filter(|(i, c)| !used[*i] && c.centre_mm.is_some())
+                .map(|(i, c)| (i, distance(c.centre_mm.unwrap_or_default(), truth.centre_mm)))
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            match best {
+                Some((i, d)) if d <= TWO_CONTACT_MATCH_MM => {
+                    used[i] = true;
+                    let force = match &self.calibration {
+                        Some(calibration) => calibration.contact_force_n(&listed[i]),
+                        None => listed[i].force_n,
+                    };
+                    force.is_some_and(|f| {
+                        (f - truth.normal_force_n).abs() <= TWO_CONTACT_FORCE_TOLERANCE * truth.normal_force_n
+                    })
+                }
+                _ => false,
+            }
+        })
+    }
+
+    fn edges_listed_as_one(&self) -> usize {
+        self.of(CaseKind::Edge)
             .filter(|s| {
                 s.observed
                     .as_ref()
@@ -708,72 +782,87 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
                     .is_some_and(|c| c.len() == 1)
             })
             .count()
-    });
+    }
 
-    let direction_errors: Vec<f64> = of(CaseKind::Tangential)
-        .filter_map(|s| {
-            let found = s.observed.as_ref()?.force_vector_n?;
-            let truth = s.truth.frame.force_vector_n;
-            Some(angle_between_deg([found[0], found[1]], [truth[0], truth[1]]))
-        })
-        .collect();
-    let direction_count = of(CaseKind::Tangential).count();
-    // Misses count as a full reversal when the mode reports force vectors at all.
-    let direction_errors = if direction_errors.is_empty() {
-        direction_errors
-    } else {
-        let mut all = direction_errors;
-        all.resize(direction_count, 180.0);
+    /// The pushes' tangential direction errors (deg); empty when the mode reports no force vector.
+    fn tangential_direction_errors(&self) -> Vec<f64> {
+        let errors: Vec<f64> = self
+            .of(CaseKind::Tangential)
+            .filter_map(|s| {
+                let found = s.observed.as_ref()?.force_vector_n?;
+                let truth = s.truth.frame.force_vector_n;
+                Some(angle_between_deg([found[0], found[1]], [truth[0], truth[1]]))
+            })
+            .collect();
+        if errors.is_empty() {
+            return errors;
+        }
+        // Misses count as a full reversal when the mode reports force vectors at all.
+        let mut all = errors;
+        all.resize(self.of(CaseKind::Tangential).count(), 180.0);
         all
-    };
+    }
 
-    // The tangential scale is fitted on the calibration pushes, near the centre: how well one scale holds over the
-    // pad shows here.
-    let tangential: Vec<([f64; 2], Option<[f64; 2]>)> = of(CaseKind::Tangential)
-        .map(|s| {
-            let truth = s.truth.frame.force_vector_n;
-            let scale = calibration.as_ref().map_or(1.0, ForceCalibration::tangential_scale);
-            let found = s
-                .observed
-                .as_ref()
-                .filter(|o| o.contact)
-                .and_then(|o| o.force_vector_n)
-                .map(|f| [f[0] * scale, f[1] * scale]);
-            ([truth[0], truth[1]], found)
-        })
-        .collect();
-    let reports_vectors = tangential.iter().any(|(_, found)| found.is_some());
-    let tangential_force_errors: Vec<f64> = if reports_vectors {
-        tangential
+    /// The pushes' tangential force errors (N; a push read as no contact, 0 N) and read / true ratios, with the
+    /// tangential scale. It is fitted on the calibration pushes, near the centre: how well one scale holds over the
+    /// pad shows here. Empty errors when the mode reports no force vector.
+    fn tangential_force_errors(&self) -> (Vec<f64>, Vec<f64>) {
+        let scale = self
+            .calibration
+            .as_ref()
+            .map_or(1.0, ForceCalibration::tangential_scale);
+        let tangential: Vec<([f64; 2], Option<[f64; 2]>)> = self
+            .of(CaseKind::Tangential)
+            .map(|s| {
+                let truth = s.truth.frame.force_vector_n;
+                let found = s
+                    .observed
+                    .as_ref()
+                    .filter(|o| o.contact)
+                    .and_then(|o| o.force_vector_n)
+                    .map(|f| [f[0] * scale, f[1] * scale]);
+                ([truth[0], truth[1]], found)
+            })
+            .collect();
+        let errors = if tangential.iter().any(|(_, found)| found.is_some()) {
+            tangential
+                .iter()
+                .map(|(truth, found)| distance(found.unwrap_or([0.0, 0.0]), *truth))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let ratios = tangential
             .iter()
-            .map(|(truth, found)| distance(found.unwrap_or([0.0, 0.0]), *truth))
-            .collect()
-    } else {
-        Vec::new()
-    };
-    let tangential_force_ratios: Vec<f64> = tangential
-        .iter()
-        .filter_map(|(truth, found)| found.map(|f| f[0].hypot(f[1]) / truth[0].hypot(truth[1])))
-        .collect();
+            .filter_map(|(truth, found)| found.map(|f| f[0].hypot(f[1]) / truth[0].hypot(truth[1])))
+            .collect();
+        (errors, ratios)
+    }
 
-    // The push shift is fitted on the calibration pushes, near the centre, like the tangential scale.
-    let push_shift_mm = calibration.as_ref().map_or(0.0, ForceCalibration::push_shift_mm);
-    let most_mm = most_shift_mm(&SensorConfig::default().pad);
-    let (push_errors, push_unshifted_errors): (Vec<f64>, Vec<f64>) = of(CaseKind::Tangential)
-        .filter_map(|s| {
-            let found = s.observed.as_ref().filter(|o| o.contact)?;
-            let (read, truth) = (found.contact_mm?, strongest_centre(&s.truth)?);
-            let shifted = match found.force_vector_n {
-                Some(f) => shifted_centre(read, f, push_shift_mm, most_mm),
-                None => read,
-            };
-            Some((distance(shifted, truth), distance(read, truth)))
-        })
-        .unzip();
+    /// The pushes' localisation errors (mm) with the push shift (fitted on the calibration pushes, near the centre,
+    /// like the tangential scale) and without it.
+    fn push_localisation_errors(&self) -> (Vec<f64>, Vec<f64>) {
+        let push_shift_mm = self.calibration.as_ref().map_or(0.0, ForceCalibration::push_shift_mm);
+        let most_mm = most_shift_mm(&SensorConfig::default().pad);
+        self.of(CaseKind::Tangential)
+            .filter_map(|s| {
+                let found = s.observed.as_ref().filter(|o| o.contact)?;
+                let (read, truth) = (found.contact_mm?, strongest_centre(&s.truth)?);
+                let shifted = match found.force_vector_n {
+                    Some(f) => shifted_centre(read, f, push_shift_mm, most_mm),
+                    None => read,
+                };
+                Some((distance(shifted, truth), distance(read, truth)))
+            })
+            .unzip()
+    }
 
-    let push_force_errors = |share: Option<f64>| -> Option<f64> {
-        let calibration = calibration.as_ref()?;
-        let errors: Vec<f64> = of(CaseKind::Tangential)
+    /// RMS of the pushes' calibrated normal force error, with the push's normal share `share` (the calibration's
+    /// own when `None`); `None` without a calibration.
+    fn push_force_rms_n(&self, share: Option<f64>) -> Option<f64> {
+        let calibration = self.calibration.as_ref()?;
+        let errors: Vec<f64> = self
+            .of(CaseKind::Tangential)
             .map(|s| {
                 let found = s.observed.as_ref().and_then(|o| match share {
                     Some(share) => calibration.force_with_share_n(o, share),
@@ -783,79 +872,41 @@ pub(crate) fn score(mode: Mode, scored: &[Scored]) -> ModeFigures {
             })
             .collect();
         rms(&errors)
-    };
+    }
 
-    let torque_errors: Vec<f64> = of(CaseKind::Twist)
-        .filter_map(|s| {
-            let scale = calibration.as_ref().map_or(1.0, ForceCalibration::tangential_scale);
-            Some(s.observed.as_ref()?.torque_nmm? * scale - s.truth.frame.torque_nmm)
-        })
-        .collect();
+    /// The twists' torque errors (N mm), with the tangential scale.
+    fn torque_errors(&self) -> Vec<f64> {
+        let scale = self
+            .calibration
+            .as_ref()
+            .map_or(1.0, ForceCalibration::tangential_scale);
+        self.of(CaseKind::Twist)
+            .filter_map(|s| Some(s.observed.as_ref()?.torque_nmm? * scale - s.truth.frame.torque_nmm))
+            .collect()
+    }
 
-    let rotation_errors: Vec<f64> = scored
-        .iter()
-        .filter_map(|s| {
-            let (_, image) = s.truth.camera_motion?;
-            let found = s.observed.as_ref()?.camera_motion.as_ref()?.rotation_deg?;
-            Some(found - image.rotation_deg)
-        })
-        .collect();
-
-    let damaged: Vec<&Scored> = of(CaseKind::Damaged).collect();
-    let resolution_errors: Vec<f64> = of(CaseKind::Resolution)
-        .filter_map(|s| {
-            Some(distance(
-                s.observed.as_ref().filter(|o| o.contact)?.contact_mm?,
-                strongest_centre(&s.truth)?,
-            ))
-        })
-        .collect();
-
-    ModeFigures {
-        mode,
-        frames: scored.len(),
-        refused: scored.iter().filter(|s| s.observed.is_none()).count(),
-        median_ms: quantile(&times, 0.5),
-        p99_ms: quantile(&times, 0.99),
-        speedup: None,
-        calibration: calibration.as_ref().map(ForceCalibration::name),
-        localisation_rmse_mm: rms(&location_errors),
-        localisation_misses,
-        localisation_frames: of(CaseKind::Press).count(),
-        force_rms_n: force_errors(&[CaseKind::Press]),
-        force_rms_with_motion_n: force_errors(&[CaseKind::Press, CaseKind::CameraMotion]),
-        detection_floor_n,
-        detection_rates,
-        edge_detection_floor_n,
-        edge_detection_rates,
-        false_contacts,
-        rest_frames: rests.len(),
-        edge_mae_deg: nusense_estimator::stats::mean(&edge_errors),
-        edge_max_deg: edge_errors.iter().copied().reduce(f64::max),
-        edge_misses,
-        edge_frames: of(CaseKind::Edge).count(),
-        two_contacts_ok,
-        two_contact_frames: two.len(),
-        edges_one_contact,
-        round_pairs_with_edge,
-        tangential_direction_mae_deg: nusense_estimator::stats::mean(&direction_errors),
-        tangential_direction_max_deg: direction_errors.iter().copied().reduce(f64::max),
-        tangential_force_rms_n: rms(&tangential_force_errors),
-        push_localisation_rmse_mm: rms(&push_errors),
-        push_localisation_unshifted_rmse_mm: rms(&push_unshifted_errors),
-        push_force_rms_n: push_force_errors(None),
-        push_force_unshared_rms_n: push_force_errors(Some(0.0)),
-        tangential_force_ratio: quantile(&tangential_force_ratios, 0.5),
-        torque_rms_nmm: rms(&torque_errors),
-        camera_rotation_rms_deg: rms(&rotation_errors),
-        camera_rotation_max_deg: rotation_errors.iter().map(|e| e.abs()).reduce(f64::max),
-        damaged_detected: damaged
+    /// The camera rotation's errors (deg) on every case with the camera moved.
+    fn rotation_errors(&self) -> Vec<f64> {
+        self.scored
             .iter()
-            .filter(|s| s.observed.as_ref().is_some_and(|o| o.contact))
-            .count(),
-        damaged_frames: damaged.len(),
-        resolution_rmse_mm: rms(&resolution_errors),
-        error: None,
+            .filter_map(|s| {
+                let (_, image) = s.truth.camera_motion?;
+                let found = s.observed.as_ref()?.camera_motion.as_ref()?.rotation_deg?;
+                Some(found - image.rotation_deg)
+            })
+            .collect()
+    }
+
+    /// The other sizes' localisation errors (mm), over the presses read as contacts.
+    fn resolution_errors(&self) -> Vec<f64> {
+        self.of(CaseKind::Resolution)
+            .filter_map(|s| {
+                Some(distance(
+                    s.observed.as_ref().filter(|o| o.contact)?.contact_mm?,
+                    strongest_centre(&s.truth)?,
+                ))
+            })
+            .collect()
     }
 }
 
