@@ -458,6 +458,20 @@ fn fraction(key: &'static str, v: f64) -> Result<(), ConfigError> {
     }
 }
 
+/// `v` within `range` (a NaN never is); `allowed` says so in the error.
+fn in_range(
+    key: &'static str,
+    v: f64,
+    range: std::ops::RangeInclusive<f64>,
+    allowed: &'static str,
+) -> Result<(), ConfigError> {
+    if range.contains(&v) {
+        Ok(())
+    } else {
+        Err(invalid(key, v, allowed))
+    }
+}
+
 impl SensorConfig {
     pub fn from_toml_str(text: &str) -> Result<Self, ConfigError> {
         let config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
@@ -484,6 +498,20 @@ impl SensorConfig {
 
     /// Checks every value against what the estimator can use; the error names the key.
     pub fn validate(&self) -> Result<(), ConfigError> {
+        self.validate_frame()?;
+        self.validate_gamma()?;
+        self.validate_paper()?;
+        self.validate_elastic()?;
+        self.validate_inverse()?;
+        if let Some(map) = &self.pad_map {
+            map.validate()
+                .map_err(|reason| invalid("pad_map", reason, "a map written by `nusense calibrate`"))?;
+        }
+        Ok(())
+    }
+
+    /// The camera, the pad's grid and the ROI.
+    fn validate_frame(&self) -> Result<(), ConfigError> {
         let cam = &self.camera;
         if cam.width < 16 || cam.height < 16 {
             return Err(invalid(
@@ -531,6 +559,11 @@ impl SensorConfig {
                 "the ROI must lie inside the camera.width x camera.height frame",
             ));
         }
+        Ok(())
+    }
+
+    /// What the gamma modes read: the shear thresholds, the paper's force line and the B-spline surface.
+    fn validate_gamma(&self) -> Result<(), ConfigError> {
         let t = &self.thresholds;
         finite_positive("thresholds.contact_shear_mm", t.contact_shear_mm)?;
         finite_positive("thresholds.max_displacement_cells", t.max_displacement_cells)?;
@@ -541,7 +574,7 @@ impl SensorConfig {
         finite("calibration.b", self.calibration.b)?;
         finite_positive("calibration.alpha", self.calibration.alpha)?;
         let s = &self.surface;
-        let (net_rows, net_cols) = (usize::from(pad.corner_rows()), usize::from(pad.corner_cols()));
+        let (net_rows, net_cols) = (usize::from(self.pad.corner_rows()), usize::from(self.pad.corner_cols()));
         if s.degree_u < 1 || s.degree_u >= net_rows {
             return Err(invalid(
                 "surface.degree_u",
@@ -556,9 +589,11 @@ impl SensorConfig {
                 "1 ..= corner columns - 1 (14 on the real pad)",
             ));
         }
-        if !(s.uv_step.is_finite() && s.uv_step >= 0.001 && s.uv_step <= 1.0) {
-            return Err(invalid("surface.uv_step", s.uv_step, "0.001 ..= 1"));
-        }
+        in_range("surface.uv_step", s.uv_step, 0.001..=1.0, "0.001 ..= 1")
+    }
+
+    /// The published method's image filters and quadrilateral search.
+    fn validate_paper(&self) -> Result<(), ConfigError> {
         let p = &self.paper;
         if p.bilateral_diameter == 0 {
             return Err(invalid("paper.bilateral_diameter", p.bilateral_diameter, "> 0"));
@@ -578,78 +613,72 @@ impl SensorConfig {
             ));
         }
         fraction("paper.quad_min_solidity", p.quad_min_solidity)?;
-        finite_positive("paper.pair_distance_px", p.pair_distance_px)?;
+        finite_positive("paper.pair_distance_px", p.pair_distance_px)
+    }
+
+    /// The pad's elastic model and the force calibration the inverse applies to it.
+    fn validate_elastic(&self) -> Result<(), ConfigError> {
         let e = &self.elastic;
         finite_positive("elastic.shear_modulus_kpa", e.shear_modulus_kpa)?;
-        if !(e.poisson_ratio.is_finite() && (0.0..=0.5).contains(&e.poisson_ratio)) {
-            return Err(invalid("elastic.poisson_ratio", e.poisson_ratio, "between 0 and 0.5"));
-        }
-        if !(e.cover_mm.is_finite() && (0.1..=20.0).contains(&e.cover_mm)) {
-            return Err(invalid("elastic.cover_mm", e.cover_mm, "0.1 ..= 20 mm"));
-        }
-        if !(e.gel_mm.is_finite() && (0.1..=50.0).contains(&e.gel_mm)) {
-            return Err(invalid("elastic.gel_mm", e.gel_mm, "0.1 ..= 50 mm"));
-        }
-        if !(e.skin_mm.is_finite() && (0.05..=20.0).contains(&e.skin_mm)) {
-            return Err(invalid("elastic.skin_mm", e.skin_mm, "0.05 ..= 20 mm"));
-        }
-        if !(e.skin_modulus_ratio.is_finite() && (0.01..=1000.0).contains(&e.skin_modulus_ratio)) {
-            return Err(invalid(
-                "elastic.skin_modulus_ratio",
-                e.skin_modulus_ratio,
-                "0.01 ..= 1000 (the skin's shear modulus over the gel's)",
-            ));
-        }
-        if !(e.bond_mm.is_finite() && (0.0..=20.0).contains(&e.bond_mm)) {
-            return Err(invalid("elastic.bond_mm", e.bond_mm, "0 (no bond layer) ..= 20 mm"));
-        }
-        if !(e.bond_modulus_ratio.is_finite() && (0.01..=1000.0).contains(&e.bond_modulus_ratio)) {
-            return Err(invalid(
-                "elastic.bond_modulus_ratio",
-                e.bond_modulus_ratio,
-                "0.01 ..= 1000 (the bond layer's shear modulus over the gel's)",
-            ));
-        }
-        if !(e.border_margin_mm.is_finite() && (0.0..=50.0).contains(&e.border_margin_mm)) {
-            return Err(invalid("elastic.border_margin_mm", e.border_margin_mm, "0 ..= 50 mm"));
-        }
-        if !(e.gel_refractive_index == 0.0 || (1.0..=3.0).contains(&e.gel_refractive_index)) {
-            return Err(invalid(
+        in_range("elastic.poisson_ratio", e.poisson_ratio, 0.0..=0.5, "between 0 and 0.5")?;
+        in_range("elastic.cover_mm", e.cover_mm, 0.1..=20.0, "0.1 ..= 20 mm")?;
+        in_range("elastic.gel_mm", e.gel_mm, 0.1..=50.0, "0.1 ..= 50 mm")?;
+        in_range("elastic.skin_mm", e.skin_mm, 0.05..=20.0, "0.05 ..= 20 mm")?;
+        in_range(
+            "elastic.skin_modulus_ratio",
+            e.skin_modulus_ratio,
+            0.01..=1000.0,
+            "0.01 ..= 1000 (the skin's shear modulus over the gel's)",
+        )?;
+        in_range("elastic.bond_mm", e.bond_mm, 0.0..=20.0, "0 (no bond layer) ..= 20 mm")?;
+        in_range(
+            "elastic.bond_modulus_ratio",
+            e.bond_modulus_ratio,
+            0.01..=1000.0,
+            "0.01 ..= 1000 (the bond layer's shear modulus over the gel's)",
+        )?;
+        in_range(
+            "elastic.border_margin_mm",
+            e.border_margin_mm,
+            0.0..=50.0,
+            "0 ..= 50 mm",
+        )?;
+        if e.gel_refractive_index != 0.0 {
+            in_range(
                 "elastic.gel_refractive_index",
                 e.gel_refractive_index,
+                1.0..=3.0,
                 "0 (no parallax) or 1 ..= 3",
-            ));
+            )?;
         }
-        if !(e.tangential_force_scale.is_finite() && (0.01..=100.0).contains(&e.tangential_force_scale)) {
-            return Err(invalid(
-                "elastic.tangential_force_scale",
-                e.tangential_force_scale,
-                "0.01 ..= 100 (the reference's tangential force over the model's)",
-            ));
-        }
-        if !(e.push_centre_shift_mm.is_finite() && (-10.0..=10.0).contains(&e.push_centre_shift_mm)) {
-            return Err(invalid(
-                "elastic.push_centre_shift_mm",
-                e.push_centre_shift_mm,
-                "-10 ..= 10 (mm along the push per unit of push over load)",
-            ));
-        }
-        if !(e.push_normal_share.is_finite() && (-1.0..=1.0).contains(&e.push_normal_share)) {
-            return Err(invalid(
-                "elastic.push_normal_share",
-                e.push_normal_share,
-                "-1 ..= 1 (the normal force read too much per unit of push squared over load)",
-            ));
-        }
+        in_range(
+            "elastic.tangential_force_scale",
+            e.tangential_force_scale,
+            0.01..=100.0,
+            "0.01 ..= 100 (the reference's tangential force over the model's)",
+        )?;
+        in_range(
+            "elastic.push_centre_shift_mm",
+            e.push_centre_shift_mm,
+            -10.0..=10.0,
+            "-10 ..= 10 (mm along the push per unit of push over load)",
+        )?;
+        in_range(
+            "elastic.push_normal_share",
+            e.push_normal_share,
+            -1.0..=1.0,
+            "-1 ..= 1 (the normal force read too much per unit of push squared over load)",
+        )
+    }
+
+    /// The inverse's noise, prior and contact test, and the re-tare.
+    fn validate_inverse(&self) -> Result<(), ConfigError> {
         let i = &self.inverse;
         finite_positive("inverse.noise_mm", i.noise_mm)?;
         finite_positive("inverse.traction_prior_n", i.traction_prior_n)?;
         finite_positive("inverse.noise_floor_mm", i.noise_floor_mm)?;
         finite_positive("inverse.noise_floor_px", i.noise_floor_px)?;
-        if !(i.false_alarm_probability.is_finite()
-            && i.false_alarm_probability > 0.0
-            && i.false_alarm_probability < 0.5)
-        {
+        if !(i.false_alarm_probability > 0.0 && i.false_alarm_probability < 0.5) {
             return Err(invalid(
                 "inverse.false_alarm_probability",
                 i.false_alarm_probability,
@@ -659,10 +688,6 @@ impl SensorConfig {
         finite_positive("retare.motion_mm", self.retare.motion_mm)?;
         if self.retare.frames == 0 {
             return Err(invalid("retare.frames", 0, ">= 1"));
-        }
-        if let Some(map) = &self.pad_map {
-            map.validate()
-                .map_err(|reason| invalid("pad_map", reason, "a map written by `nusense calibrate`"))?;
         }
         Ok(())
     }
@@ -725,6 +750,70 @@ mod tests {
             SensorConfig::from_toml_str("[elastic]\nskin_thickness_mm = 1.0\n"),
             Err(ConfigError::Parse { .. })
         ));
+    }
+
+    /// Every checked value, set wrong (out of range, or NaN where a range is checked), is refused by the error naming
+    /// its key, and the default config passes.
+    #[test]
+    fn every_checked_value_names_its_key_when_wrong() {
+        type Spoil = fn(&mut SensorConfig);
+        let cases: [(&str, Spoil); 34] = [
+            ("camera.width", |c| c.camera.width = 8),
+            ("camera.fx", |c| c.camera.fx = 0.0),
+            ("camera.cy", |c| c.camera.cy = f64::NAN),
+            ("camera.distortion", |c| c.camera.distortion[2] = f64::INFINITY),
+            ("pad.rows", |c| c.pad.cols = 2),
+            ("pad.height_mm", |c| c.pad.height_mm = -40.0),
+            ("roi.width", |c| c.roi.height = 0),
+            ("roi.x", |c| c.roi.x = c.camera.width),
+            ("thresholds.contact_shear_mm", |c| c.thresholds.contact_shear_mm = 0.0),
+            ("thresholds.edge_min_confidence", |c| {
+                c.thresholds.edge_min_confidence = 1.5
+            }),
+            ("calibration.b", |c| c.calibration.b = f64::NAN),
+            ("calibration.alpha", |c| c.calibration.alpha = 0.0),
+            ("surface.degree_u", |c| c.surface.degree_u = 0),
+            ("surface.degree_v", |c| c.surface.degree_v = 15),
+            ("surface.uv_step", |c| c.surface.uv_step = f64::NAN),
+            ("paper.bilateral_diameter", |c| c.paper.bilateral_diameter = 0),
+            ("paper.binary_threshold", |c| c.paper.binary_threshold = f64::INFINITY),
+            ("paper.quad_max_area_px2", |c| {
+                c.paper.quad_max_area_px2 = c.paper.quad_min_area_px2
+            }),
+            ("paper.pair_distance_px", |c| c.paper.pair_distance_px = -1.0),
+            ("elastic.shear_modulus_kpa", |c| c.elastic.shear_modulus_kpa = 0.0),
+            ("elastic.poisson_ratio", |c| c.elastic.poisson_ratio = 0.6),
+            ("elastic.poisson_ratio", |c| c.elastic.poisson_ratio = f64::NAN),
+            ("elastic.cover_mm", |c| c.elastic.cover_mm = 25.0),
+            ("elastic.gel_mm", |c| c.elastic.gel_mm = 0.0),
+            ("elastic.border_margin_mm", |c| c.elastic.border_margin_mm = -1.0),
+            ("elastic.gel_refractive_index", |c| c.elastic.gel_refractive_index = 0.5),
+            ("elastic.gel_refractive_index", |c| {
+                c.elastic.gel_refractive_index = f64::NAN
+            }),
+            ("inverse.noise_mm", |c| c.inverse.noise_mm = 0.0),
+            ("inverse.noise_floor_px", |c| c.inverse.noise_floor_px = f64::INFINITY),
+            ("inverse.false_alarm_probability", |c| {
+                c.inverse.false_alarm_probability = 0.5
+            }),
+            ("inverse.false_alarm_probability", |c| {
+                c.inverse.false_alarm_probability = f64::NAN
+            }),
+            ("retare.motion_mm", |c| c.retare.motion_mm = -1.0),
+            ("retare.frames", |c| c.retare.frames = 0),
+            ("elastic.push_centre_shift_mm", |c| {
+                c.elastic.push_centre_shift_mm = f64::NAN
+            }),
+        ];
+        assert_eq!(SensorConfig::default().validate().map_err(|e| e.to_string()), Ok(()));
+        for (key, spoil) in cases {
+            let mut config = SensorConfig::default();
+            spoil(&mut config);
+            assert_eq!(config.validate().unwrap_err().key(), Some(key));
+        }
+        let mut no_parallax = SensorConfig::default();
+        no_parallax.elastic.gel_refractive_index = 0.0;
+        assert!(no_parallax.validate().is_ok());
     }
 
     #[test]
