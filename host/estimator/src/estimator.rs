@@ -306,6 +306,82 @@ impl Estimator {
         relit_corners: &[bool],
     ) -> Result<(Reading, f64), EstimateError> {
         let valid: Vec<bool> = registration.corners.iter().map(|c| c.valid).collect();
+        let (motion, outcome, near_loads) = self.motion_and_test(lattice, &valid, relit_corners)?;
+        let gammas = self.paper_gammas(lattice, &motion, &valid)?;
+        let line = force(&self.config.calibration, gammas.compensated);
+
+        let mut local: Vec<f64> = (0..valid.len())
+            .filter(|&i| valid[i])
+            .map(|i| motion.displacement[2 * i].hypot(motion.displacement[2 * i + 1]))
+            .collect();
+        local.sort_unstable_by(|a, b| b.total_cmp(a));
+        let contact_score_mm = local.get(CONTACT_SUPPORT - 1).copied().unwrap_or(0.0);
+
+        let (touch, pressure_map) = if self.mode == Mode::Inverse {
+            let steady: Vec<bool> = (0..valid.len())
+                .map(|i| valid[i] && !self.rest.light_sensitive.get(i).copied().unwrap_or(false))
+                .collect();
+            self.inverse_touch(&motion, &valid, &steady, &near_loads, &outcome)
+        } else {
+            let field = PaperField {
+                compensated_paper_px: &gammas.compensated_paper_px,
+                samples: &gammas.samples,
+            };
+            (
+                self.line_touch(&field, &motion, &valid, &outcome, line.model_n, registration),
+                None,
+            )
+        };
+        let reading = Reading {
+            mode: self.mode,
+            touch,
+            test: ContactTest {
+                statistic: outcome.statistic,
+                threshold: outcome.threshold,
+                p_value: outcome.p_value,
+                noise_mm: outcome.noise_mm,
+                detection_floor_n: outcome.detection_floor_n,
+            },
+            camera_motion: motion.reported,
+            gamma: GammaReading {
+                gamma: gammas.compensated,
+                gamma_uncompensated: gammas.uncompensated,
+                samples_used: gammas.samples.used(),
+                samples_total: gammas.samples.total(),
+            },
+            force_model_n: line.model_n,
+            contact_score_mm,
+            pressure_map,
+            counts: LatticeCounts {
+                points_detected: lattice.corners_found(),
+                points_expected: self.config.pad.corner_count(),
+                squares_detected: lattice.squares_found(),
+                squares_expected: self.config.pad.yellow_count(),
+                points_valid: registration.valid_count(),
+                points_implausible: registration.implausible,
+            },
+            recovered: false,
+            retared: false,
+            retare_count: self.retare_count,
+            shear_field: shear_field(registration, &motion.displacement, &valid),
+            elapsed_ms: 0.0,
+        };
+        if reading.numbers().iter().any(|v| !v.is_finite()) {
+            return Err(EstimateError::NoPattern {
+                reason: "the measurement is not finite (degenerate lattice)".into(),
+            });
+        }
+        Ok((reading, motion.largest_mm))
+    }
+
+    /// The camera's motion removed, and the contact test on what is left (its verdict, and the corners within reach
+    /// of the loads it found).
+    fn motion_and_test(
+        &self,
+        lattice: &Lattice,
+        valid: &[bool],
+        relit_corners: &[bool],
+    ) -> Result<(Compensated, TestOutcome, Vec<usize>), EstimateError> {
         // The contact test leaves out the corners a change of light biases (after a camera move, or under the LEDs'
         // drift where the frame clips): their bias is no traction, while a contact moves many corners besides them.
         // Its noise is what this frame's corners show about the motion-only fit; the floor and everything measured
@@ -313,7 +389,7 @@ impl Estimator {
         let tested_valid: Vec<bool> = (0..valid.len())
             .map(|i| valid[i] && !relit_corners[i] && !self.rest.light_sensitive.get(i).copied().unwrap_or(false))
             .collect();
-        let (motion, tested_stage) = self.remove_motion(lattice, &valid, &tested_valid)?;
+        let (motion, tested_stage) = self.remove_motion(lattice, valid, &tested_valid)?;
         // The published detector keeps the noise the fast tracker was first judged by (its residuals after stage 1,
         // never below the configured floors): its corners' scatter on rest frames is not measured.
         let (outcome, near_loads) = match self.mode {
@@ -328,11 +404,21 @@ impl Estimator {
                 self.rest.noise_floor_mm,
             ),
         };
+        Ok((motion, outcome, near_loads))
+    }
 
+    /// The paper's gamma on the B-spline surface's samples, with the camera's motion removed and as the paper has it
+    /// (without).
+    fn paper_gammas(
+        &self,
+        lattice: &Lattice,
+        motion: &Compensated,
+        valid: &[bool],
+    ) -> Result<PaperGammas, EstimateError> {
         let uncompensated_paper_px: Vec<Point2> = lattice
             .corners
             .iter()
-            .zip(&valid)
+            .zip(valid)
             .map(|(c, &ok)| {
                 if ok {
                     c.undistorted_px.map(|p| self.rest.mapping.to_paper(p))
@@ -356,91 +442,18 @@ impl Estimator {
                 p.map(|p| self.rest.mapping.to_paper(p)).unwrap_or([0.0, 0.0])
             })
             .collect();
-        let (samples, gamma_compensated, gamma_uncompensated) = self.rest.sampler.sample_with_gammas(
+        let (samples, compensated, uncompensated) = self.rest.sampler.sample_with_gammas(
             &compensated_paper_px,
             &uncompensated_paper_px,
-            &valid,
+            valid,
             self.config.calibration.alpha,
         )?;
-        let line = force(&self.config.calibration, gamma_compensated);
-
-        let mut local: Vec<f64> = (0..valid.len())
-            .filter(|&i| valid[i])
-            .map(|i| motion.displacement[2 * i].hypot(motion.displacement[2 * i + 1]))
-            .collect();
-        local.sort_unstable_by(|a, b| b.total_cmp(a));
-        let contact_score_mm = local.get(CONTACT_SUPPORT - 1).copied().unwrap_or(0.0);
-
-        let (touch, pressure_map) = if self.mode == Mode::Inverse {
-            let steady: Vec<bool> = (0..valid.len())
-                .map(|i| valid[i] && !self.rest.light_sensitive.get(i).copied().unwrap_or(false))
-                .collect();
-            self.inverse_touch(&motion, &valid, &steady, &near_loads, &outcome)
-        } else {
-            let field = PaperField {
-                compensated_paper_px: &compensated_paper_px,
-                samples: &samples,
-            };
-            (
-                self.line_touch(&field, &motion, &valid, &outcome, line.model_n, registration),
-                None,
-            )
-        };
-        let shear_field = registration
-            .corners
-            .iter()
-            .enumerate()
-            .map(|(i, c)| ShearVector {
-                index: c.index,
-                reference_px: c.reference_raw,
-                current_px: c.current_raw,
-                displacement_mm: c
-                    .displacement_mm
-                    .map(|_| [motion.displacement[2 * i], motion.displacement[2 * i + 1]])
-                    .filter(|_| valid[i]),
-                valid: c.valid,
-            })
-            .collect();
-        let reading = Reading {
-            mode: self.mode,
-            touch,
-            test: ContactTest {
-                statistic: outcome.statistic,
-                threshold: outcome.threshold,
-                p_value: outcome.p_value,
-                noise_mm: outcome.noise_mm,
-                detection_floor_n: outcome.detection_floor_n,
-            },
-            camera_motion: motion.reported,
-            gamma: GammaReading {
-                gamma: gamma_compensated,
-                gamma_uncompensated,
-                samples_used: samples.used(),
-                samples_total: samples.total(),
-            },
-            force_model_n: line.model_n,
-            contact_score_mm,
-            pressure_map,
-            counts: LatticeCounts {
-                points_detected: lattice.corners_found(),
-                points_expected: self.config.pad.corner_count(),
-                squares_detected: lattice.squares_found(),
-                squares_expected: self.config.pad.yellow_count(),
-                points_valid: registration.valid_count(),
-                points_implausible: registration.implausible,
-            },
-            recovered: false,
-            retared: false,
-            retare_count: self.retare_count,
-            shear_field,
-            elapsed_ms: 0.0,
-        };
-        if reading.numbers().iter().any(|v| !v.is_finite()) {
-            return Err(EstimateError::NoPattern {
-                reason: "the measurement is not finite (degenerate lattice)".into(),
-            });
-        }
-        Ok((reading, motion.largest_mm))
+        Ok(PaperGammas {
+            compensated_paper_px,
+            samples,
+            compensated,
+            uncompensated,
+        })
     }
 
     /// Camera motion removed (see [`crate::motion`]): the frame's corners are mapped to pad mm through the rest
@@ -534,7 +547,27 @@ impl Estimator {
         let valid: Vec<bool> = (0..all_valid.len())
             .map(|i| all_valid[i] && (steady[i] || near_loads.binary_search(&i).is_ok()))
             .collect();
-        let valid = &valid[..];
+        let (mut kept, tractions, edge_region) = self.listed_contacts(motion, &valid, outcome);
+        if kept.is_empty() {
+            return (None, Some(zero_map));
+        }
+        let pressure_n = self.calibrate_pushes(&mut kept);
+        let contacts: Vec<ContactRegion> = kept.iter().filter_map(|r| self.region_at(r)).collect();
+        if contacts.is_empty() {
+            return (None, Some(zero_map));
+        }
+        let touch = self.touch_of(&kept, contacts, &pressure_n, edge_region.as_ref());
+        (Some(touch), Some(self.pressure_map(&tractions)))
+    }
+
+    /// Stage 2's contacts (strongest first, each beside the strongest holding its own), the tractions of those
+    /// listed (3 per cell, N) and the strongest's shape for its edge direction.
+    fn listed_contacts(
+        &self,
+        motion: &Compensated,
+        valid: &[bool],
+        outcome: &TestOutcome,
+    ) -> (Vec<crate::inverse::Region>, Vec<f64>, Option<crate::inverse::Region>) {
         // Stage 2 picks the loaded cells at the noise its own fit leaves (corners near the loads left out), never
         // below its floor (`inverse.noise_floor_px`), as before the test measured its noise. Its regions are contacts
         // above the floor at that noise; the strongest is one above the test's floor too (the test found a contact),
@@ -578,14 +611,17 @@ impl Estimator {
             }
             listed
         });
-        if kept.is_empty() {
-            return (None, Some(zero_map));
-        }
+        (kept, tractions, edge_region)
+    }
+
+    /// What the calibration pushes taught, applied to each contact: its centre moved along its push, and what the
+    /// push adds to its normal force taken off. Returns each contact's normal force as the solve found it.
+    fn calibrate_pushes(&self, kept: &mut [crate::inverse::Region]) -> Vec<f64> {
         let most_mm = crate::calibration::push_centre::most_shift_mm(&self.config.pad);
         // The contacts' centre is weighed by the pressure the solve found: what a push adds to a load is taken off
         // its force, not moved.
         let pressure_n: Vec<f64> = kept.iter().map(|r| r.force_vector_n[2]).collect();
-        for region in &mut kept {
+        for region in kept.iter_mut() {
             region.centre_mm = crate::calibration::push_centre::shifted_centre(
                 region.centre_mm,
                 region.force_vector_n,
@@ -598,16 +634,26 @@ impl Estimator {
                 self.config.elastic.push_normal_share,
             );
         }
-        let contacts: Vec<ContactRegion> = kept.iter().filter_map(|r| self.region_at(r)).collect();
-        if contacts.is_empty() {
-            return (None, Some(zero_map));
-        }
+        pressure_n
+    }
+
+    /// The reading's touch from the listed contacts (`kept`, and `contacts` as the reading lists them, both
+    /// strongest first, not empty): the total force vector, the torque about their pressure-weighted centre
+    /// (`pressure_n`: each one's normal force as solved) and the strongest's edge direction.
+    fn touch_of(
+        &self,
+        kept: &[crate::inverse::Region],
+        contacts: Vec<ContactRegion>,
+        pressure_n: &[f64],
+        edge_region: Option<&crate::inverse::Region>,
+    ) -> Touch {
+        let cells = self.model.cells();
         let shear = self.config.elastic.tangential_force_scale;
         let force: [f64; 3] = std::array::from_fn(|k| kept.iter().map(|r| r.force_vector_n[k]).sum());
         let total_pressure_n: f64 = pressure_n.iter().sum();
         let centre: [f64; 2] = std::array::from_fn(|axis| {
             kept.iter()
-                .zip(&pressure_n)
+                .zip(pressure_n)
                 .map(|(r, p)| p * r.centre_mm[axis])
                 .sum::<f64>()
                 / total_pressure_n
@@ -621,9 +667,7 @@ impl Estimator {
                     (p[0] - centre[0]) * f[1] - (p[1] - centre[1]) * f[0]
                 })
                 .sum::<f64>();
-        let moments = edge_region
-            .as_ref()
-            .map(|region| self.model.moments(region, self.config.thresholds.edge_min_confidence));
+        let moments = edge_region.map(|region| self.model.moments(region, self.config.thresholds.edge_min_confidence));
         let edge = moments.map_or(
             EdgeReading {
                 angle_deg: None,
@@ -636,15 +680,14 @@ impl Estimator {
         );
         let mut contacts = contacts.into_iter();
         let strongest = contacts.next().expect("checked non-empty above");
-        let touch = Touch {
+        Touch {
             strongest,
             others: contacts.collect(),
             force_n: force[2],
             force_vector_n: Some(sheared(force, shear)),
             torque_nmm: Some(torque),
             edge,
-        };
-        (Some(touch), Some(self.pressure_map(&tractions)))
+        }
     }
 
     fn region_at(&self, region: &crate::inverse::Region) -> Option<ContactRegion> {
@@ -925,9 +968,39 @@ struct Compensated {
 }
 
 /// The compensated shear field in the paper's units, for the gamma-line modes.
+/// The paper's gamma of a frame (see [`Estimator::paper_gammas`]).
+struct PaperGammas {
+    /// Each corner where the rest frame's pad map puts its compensated displacement, paper px.
+    compensated_paper_px: Vec<Point2>,
+    samples: ShearSamples,
+    /// gamma with the camera's motion removed, and as the paper measures it.
+    compensated: f64,
+    uncompensated: f64,
+}
+
 struct PaperField<'a> {
     compensated_paper_px: &'a [Point2],
     samples: &'a ShearSamples,
+}
+
+/// Each corner's shear as the reading lists it: where it was and is in the raw frame, and its displacement in pad mm
+/// with the camera's motion removed (`displacement`: 2 per corner), none where it is not `valid`.
+fn shear_field(registration: &Registration, displacement: &[f64], valid: &[bool]) -> Vec<ShearVector> {
+    registration
+        .corners
+        .iter()
+        .enumerate()
+        .map(|(i, c)| ShearVector {
+            index: c.index,
+            reference_px: c.reference_raw,
+            current_px: c.current_raw,
+            displacement_mm: c
+                .displacement_mm
+                .map(|_| [displacement[2 * i], displacement[2 * i + 1]])
+                .filter(|_| valid[i]),
+            valid: c.valid,
+        })
+        .collect()
 }
 
 impl Rest {
