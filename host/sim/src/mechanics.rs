@@ -122,63 +122,18 @@ pub fn discretise(contact: &Contact, material: &Material) -> ContactLoad {
     // a footprint to carry its tangential load, so it gets the one of a light touch.
     let shape_force = contact.normal_force_n.max(0.05);
 
-    // (position relative to the centre, weight); weights sum to 1.
-    let mut weighted: Vec<([f64; 2], f64)> = Vec::new();
-    let contact_radius_mm;
-    match contact.indenter {
-        Indenter::Sphere { radius_mm } | Indenter::FlatPunch { radius_mm } => {
-            let hertz = matches!(contact.indenter, Indenter::Sphere { .. });
-            let a = if hertz {
-                hertz_radius_mm(&half_space, radius_mm, shape_force)
-            } else {
-                radius_mm
-            };
-            contact_radius_mm = a;
-            // r = a sin(phi) removes the flat punch's rim singularity and the Hertz profile's sqrt from the
-            // integrand: Hertz p r dr ~ sin(phi) cos^2(phi) dphi, punch p r dr ~ sin(phi) dphi.
-            let n_rings = points_across(a, depth, 3, 16);
-            let n_angles = points_across(2.0 * std::f64::consts::PI * a, depth, 8, 64);
-            for ring in 0..n_rings {
-                let phi = (ring as f64 + 0.5) / n_rings as f64 * std::f64::consts::FRAC_PI_2;
-                let r = a * phi.sin();
-                let radial_weight = if hertz {
-                    phi.sin() * phi.cos().powi(2)
-                } else {
-                    phi.sin()
-                };
-                let stagger = if ring % 2 == 0 { 0.0 } else { 0.5 };
-                for k in 0..n_angles {
-                    let theta = (k as f64 + stagger) / n_angles as f64 * std::f64::consts::TAU;
-                    weighted.push(([r * theta.cos(), r * theta.sin()], radial_weight));
-                }
-            }
+    let (weighted, contact_radius_mm) = match contact.indenter {
+        Indenter::Sphere { radius_mm } => {
+            let a = hertz_radius_mm(&half_space, radius_mm, shape_force);
+            (round_footprint(a, depth, true), a)
         }
+        Indenter::FlatPunch { radius_mm } => (round_footprint(radius_mm, depth, false), radius_mm),
         Indenter::Edge {
             length_mm,
             width_mm,
             angle_deg,
-        } => {
-            let (sin, cos) = angle_deg.to_radians().sin_cos();
-            let along = [cos, sin];
-            let across = [-sin, cos];
-            let b = width_mm / 2.0;
-            contact_radius_mm = b;
-            let n_along = points_across(length_mm, depth, 4, 128);
-            let n_across = points_across(width_mm, depth, 3, 16);
-            for i in 0..n_along {
-                let s = ((i as f64 + 0.5) / n_along as f64 - 0.5) * length_mm;
-                for j in 0..n_across {
-                    // x = b sin(phi): the half-elliptic profile sqrt(1 - x^2/b^2) dx becomes cos^2(phi) dphi.
-                    let phi = ((j as f64 + 0.5) / n_across as f64 - 0.5) * std::f64::consts::PI;
-                    let t = b * phi.sin();
-                    weighted.push((
-                        [s * along[0] + t * across[0], s * along[1] + t * across[1]],
-                        phi.cos().powi(2),
-                    ));
-                }
-            }
-        }
-    }
+        } => (edge_footprint(length_mm, width_mm, angle_deg, depth), width_mm / 2.0),
+    };
     let total: f64 = weighted.iter().map(|(_, w)| w).sum();
     let extent_mm = weighted.iter().map(|(p, _)| p[0].hypot(p[1])).fold(0.0, f64::max);
     if !loaded || total <= 0.0 {
@@ -230,6 +185,56 @@ pub fn discretise(contact: &Contact, material: &Material) -> ContactLoad {
         far,
         far_distance_mm: 2.0 * near_distance_mm,
     }
+}
+
+/// A disc of radius `a` as points (position relative to its centre, weight): Hertz's pressure on it (`hertz`), else
+/// a flat punch's, in rings and angles as fine as the pattern's `depth` resolves.
+fn round_footprint(a: f64, depth: f64, hertz: bool) -> Vec<([f64; 2], f64)> {
+    // r = a sin(phi) removes the flat punch's rim singularity and the Hertz profile's sqrt from the
+    // integrand: Hertz p r dr ~ sin(phi) cos^2(phi) dphi, punch p r dr ~ sin(phi) dphi.
+    let n_rings = points_across(a, depth, 3, 16);
+    let n_angles = points_across(2.0 * std::f64::consts::PI * a, depth, 8, 64);
+    let mut weighted = Vec::with_capacity(n_rings * n_angles);
+    for ring in 0..n_rings {
+        let phi = (ring as f64 + 0.5) / n_rings as f64 * std::f64::consts::FRAC_PI_2;
+        let r = a * phi.sin();
+        let radial_weight = if hertz {
+            phi.sin() * phi.cos().powi(2)
+        } else {
+            phi.sin()
+        };
+        let stagger = if ring % 2 == 0 { 0.0 } else { 0.5 };
+        for k in 0..n_angles {
+            let theta = (k as f64 + stagger) / n_angles as f64 * std::f64::consts::TAU;
+            weighted.push(([r * theta.cos(), r * theta.sin()], radial_weight));
+        }
+    }
+    weighted
+}
+
+/// A strip `length_mm` x `width_mm` at `angle_deg` as points (position relative to its centre, weight), with the
+/// half-elliptic pressure across it, as fine as the pattern's `depth` resolves.
+fn edge_footprint(length_mm: f64, width_mm: f64, angle_deg: f64, depth: f64) -> Vec<([f64; 2], f64)> {
+    let (sin, cos) = angle_deg.to_radians().sin_cos();
+    let along = [cos, sin];
+    let across = [-sin, cos];
+    let b = width_mm / 2.0;
+    let n_along = points_across(length_mm, depth, 4, 128);
+    let n_across = points_across(width_mm, depth, 3, 16);
+    let mut weighted = Vec::with_capacity(n_along * n_across);
+    for i in 0..n_along {
+        let s = ((i as f64 + 0.5) / n_along as f64 - 0.5) * length_mm;
+        for j in 0..n_across {
+            // x = b sin(phi): the half-elliptic profile sqrt(1 - x^2/b^2) dx becomes cos^2(phi) dphi.
+            let phi = ((j as f64 + 0.5) / n_across as f64 - 0.5) * std::f64::consts::PI;
+            let t = b * phi.sin();
+            weighted.push((
+                [s * along[0] + t * across[0], s * along[1] + t * across[1]],
+                phi.cos().powi(2),
+            ));
+        }
+    }
+    weighted
 }
 
 /// Sums forces over square cells of side `cell_mm` about `origin`, each placed at its force-weighted centroid.
