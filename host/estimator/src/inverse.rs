@@ -902,7 +902,7 @@ impl InverseModel {
         floor_mm: f64,
     ) -> (TestOutcome, Vec<usize>) {
         let measured = self.rigid_scatter(d, valid).floored(floor_mm);
-        let scatter = measured.mm;
+        let scatter = measured.median_mm;
         // A heavy load moves more than half the corners: its far field is no noise. The scatter is measured again
         // without the corners near the cells stage 1 finds loaded at that first estimate (with the motion fitted to
         // the others).
@@ -924,7 +924,7 @@ impl InverseModel {
                 let unexplained = 1.0 - FAR_FIELD_VARIANCE_SHARE;
                 if self
                     .scatter_away_from(d, valid, &along)
-                    .is_some_and(|away| away.mm * away.mm < unexplained * scatter * scatter)
+                    .is_some_and(|away| away.median_mm * away.median_mm < unexplained * scatter * scatter)
                 {
                     near = along;
                 }
@@ -938,35 +938,37 @@ impl InverseModel {
             // ([`Self::compact_scatter`]), which explains such a load's far field; a rest frame's errors, spread
             // over the pad, barely lower it.
             compact = self.compact_scatter(stage, d, valid).map(|c| c.floored(floor_mm));
-            if let Some(compact) = compact.filter(|c| c.mm < scatter) {
-                near = self.near_loads(stage, compact.mm, MEASURED_NOISE_REACH_CELLS);
+            if let Some(compact) = compact.filter(|c| c.median_mm < scatter) {
+                near = self.near_loads(stage, compact.median_mm, MEASURED_NOISE_REACH_CELLS);
             }
         }
-        let outcome = if near.is_empty() {
-            self.test_estimated(stage, measured)
+        let noise = if near.is_empty() {
+            measured
         } else {
-            let noise = self
-                .scatter_away_from(d, valid, &near)
-                .map_or(measured, |away| away.floored(floor_mm));
-            self.test_estimated(stage, noise)
+            self.scatter_away_from(d, valid, &near)
+                .map_or(measured, |away| away.floored(floor_mm))
         };
+        let outcome = self.test_estimated(stage, noise);
         if outcome.contact {
             return (outcome, near);
         }
         // A load's far field can still reach the far corners: a press pushed sideways moves the whole pad (10 N
         // with 4 N of shear on a half-space pad: their scatter about the motion 0.12-0.14 mm, 40 times a rest
         // frame's, and no contact). When the motion and one compact load explain more than
-        // `FAR_FIELD_VARIANCE_SHARE` of the squared scatter the test used, on the corners away from that load, the
-        // scatter was the load's and not noise, and the test is taken at what the compact fit leaves. One compact
-        // load explains little of a rest frame's errors, spread over the pad: at most 37 % of the squared scatter
-        // over the validation sets' rest frames and rest frames under camera motion and uneven light.
+        // `FAR_FIELD_VARIANCE_SHARE` of the squared scatter (the median corner's) where the test's noise came from,
+        // on the corners away from that load, the scatter was the load's and not noise, and the test is taken at what
+        // the compact fit leaves. One compact load explains little of a rest frame's errors, spread over the pad: at
+        // most 37 % of the squared scatter over the validation sets' rest frames and rest frames under camera motion
+        // and uneven light.
         let compact = compact.or_else(|| self.compact_scatter(stage, d, valid).map(|c| c.floored(floor_mm)));
         let unexplained = 1.0 - FAR_FIELD_VARIANCE_SHARE;
-        if let Some(compact) = compact.filter(|c| c.mm * c.mm < unexplained * outcome.noise_mm * outcome.noise_mm) {
+        if let Some(compact) =
+            compact.filter(|c| c.median_mm * c.median_mm < unexplained * noise.median_mm * noise.median_mm)
+        {
             let rescued = self.test_estimated(stage, compact);
             if rescued.contact {
                 if near.is_empty() {
-                    near = self.near_loads(stage, compact.mm, MEASURED_NOISE_REACH_CELLS);
+                    near = self.near_loads(stage, compact.median_mm, MEASURED_NOISE_REACH_CELLS);
                 }
                 return (rescued, near);
             }
@@ -2909,16 +2911,24 @@ pub fn normal_quantile(p: f64) -> f64 {
 }
 
 /// A noise level (mm per axis) and how well it is known: the degrees of freedom of the chi-square that a sum of
-/// squares as precise would have (infinite for a noise that is given, not measured).
+/// squares as precise would have (infinite for a noise that is given, not measured); and the median corner's
+/// scatter, the scale that loads are looked for at.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct NoiseEstimate {
     mm: f64,
     dof: f64,
+    /// The median corner's scatter, mm per axis, the scale that loads are looked for at (see
+    /// [`InverseModel::measured_test_and_loads_of`]).
+    median_mm: f64,
 }
 
 impl NoiseEstimate {
     fn known(mm: f64) -> Self {
-        Self { mm, dof: f64::INFINITY }
+        Self {
+            mm,
+            dof: f64::INFINITY,
+            median_mm: mm,
+        }
     }
 
     /// From corners' squared residuals |r|^2, each sigma^2 chi-square(2): their median over 2 ln 2. The median of n
@@ -2926,21 +2936,27 @@ impl NoiseEstimate {
     /// median), as much as a mean of 2 n ln^2 2 squares' would: those are its degrees of freedom, about 0.96 per corner
     /// (the median trades that precision for a contact's corners not counting). `squares` must not be empty.
     fn median_of(squares: &mut [f64]) -> Self {
-        let middle = squares.len() / 2;
-        let (_, median, _) = squares.select_nth_unstable_by(middle, f64::total_cmp);
+        let n = squares.len();
+        let (_, median, _) = squares.select_nth_unstable_by(n / 2, f64::total_cmp);
         let ln2 = std::f64::consts::LN_2;
+        let mm = (*median / (2.0 * ln2)).sqrt();
         Self {
-            mm: (*median / (2.0 * ln2)).sqrt(),
-            dof: 2.0 * squares.len() as f64 * ln2 * ln2,
+            mm,
+            dof: 2.0 * n as f64 * ln2 * ln2,
+            median_mm: mm,
         }
     }
 
     /// Never below `floor_mm`; a floor that is used is given, not measured.
     fn floored(self, floor_mm: f64) -> Self {
-        if self.mm >= floor_mm {
+        let noise = if self.mm >= floor_mm {
             self
         } else {
             Self::known(floor_mm)
+        };
+        Self {
+            median_mm: self.median_mm.max(floor_mm),
+            ..noise
         }
     }
 }
