@@ -215,7 +215,7 @@ pub enum ElasticModel {
 /// thickness and the gel's modulus are published nowhere, so they are the two numbers that turn the equivalent layer
 /// fitted to the real pair into a real stack: Odemark's equivalence h_skin (G_skin / G_gel)^(1/3) = 2.8 mm and the
 /// same peak in-plane displacement under a 6 N press of 5 mm radius, which give G_gel = 11 kPa
-/// ([`LAYERED_GEL_KPA`]) and h_skin = 1.07 mm ([`LAYERED_SKIN_MM`]); no bond layer (its thickness is not published
+/// (`LAYERED_GEL_KPA`) and h_skin = 1.07 mm (`LAYERED_SKIN_MM`); no bond layer (its thickness is not published
 /// either). What it gets right that the equivalent layer does not is shear against pressure: on the quick validation
 /// set (at 122e3ba) the pushes' tangential force reads 0.87 times the truth (0.22 N RMS) against 2.40 times (2.39 N),
 /// torque 2.1 against 18.7 N mm RMS (both with the normal force's calibration alone; `tangential_force_scale`

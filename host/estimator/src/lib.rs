@@ -5,27 +5,27 @@
 //! [`pad_map`] undistorts the points and maps them to pad mm with a per-sensor map; [`registration`] pairs them
 //! with the rest frame by lattice index; [`inverse`] fits the camera motion ([`motion`]) jointly with the surface
 //! tractions of the pad's elastic model ([`elastic`]), removes it and decides contact against the frame's noise;
-//! [`surface`] and [`shear`] give the paper's gamma, [`force`], [`contact`] and [`edge`] the paper-line readings.
+//! [`surface`] and [`shear`] give the paper's gamma, `force`, [`contact`] and `edge` the paper-line readings.
 //! [`Estimator`] runs them and returns a [`Reading`]; [`SensorConfig`] holds every parameter, with defaults for the
 //! real sensor; [`calibration`] fits what the model cannot know from a force/torque log.
 
 pub mod calibration;
-pub mod config;
+pub(crate) mod config;
 pub mod contact;
 pub mod detection;
-pub mod edge;
+pub(crate) mod edge;
 pub mod elastic;
-pub mod error;
-pub mod estimator;
-pub mod force;
+pub(crate) mod error;
+pub(crate) mod estimator;
+pub(crate) mod force;
 pub mod homography;
 pub mod inverse;
-pub mod lattice;
-pub mod linalg;
+pub(crate) mod lattice;
+pub(crate) mod linalg;
 pub mod motion;
 pub mod pad_map;
 pub mod paper;
-pub mod reading;
+pub(crate) mod reading;
 pub mod registration;
 pub mod shear;
 pub mod stats;
