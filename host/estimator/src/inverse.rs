@@ -57,7 +57,7 @@
 //! pressure between them is more than two round presses leave there (`InverseModel::join_cut_lines`: the cell map cuts
 //! some 20 mm edges of the validation pad into lumps about 10 mm apart). The edge direction (second
 //! moments of the pressure) comes from a second solve with the pressure's unknowns on the grid's nodes instead of its
-//! cells, which has no checkerboard noise (see [`PressureBasis`]).
+//! cells, which has no checkerboard noise (see `PressureBasis`).
 
 use std::sync::{Arc, Mutex};
 
@@ -291,7 +291,7 @@ pub struct Stage2 {
     pub motion: [f64; MOTION_PARAMETERS],
     /// Strongest (largest normal force) first.
     pub regions: Vec<Region>,
-    /// The strongest contact as the node solve sees it (see [`PressureBasis`]), for its edge direction.
+    /// The strongest contact as the node solve sees it (see `PressureBasis`), for its edge direction.
     pub edge_region: Option<Region>,
 }
 
@@ -892,7 +892,7 @@ impl InverseModel {
         self.measured_test_and_loads(d, valid, floor_mm).0
     }
 
-    /// [`Self::measured_test`], and the corners (ascending) within [`MEASURED_NOISE_REACH_CELLS`] of a load that its
+    /// [`Self::measured_test`], and the corners (ascending) within `MEASURED_NOISE_REACH_CELLS` of a load that its
     /// stage 1 on `valid` finds (the corners its noise leaves out).
     pub fn measured_test_and_loads(&self, d: &[f64], valid: &[bool], floor_mm: f64) -> (TestOutcome, Vec<usize>) {
         self.measured_test_and_loads_of(&self.stage1(d, valid), d, valid, floor_mm)
@@ -1048,7 +1048,7 @@ impl InverseModel {
         estimate.mm.is_finite().then_some(estimate)
     }
 
-    /// The corners' scatter about the motion-only fit, mm per axis, with the largest [`NOISE_CENSORED_SHARE`] of
+    /// The corners' scatter about the motion-only fit, mm per axis, with the largest `NOISE_CENSORED_SHARE` of
     /// them censored (see `NoiseEstimate::censored_of`), so that a contact (a minority of the corners) barely counts,
     /// while every error the motion does not explain (lighting, JPEG, the tracker) does, smooth ones included.
     pub fn rigid_scatter_mm(&self, d: &[f64], valid: &[bool]) -> f64 {
@@ -1562,7 +1562,7 @@ impl InverseModel {
     }
 
     /// Whether the loads stage 1 finds at `noise_mm` (its loaded cells and their ring, every group taken as one
-    /// region, with stage 1's pressure) are two presses by [`Self::two_presses`]' rule. The gamma modes read one
+    /// region, with stage 1's pressure) are two presses by `Self::two_presses`' rule. The gamma modes read one
     /// contact and take the edge direction from the whole shear field, which two presses side by side make as
     /// elongated as an edge, along the pair; a long contact, which a line explains as well as two points, is not two.
     pub fn stage1_loads_are_two_presses(&self, stage: &Stage1, d: &[f64], valid: &[bool], noise_mm: f64) -> bool {

@@ -32,7 +32,7 @@ fn fit_kept(pairs: &[(Point2, Point2)], keep: &[bool]) -> Option<Similarity> {
 
 /// The similarity of raw px that moves the rest frame's corners (`pairs.0`) onto this frame's (`pairs.1`), fitted on
 /// the pairs that move rigidly: each round leaves out those the previous fit misses by more than
-/// [`OUTLIER_SIGMAS`] robust sigmas (the corners a press moves).
+/// `OUTLIER_SIGMAS` robust sigmas (the corners a press moves).
 pub fn fit_raw_similarity(pairs: &[(Point2, Point2)]) -> Option<Similarity> {
     let mut keep = vec![true; pairs.len()];
     let mut fit = fit_kept(pairs, &keep)?;

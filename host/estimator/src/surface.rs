@@ -310,7 +310,7 @@ impl BSplineSurface {
     }
 
     /// Samples with precomputed basis functions (the per-frame path: the knots never change). Each sample is
-    /// [`Self::combine`] of its u and v spans, term by term in the same order from the basis's precomputed terms,
+    /// `Self::combine` of its u and v spans, term by term in the same order from the basis's precomputed terms,
     /// so the result is the same to the bit.
     pub fn sample_on(&self, basis: &SampleBasis) -> SampleGrid {
         let mut points = Vec::with_capacity(basis.len());

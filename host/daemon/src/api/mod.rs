@@ -2,7 +2,7 @@
 //!
 //! Every JSON message carries `schema_version` ([`crate::SCHEMA_VERSION`]). Errors are `{"schema_version": 1,
 //! "error": "..."}` with a 4xx/5xx status that says whose fault it was. The first paths, without `v1/`,
-//! redirect (308, method and body kept) to their `/api/v1/` equivalent. [`guard`] decides who may ask.
+//! redirect (308, method and body kept) to their `/api/v1/` equivalent. `guard` decides who may ask.
 
 mod guard;
 mod overlay;

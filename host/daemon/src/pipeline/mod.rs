@@ -1,13 +1,13 @@
 //! The live pipeline: a capture thread feeds a bounded drop-oldest queue with the camera's bytes, a decode thread
 //! decodes each frame (only the scale and region the estimator reads) into a second drop-oldest queue, and an
 //! estimator thread turns it into a reading and publishes it (latest value, a broadcast for WebSocket clients,
-//! the recorder): decoding a frame overlaps with estimating the one before ([`stages`], which also keeps the
+//! the recorder): decoding a frame overlaps with estimating the one before (`stages`, which also keeps the
 //! one-thread arrangement as a baseline). Frames dropped in front of each stage are counted. Latency is measured
 //! from the frame's capture timestamp, decoding included, and kept per stage.
 //!
 //! The first frame, and the first frame after a tare, is the rest frame the estimator measures against: it is
 //! decoded whole at the decode scale, and later frames only inside the pattern's region around its lattice
-//! (whole again after a frame that could not be measured, in case the pattern left the region); [`stages`] says
+//! (whole again after a frame that could not be measured, in case the pattern left the region); `stages` says
 //! how a tare stays ordered with the frames already decoded. The whole frame is decoded at full size only when
 //! someone asks for the picture (`/api/v1/frame.jpg`, Foxglove); recordings keep the camera's JPEG bytes as they
 //! came.

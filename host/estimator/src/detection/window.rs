@@ -293,12 +293,12 @@ pub struct WindowCentroid {
 }
 
 /// A square's search window: its cell and half-size (cell units), with every row it can hold tabulated for a centre
-/// on a whole pixel, the only centre [`centroid`] is given by the tracker. A row's range is [`CellFrame::row_span`]
+/// on a whole pixel, the only centre [`centroid`] is given by the tracker. A row's range is `CellFrame::row_span`
 /// of the row's offset from the centre, and with the centre on a whole pixel that offset is the same half-integer for
 /// the same row of the window wherever the window is, so the table holds the very values the row would compute (their
 /// divisions and comparisons took about 70 of the some 150 instructions a window's row cost, and a frame at 2048x1536
 /// has some 11,000 such rows), and for most rows the first and last pixel as offsets from the centre, which save the
-/// row its rounding (see [`TabulatedRow::Offsets`]).
+/// row its rounding (see `TabulatedRow::Offsets`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Window {
     cell: CellFrame,
@@ -399,7 +399,7 @@ impl Window {
 ///
 /// The sums are those of the plain loop: each row's membership and membership times x in f32 from the left, pixel
 /// by pixel, and the rows' totals in f64 from the top. A row's f32 sums are two chains of dependent additions,
-/// which would bound this loop's speed, so [`ROWS_AT_ONCE`] rows are summed together, as the lanes of one vector:
+/// which would bound this loop's speed, so `ROWS_AT_ONCE` rows are summed together, as the lanes of one vector:
 /// their memberships are first looked up into a buffer (pixel-major, a row per lane, zeros past a row's end, which
 /// add nothing), then added lane by lane. Each row's own order is kept, and with it every bit of the result. On a
 /// processor with AVX2 (checked at run time: the build targets any x86-64) the lookups are vector gathers, one
