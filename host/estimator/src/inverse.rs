@@ -1134,27 +1134,10 @@ impl InverseModel {
         let mut halved: Vec<usize> = Vec::new();
         for pass in 0..2 {
             let extending = solved.as_ref().is_some_and(|found| !found.regions.is_empty());
-            let lines = match &solved {
-                _ if pass == 0 => Vec::new(),
-                Some(found) if extending => self.lines_extending(
-                    &found.regions,
-                    Observed {
-                        d,
-                        valid,
-                        tractions: &found.tractions,
-                    },
-                    &found.support,
-                    noise_mm,
-                ),
-                _ => {
-                    let mut lines = self.line_loads(&self.matched(d, valid), noise_mm);
-                    if solved.is_none() {
-                        if let Some(strongest) = self.strongest_cell(seed) {
-                            lines[strongest] = true;
-                        }
-                    }
-                    lines
-                }
+            let lines = if pass == 0 {
+                Vec::new()
+            } else {
+                self.second_pass_lines(d, valid, seed, solved.as_ref(), noise_mm)
             };
             if solved.is_some() && !lines.iter().any(|&l| l) {
                 break;
@@ -1212,64 +1195,16 @@ impl InverseModel {
                 tractions,
             });
         }
-        let Some(Solved {
-            groups,
-            support,
-            motion,
-            regions,
-            tractions: solved_tractions,
-        }) = solved
-        else {
+        let Some(solved) = solved else {
             return empty;
         };
-        // The strongest contact's shape, from the node solve: its region there that holds the contact's peak cell.
-        // Half of a contact split in two is a point load's (see `split_pair`): it has no direction, and the node
-        // solve's region holds both halves, bridged by the blur. The blur bridges contacts the cell map lists apart
-        // too: when the listed contacts it bridges are two presses by `split_pair`'s rule ([`Self::two_presses`],
-        // their cells taken as one), the others' cells are not the strongest's shape (two fingertips are not an
-        // edge along the pair); when a line explains them as well, they are a long contact's parts (the cell map
-        // cuts some 20 mm edges into two or three, and `join_cut_lines` joins most but not all) and the direction is
-        // theirs.
         let observed = Observed {
             d,
             valid,
-            tractions: &solved_tractions,
+            tractions: &solved.tractions,
         };
-        let edge_region = regions.first().and_then(|first| {
-            if first.cells.iter().any(|c| halved.contains(&c.0)) {
-                return None;
-            }
-            let peak = first.cells.iter().max_by(|a, b| a.1[2].total_cmp(&b.1[2]))?.0;
-            let (smooth, _, _) = self.constrained_solve(d, valid, seed, &groups, PressureBasis::Nodes, false)?;
-            let shape = self
-                .regions(&smooth, &support, None)
-                .into_iter()
-                .find(|r| r.cells.iter().any(|c| c.0 == peak))?;
-            let bridged: Vec<&Region> = regions[1..]
-                .iter()
-                .filter(|other| other.cells.iter().any(|c| shape.cells.iter().any(|s| s.0 == c.0)))
-                .collect();
-            if bridged.is_empty() {
-                return Some(shape);
-            }
-            let listed = self.region(
-                first
-                    .cells
-                    .iter()
-                    .chain(bridged.iter().flat_map(|other| &other.cells))
-                    .copied()
-                    .collect(),
-            );
-            if self.two_presses(&listed, observed, noise_mm).is_none() {
-                return Some(shape);
-            }
-            let apart: Vec<usize> = bridged
-                .iter()
-                .flat_map(|other| other.cells.iter().map(|c| c.0))
-                .collect();
-            let own: Vec<Traction> = shape.cells.into_iter().filter(|c| !apart.contains(&c.0)).collect();
-            (!own.is_empty()).then(|| self.region(own))
-        });
+        let edge_region = self.edge_region(observed, seed, &solved, &halved, noise_mm);
+        let Solved { motion, regions, .. } = solved;
         // Tractions outside the contacts are not reported (they are below the floor).
         let mut kept = vec![0.0; 3 * cells];
         for (j, f) in regions.iter().flat_map(|r| &r.cells) {
@@ -1283,6 +1218,100 @@ impl InverseModel {
             regions,
             edge_region,
         }
+    }
+
+    /// The cells of the line shapes stage 2's second pass adds (see [`Self::stage2`]): after a first pass that found
+    /// contacts, those of the lines that carry the strongest further; else those of every significant line, and the
+    /// strongest cell of stage 1 when the first pass found nothing to solve.
+    fn second_pass_lines(
+        &self,
+        d: &[f64],
+        valid: &[bool],
+        seed: &Stage1,
+        first: Option<&Solved>,
+        noise_mm: f64,
+    ) -> Vec<bool> {
+        match first {
+            Some(found) if !found.regions.is_empty() => self.lines_extending(
+                &found.regions,
+                Observed {
+                    d,
+                    valid,
+                    tractions: &found.tractions,
+                },
+                &found.support,
+                noise_mm,
+            ),
+            _ => {
+                let mut lines = self.line_loads(&self.matched(d, valid), noise_mm);
+                if first.is_none() {
+                    if let Some(strongest) = self.strongest_cell(seed) {
+                        lines[strongest] = true;
+                    }
+                }
+                lines
+            }
+        }
+    }
+
+    /// The strongest contact's shape, from the node solve: its region there that holds the contact's peak cell.
+    /// Half of a contact split in two is a point load's (see `split_pair`): it has no direction, and the node
+    /// solve's region holds both halves, bridged by the blur. The blur bridges contacts the cell map lists apart
+    /// too: when the listed contacts it bridges are two presses by `split_pair`'s rule ([`Self::two_presses`],
+    /// their cells taken as one), the others' cells are not the strongest's shape (two fingertips are not an
+    /// edge along the pair); when a line explains them as well, they are a long contact's parts (the cell map
+    /// cuts some 20 mm edges into two or three, and `join_cut_lines` joins most but not all) and the direction is
+    /// theirs. `observed`: the frame and stage 2's tractions; `solved`: stage 2's last pass; `halved`: the cells of
+    /// the contacts split in two.
+    fn edge_region(
+        &self,
+        observed: Observed,
+        seed: &Stage1,
+        solved: &Solved,
+        halved: &[usize],
+        noise_mm: f64,
+    ) -> Option<Region> {
+        let first = solved.regions.first()?;
+        if first.cells.iter().any(|c| halved.contains(&c.0)) {
+            return None;
+        }
+        let peak = first.cells.iter().max_by(|a, b| a.1[2].total_cmp(&b.1[2]))?.0;
+        let (smooth, _, _) = self.constrained_solve(
+            observed.d,
+            observed.valid,
+            seed,
+            &solved.groups,
+            PressureBasis::Nodes,
+            false,
+        )?;
+        let shape = self
+            .regions(&smooth, &solved.support, None)
+            .into_iter()
+            .find(|r| r.cells.iter().any(|c| c.0 == peak))?;
+        let bridged: Vec<&Region> = solved.regions[1..]
+            .iter()
+            .filter(|other| other.cells.iter().any(|c| shape.cells.iter().any(|s| s.0 == c.0)))
+            .collect();
+        if bridged.is_empty() {
+            return Some(shape);
+        }
+        let listed = self.region(
+            first
+                .cells
+                .iter()
+                .chain(bridged.iter().flat_map(|other| &other.cells))
+                .copied()
+                .collect(),
+        );
+        if self.two_presses(&listed, observed, noise_mm).is_none() {
+            return Some(shape);
+        }
+        let apart: Vec<usize> = bridged
+            .iter()
+            .flat_map(|other| other.cells.iter().map(|c| c.0))
+            .collect();
+        let own: Vec<Traction> = shape.cells.into_iter().filter(|c| !apart.contains(&c.0)).collect();
+        (!own.is_empty()).then(|| self.region(own))
     }
 
     /// The layered model's contact centres: each region's pressure solved again on its cells' quarters (pressure >= 0
