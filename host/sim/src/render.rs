@@ -487,15 +487,15 @@ impl Renderer {
         self.truth_of(scene, &pad, led_currents_ma, seed)
     }
 
-    fn render_image(
+    /// The pad's in-plane displacement as meshes in the pattern's plane: the inverse map from where a point is
+    /// seen to where it sits in the material and, for the layered pad, the forward in-plane map with the solved field
+    /// (whose normal displacement the parallax needs). None where nothing moves.
+    #[allow(clippy::type_complexity)]
+    fn meshes<'a>(
         &self,
-        scene: &Scene,
-        led_currents_ma: [f32; 4],
-        seed: u64,
-    ) -> Result<(RgbImage, Deformation), RenderError> {
-        check_inputs(&self.model, scene, led_currents_ma)?;
-        let pad = Deformation::new(&self.model, self.spectral.as_ref(), scene);
-        let (inverse, forward) = match &pad {
+        pad: &'a Deformation,
+    ) -> (Option<DisplacementMesh>, Option<(DisplacementMesh, &'a LayerField)>) {
+        match pad {
             Deformation::HalfSpace(loaded) => (
                 loaded.is_loaded().then(|| {
                     DisplacementMesh::sample(self.mesh_min, self.mesh_max, self.model.mesh_step_mm, |p| {
@@ -520,10 +520,104 @@ impl Renderer {
                 }
                 None => (None, None),
             },
+        }
+    }
+
+    /// Where in the material the point seen at `q` (pattern plane, mm) by pixel `index` sits, through
+    /// [`Self::meshes`]' maps.
+    fn material_point(
+        &self,
+        q: [f32; 2],
+        index: usize,
+        inverse: Option<&DisplacementMesh>,
+        forward: Option<&(DisplacementMesh, &LayerField)>,
+    ) -> [f32; 2] {
+        match (inverse, forward) {
+            (Some(mesh), None) => {
+                let v = mesh.at(q);
+                [q[0] + v[0], q[1] + v[1]]
+            }
+            (Some(mesh), Some((in_plane, field))) => {
+                // The point seen moved sideways by u and towards the camera by w, which the oblique ray
+                // sees as a further sideways shift: solve p + u(p) + w(p) s = q by fixed point from the
+                // in-plane inverse (|grad u| and |s| are well below 1).
+                let s = self.parallax[index];
+                let v = mesh.at(q);
+                let mut p = [q[0] + v[0], q[1] + v[1]];
+                for _ in 0..3 {
+                    let u = in_plane.at(p);
+                    let w = field.at([f64::from(p[0]), f64::from(p[1])])[2] as f32;
+                    p = [q[0] - u[0] - w * s[0], q[1] - u[1] - w * s[1]];
+                }
+                p
+            }
+            _ => q,
+        }
+    }
+
+    /// Adds the sensor's noise to one pixel's `rgb` from 64 random `bits`: read noise of `noise_scale` (per unit of
+    /// a triangular variate), or with shot noise, a level that grows with the signal.
+    fn add_noise(&self, rgb: &mut [f32; 3], bits: u64, noise_scale: f32) {
+        let shot_noise = self.model.shot_noise;
+        for (k, value) in rgb.iter_mut().enumerate() {
+            // Two uniform bytes sum to a triangular variate on [-255, 255], variance 255^2 / 6.
+            let a = ((bits >> (16 * k)) & 0xff) as f32;
+            let b = ((bits >> (16 * k + 8)) & 0xff) as f32;
+            let scale = if shot_noise > 0.0 {
+                let sigma = (self.model.noise_sigma.powi(2) + shot_noise * value.max(0.0)).sqrt();
+                sigma * 6f32.sqrt() / 255.0
+            } else {
+                noise_scale
+            };
+            *value += (a + b - 255.0) * scale;
+        }
+    }
+
+    /// The pad's colour over a pixel's footprint (half-extents `half`, mm) about material point `p`: surround,
+    /// rim, lines and squares by their coverage, the squares' ink missing or smeared where `damage` says (missing:
+    /// whether the ink is gone, else smeared by the last value; centre and radius in mm).
+    fn pad_colour(&self, p: [f32; 2], half: [f32; 2], damage: &[(bool, [f32; 2], f32, f32)]) -> [f32; 3] {
+        let colours = &self.model.colours;
+        let mut half = half;
+        let mut yellow_kept = 1.0;
+        for &(missing, centre, radius, smear) in damage {
+            let distance = (p[0] - centre[0]).hypot(p[1] - centre[1]);
+            let inside = disc_coverage(distance, radius, half[0].max(half[1]));
+            if inside > 0.0 {
+                if missing {
+                    yellow_kept *= 1.0 - inside;
+                } else {
+                    half = [half[0] + smear * inside, half[1] + smear * inside];
+                }
+            }
+        }
+        let (rim, pattern, yellow, red) = self.layout.coverage(p, half);
+        // Where the yellow ink is gone, the red base (the lines' colour) shows.
+        let yellow = yellow * yellow_kept;
+        let shade = if rim > 0.0 {
+            1.0 + self.model.texture_amplitude * self.texture.at(p)
+        } else {
+            1.0
         };
+        std::array::from_fn(|k| {
+            colours.surround[k] * (1.0 - rim)
+                + colours.rim[k] * (rim - pattern)
+                + (colours.lines[k] * (pattern - yellow - red) + colours.red[k] * red + colours.yellow[k] * yellow)
+                    * shade
+        })
+    }
+
+    fn render_image(
+        &self,
+        scene: &Scene,
+        led_currents_ma: [f32; 4],
+        seed: u64,
+    ) -> Result<(RgbImage, Deformation), RenderError> {
+        check_inputs(&self.model, scene, led_currents_ma)?;
+        let pad = Deformation::new(&self.model, self.spectral.as_ref(), scene);
+        let (inverse, forward) = self.meshes(&pad);
         let gains = led_currents_ma.map(|c| c / self.model.lighting.nominal_current_ma);
         let colours = &self.model.colours;
-        let texture_amplitude = self.model.texture_amplitude;
         let damage: Vec<(bool, [f32; 2], f32, f32)> = scene
             .damage
             .iter()
@@ -572,56 +666,8 @@ impl Renderer {
             let albedo = if q[0].abs() > surround_beyond[0] || q[1].abs() > surround_beyond[1] {
                 colours.surround
             } else {
-                let p = match (&inverse, &forward) {
-                    (Some(mesh), None) => {
-                        let v = mesh.at(q);
-                        [q[0] + v[0], q[1] + v[1]]
-                    }
-                    (Some(mesh), Some((in_plane, field))) => {
-                        // The point seen moved sideways by u and towards the camera by w, which the oblique ray
-                        // sees as a further sideways shift: solve p + u(p) + w(p) s = q by fixed point from the
-                        // in-plane inverse (|grad u| and |s| are well below 1).
-                        let s = self.parallax[index];
-                        let v = mesh.at(q);
-                        let mut p = [q[0] + v[0], q[1] + v[1]];
-                        for _ in 0..3 {
-                            let u = in_plane.at(p);
-                            let w = field.at([f64::from(p[0]), f64::from(p[1])])[2] as f32;
-                            p = [q[0] - u[0] - w * s[0], q[1] - u[1] - w * s[1]];
-                        }
-                        p
-                    }
-                    _ => q,
-                };
-                let mut half = g.half;
-                let mut yellow_kept = 1.0;
-                for &(missing, centre, radius, smear) in &damage {
-                    let distance = (p[0] - centre[0]).hypot(p[1] - centre[1]);
-                    let inside = disc_coverage(distance, radius, half[0].max(half[1]));
-                    if inside > 0.0 {
-                        if missing {
-                            yellow_kept *= 1.0 - inside;
-                        } else {
-                            half = [half[0] + smear * inside, half[1] + smear * inside];
-                        }
-                    }
-                }
-                let (rim, pattern, yellow, red) = self.layout.coverage(p, half);
-                // Where the yellow ink is gone, the red base (the lines' colour) shows.
-                let yellow = yellow * yellow_kept;
-                let shade = if rim > 0.0 {
-                    1.0 + texture_amplitude * self.texture.at(p)
-                } else {
-                    1.0
-                };
-                std::array::from_fn(|k| {
-                    colours.surround[k] * (1.0 - rim)
-                        + colours.rim[k] * (rim - pattern)
-                        + (colours.lines[k] * (pattern - yellow - red)
-                            + colours.red[k] * red
-                            + colours.yellow[k] * yellow)
-                            * shade
-                })
+                let p = self.material_point(q, index, inverse.as_ref(), forward.as_ref());
+                self.pad_colour(p, g.half, &damage)
             };
             let glare = light.glare * 255.0 * mean_gain;
             let mut rgb: [f32; 3] = albedo.map(|a| a * brightness + glare);
@@ -635,19 +681,7 @@ impl Renderer {
                 }
             }
             if noise_scale > 0.0 || shot_noise > 0.0 {
-                let bits = rng.next_u64();
-                for (k, value) in rgb.iter_mut().enumerate() {
-                    // Two uniform bytes sum to a triangular variate on [-255, 255], variance 255^2 / 6.
-                    let a = ((bits >> (16 * k)) & 0xff) as f32;
-                    let b = ((bits >> (16 * k + 8)) & 0xff) as f32;
-                    let scale = if shot_noise > 0.0 {
-                        let sigma = (self.model.noise_sigma.powi(2) + shot_noise * value.max(0.0)).sqrt();
-                        sigma * 6f32.sqrt() / 255.0
-                    } else {
-                        noise_scale
-                    };
-                    *value += (a + b - 255.0) * scale;
-                }
+                self.add_noise(&mut rgb, rng.next_u64(), noise_scale);
             }
             for (channel, value) in out.iter_mut().zip(rgb) {
                 *channel = (value + 0.5).clamp(0.0, 255.0) as u8;
