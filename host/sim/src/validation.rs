@@ -163,177 +163,46 @@ const EDGE_REACH_MM: [f64; 2] = [12.0, 8.0];
 
 impl ValidationSet {
     pub fn new(profile: Profile, seed: u64) -> Self {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let main = match profile {
-            Profile::Quick => (1024, 768),
-            Profile::Full => (2048, 1536),
+        let mut draw = Draw {
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            seed,
+            quick: profile == Profile::Quick,
+            main: match profile {
+                Profile::Quick => (1024, 768),
+                Profile::Full => (2048, 1536),
+            },
+            cases: Vec::new(),
         };
-        let many = |quick: usize, full: usize| if profile == Profile::Quick { quick } else { full };
-        let mut cases: Vec<Case> = Vec::new();
-        let mut push = |rng: &mut ChaCha8Rng, kind: CaseKind, size, scene, camera_motion, drift: f32| {
-            let led_currents_ma =
-                std::array::from_fn(|_| NOMINAL_LED_CURRENT_MA * (1.0 + rng.gen_range(-drift..=drift)));
-            let index = cases.len();
-            cases.push(Case {
-                name: format!("{}_{index:03}", kind_name(kind)),
-                kind,
-                size,
-                scene,
-                camera_motion,
-                led_currents_ma,
-                seed: seed.wrapping_mul(1_000_003).wrapping_add(index as u64 + 1),
-            });
-        };
-        let anywhere = |rng: &mut ChaCha8Rng| {
-            [
-                rng.gen_range(-REACH_MM[0]..=REACH_MM[0]),
-                rng.gen_range(-REACH_MM[1]..=REACH_MM[1]),
-            ]
-        };
-        // The small tips only up to the force at which the linear pad still holds: a 1.5 mm flat tip at 6 N would
-        // push the pattern further towards the camera than the 2.7 mm of elastomer below it.
-        let any_tip = |rng: &mut ChaCha8Rng, at: Point2| match rng.gen_range(0..5) {
-            0 => Contact::sphere(3.0, at, rng.gen_range(1.0..=SMALL_SPHERE_MAX_N)),
-            1 => Contact::sphere(5.0, at, rng.gen_range(1.0..=8.0)),
-            2 => Contact::sphere(8.0, at, rng.gen_range(1.0..=8.0)),
-            3 => Contact::flat_punch(1.5, at, rng.gen_range(1.0..=SMALL_FLAT_MAX_N)),
-            _ => Contact::flat_punch(3.0, at, rng.gen_range(1.0..=8.0)),
-        };
-
-        let forces = many(8, 16);
-        for i in 0..forces {
-            let force = 1.0 + 7.0 * i as f64 / (forces - 1) as f64;
-            let at = [rng.gen_range(-8.0..=8.0), rng.gen_range(-6.0..=6.0)];
-            let scene = Scene::with_contact(Contact::sphere(5.0, at, force));
-            push(&mut rng, CaseKind::Calibration, main, scene, None, 0.0);
-        }
-        for _ in 0..many(24, 80) {
-            let at = anywhere(&mut rng);
-            let scene = Scene::with_contact(any_tip(&mut rng, at));
-            push(&mut rng, CaseKind::Press, main, scene, None, DRIFT);
-        }
-        for force in FLOOR_FORCES_N {
-            for k in 0..many(3, 8) {
-                let at = anywhere(&mut rng);
-                let tip = if k % 2 == 0 {
-                    Contact::sphere(5.0, at, force)
-                } else {
-                    Contact::flat_punch(3.0, at, force)
-                };
-                push(&mut rng, CaseKind::Floor, main, Scene::with_contact(tip), None, DRIFT);
-            }
-        }
-        let edges = many(8, 24);
-        for k in 0..edges {
-            let angle = 180.0 * k as f64 / edges as f64 + rng.gen_range(0.0..180.0 / edges as f64);
-            let at = [
-                rng.gen_range(-EDGE_REACH_MM[0]..=EDGE_REACH_MM[0]),
-                rng.gen_range(-EDGE_REACH_MM[1]..=EDGE_REACH_MM[1]),
-            ];
-            let scene = Scene::with_contact(Contact::edge(20.0, 1.0, angle, at, rng.gen_range(3.0..=8.0)));
-            push(&mut rng, CaseKind::Edge, main, scene, None, DRIFT);
-        }
-        for _ in 0..many(6, 16) {
-            let mid = [rng.gen_range(-14.0..=14.0), rng.gen_range(-9.0..=9.0)];
-            let direction = rng.gen_range(0.0..std::f64::consts::PI);
-            let half = [
-                0.5 * TWO_CONTACT_SEPARATION_MM * direction.cos(),
-                0.5 * TWO_CONTACT_SEPARATION_MM * direction.sin(),
-            ];
-            let a = Contact::sphere(4.0, [mid[0] - half[0], mid[1] - half[1]], rng.gen_range(2.0..=6.0));
-            let b = Contact::sphere(4.0, [mid[0] + half[0], mid[1] + half[1]], rng.gen_range(2.0..=6.0));
-            let scene = Scene {
-                contacts: vec![a, b],
-                ..Scene::default()
-            };
-            push(&mut rng, CaseKind::TwoContacts, main, scene, None, DRIFT);
-        }
-        for _ in 0..many(8, 24) {
-            let at = [rng.gen_range(-15.0..=15.0), rng.gen_range(-10.0..=10.0)];
-            let scene = Scene::with_contact(sphere_with_push(&mut rng, at));
-            push(&mut rng, CaseKind::Tangential, main, scene, None, DRIFT);
-        }
-        for k in 0..many(4, 12) {
-            let at = [rng.gen_range(-10.0..=10.0), rng.gen_range(-6.0..=6.0)];
-            let mut contact = Contact::sphere(8.0, at, rng.gen_range(4.0..=6.0));
-            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
-            contact.torsion_nmm = sign * rng.gen_range(5.0..=20.0);
-            push(
-                &mut rng,
-                CaseKind::Twist,
-                main,
-                Scene::with_contact(contact),
-                None,
-                DRIFT,
-            );
-        }
-        let rests = many(6, 16);
-        for k in 0..rests {
-            // Half under LED drift alone, half with the camera moved as well.
-            let motion = (k % 2 == 1).then(|| camera_motion(&mut rng));
-            push(&mut rng, CaseKind::Rest, main, Scene::rest(), motion, REST_DRIFT);
-        }
-        for _ in 0..many(8, 24) {
-            let (at, force) = (anywhere(&mut rng), rng.gen_range(1.0..=8.0));
-            let scene = Scene::with_contact(Contact::sphere(5.0, at, force));
-            let motion = Some(camera_motion(&mut rng));
-            push(&mut rng, CaseKind::CameraMotion, main, scene, motion, DRIFT);
-        }
-        for k in 0..many(3, 8) {
-            let (at, force) = (anywhere(&mut rng), rng.gen_range(2.0..=8.0));
-            let mut scene = Scene::with_contact(Contact::sphere(5.0, at, force));
-            let centre = anywhere(&mut rng);
-            scene.damage.push(if k % 2 == 0 {
-                Damage::Missing {
-                    centre_mm: centre,
-                    radius_mm: rng.gen_range(2.0..=5.0),
-                }
-            } else {
-                Damage::Smeared {
-                    centre_mm: centre,
-                    radius_mm: rng.gen_range(3.0..=6.0),
-                    smear_mm: 0.5,
-                }
-            });
-            push(&mut rng, CaseKind::Damaged, main, scene, None, DRIFT);
-        }
-        let sizes: &[(u32, u32)] = match profile {
+        draw.calibration_presses();
+        draw.presses();
+        draw.floor_presses();
+        draw.edges();
+        draw.two_contacts();
+        draw.pushes(
+            CaseKind::Tangential,
+            -15.0..=15.0,
+            -10.0..=10.0,
+            DRIFT,
+            draw.many(8, 24),
+        );
+        draw.twists();
+        draw.rests();
+        draw.camera_motions();
+        draw.damaged();
+        draw.other_sizes(match profile {
             Profile::Quick => &[(640, 480)],
             Profile::Full => &[(640, 480), (1280, 960), (1600, 1200)],
-        };
-        for &size in sizes {
-            for _ in 0..many(4, 4) {
-                let (at, force) = (anywhere(&mut rng), rng.gen_range(1.0..=8.0));
-                let scene = Scene::with_contact(Contact::sphere(5.0, at, force));
-                push(&mut rng, CaseKind::Resolution, size, scene, None, DRIFT);
-            }
-        }
+        });
         // Last, so that adding them left every earlier case (and its draws) as it was.
-        for force in FLOOR_FORCES_N {
-            for k in 0..many(2, 4) {
-                for angle in EDGE_FLOOR_ANGLES_DEG {
-                    // Near the centre on the first round, anywhere the edge fits on the others.
-                    let at = if k == 0 {
-                        [rng.gen_range(-3.0..=3.0), rng.gen_range(-3.0..=3.0)]
-                    } else {
-                        [
-                            rng.gen_range(-EDGE_REACH_MM[0]..=EDGE_REACH_MM[0]),
-                            rng.gen_range(-EDGE_REACH_MM[1]..=EDGE_REACH_MM[1]),
-                        ]
-                    };
-                    let scene = Scene::with_contact(Contact::edge(20.0, 1.0, angle, at, force));
-                    push(&mut rng, CaseKind::EdgeFloor, main, scene, None, DRIFT);
-                }
-            }
-        }
+        draw.edge_floor();
         // After the edges' floor, for the same reason. Where and how hard as the calibration presses, the push a
         // fifth to a half of the load, as the tangential cases.
-        for _ in 0..many(4, 8) {
-            let at = [rng.gen_range(-8.0..=8.0), rng.gen_range(-6.0..=6.0)];
-            let scene = Scene::with_contact(sphere_with_push(&mut rng, at));
-            push(&mut rng, CaseKind::CalibrationPush, main, scene, None, 0.0);
+        draw.pushes(CaseKind::CalibrationPush, -8.0..=8.0, -6.0..=6.0, 0.0, draw.many(4, 8));
+        Self {
+            profile,
+            seed,
+            cases: draw.cases,
         }
-        Self { profile, seed, cases }
     }
 
     /// The frame sizes the cases use, the main one first.
@@ -349,6 +218,234 @@ impl ValidationSet {
 
     pub fn of_kind(&self, kind: CaseKind) -> impl Iterator<Item = &Case> {
         self.cases.iter().filter(move |c| c.kind == kind)
+    }
+}
+
+/// The set's cases as they are drawn: one seeded generator whose draws follow the cases' order, so that a kind added
+/// last leaves every earlier case as it was.
+struct Draw {
+    rng: ChaCha8Rng,
+    seed: u64,
+    quick: bool,
+    /// The main size, px.
+    main: (u32, u32),
+    cases: Vec<Case>,
+}
+
+impl Draw {
+    /// `quick` cases in the quick profile, `full` in the full one.
+    fn many(&self, quick: usize, full: usize) -> usize {
+        if self.quick {
+            quick
+        } else {
+            full
+        }
+    }
+
+    /// Adds a case, its LED currents each drawn within `drift` of the nominal current.
+    fn push(
+        &mut self,
+        kind: CaseKind,
+        size: (u32, u32),
+        scene: Scene,
+        camera_motion: Option<CameraMotion>,
+        drift: f32,
+    ) {
+        let rng = &mut self.rng;
+        let led_currents_ma = std::array::from_fn(|_| NOMINAL_LED_CURRENT_MA * (1.0 + rng.gen_range(-drift..=drift)));
+        let index = self.cases.len();
+        self.cases.push(Case {
+            name: format!("{}_{index:03}", kind_name(kind)),
+            kind,
+            size,
+            scene,
+            camera_motion,
+            led_currents_ma,
+            seed: self.seed.wrapping_mul(1_000_003).wrapping_add(index as u64 + 1),
+        });
+    }
+
+    fn anywhere(&mut self) -> Point2 {
+        [
+            self.rng.gen_range(-REACH_MM[0]..=REACH_MM[0]),
+            self.rng.gen_range(-REACH_MM[1]..=REACH_MM[1]),
+        ]
+    }
+
+    /// Anywhere an edge fits.
+    fn edge_anywhere(&mut self) -> Point2 {
+        [
+            self.rng.gen_range(-EDGE_REACH_MM[0]..=EDGE_REACH_MM[0]),
+            self.rng.gen_range(-EDGE_REACH_MM[1]..=EDGE_REACH_MM[1]),
+        ]
+    }
+
+    /// One of the five tips at `at`. The small tips only up to the force at which the linear pad still holds: a
+    /// 1.5 mm flat tip at 6 N would push the pattern further towards the camera than the 2.7 mm of elastomer below
+    /// it.
+    fn any_tip(&mut self, at: Point2) -> Contact {
+        let rng = &mut self.rng;
+        match rng.gen_range(0..5) {
+            0 => Contact::sphere(3.0, at, rng.gen_range(1.0..=SMALL_SPHERE_MAX_N)),
+            1 => Contact::sphere(5.0, at, rng.gen_range(1.0..=8.0)),
+            2 => Contact::sphere(8.0, at, rng.gen_range(1.0..=8.0)),
+            3 => Contact::flat_punch(1.5, at, rng.gen_range(1.0..=SMALL_FLAT_MAX_N)),
+            _ => Contact::flat_punch(3.0, at, rng.gen_range(1.0..=8.0)),
+        }
+    }
+
+    fn calibration_presses(&mut self) {
+        let forces = self.many(8, 16);
+        for i in 0..forces {
+            let force = 1.0 + 7.0 * i as f64 / (forces - 1) as f64;
+            let at = [self.rng.gen_range(-8.0..=8.0), self.rng.gen_range(-6.0..=6.0)];
+            let scene = Scene::with_contact(Contact::sphere(5.0, at, force));
+            self.push(CaseKind::Calibration, self.main, scene, None, 0.0);
+        }
+    }
+
+    fn presses(&mut self) {
+        for _ in 0..self.many(24, 80) {
+            let at = self.anywhere();
+            let scene = Scene::with_contact(self.any_tip(at));
+            self.push(CaseKind::Press, self.main, scene, None, DRIFT);
+        }
+    }
+
+    fn floor_presses(&mut self) {
+        for force in FLOOR_FORCES_N {
+            for k in 0..self.many(3, 8) {
+                let at = self.anywhere();
+                let tip = if k % 2 == 0 {
+                    Contact::sphere(5.0, at, force)
+                } else {
+                    Contact::flat_punch(3.0, at, force)
+                };
+                self.push(CaseKind::Floor, self.main, Scene::with_contact(tip), None, DRIFT);
+            }
+        }
+    }
+
+    fn edges(&mut self) {
+        let edges = self.many(8, 24);
+        for k in 0..edges {
+            let angle = 180.0 * k as f64 / edges as f64 + self.rng.gen_range(0.0..180.0 / edges as f64);
+            let at = self.edge_anywhere();
+            let force = self.rng.gen_range(3.0..=8.0);
+            let scene = Scene::with_contact(Contact::edge(20.0, 1.0, angle, at, force));
+            self.push(CaseKind::Edge, self.main, scene, None, DRIFT);
+        }
+    }
+
+    fn two_contacts(&mut self) {
+        for _ in 0..self.many(6, 16) {
+            let rng = &mut self.rng;
+            let mid = [rng.gen_range(-14.0..=14.0), rng.gen_range(-9.0..=9.0)];
+            let direction = rng.gen_range(0.0..std::f64::consts::PI);
+            let half = [
+                0.5 * TWO_CONTACT_SEPARATION_MM * direction.cos(),
+                0.5 * TWO_CONTACT_SEPARATION_MM * direction.sin(),
+            ];
+            let a = Contact::sphere(4.0, [mid[0] - half[0], mid[1] - half[1]], rng.gen_range(2.0..=6.0));
+            let b = Contact::sphere(4.0, [mid[0] + half[0], mid[1] + half[1]], rng.gen_range(2.0..=6.0));
+            let scene = Scene {
+                contacts: vec![a, b],
+                ..Scene::default()
+            };
+            self.push(CaseKind::TwoContacts, self.main, scene, None, DRIFT);
+        }
+    }
+
+    /// `count` spheres pushed sideways (see [`sphere_with_push`]) within `x` and `y` (mm), as cases of `kind`.
+    fn pushes(
+        &mut self,
+        kind: CaseKind,
+        x: std::ops::RangeInclusive<f64>,
+        y: std::ops::RangeInclusive<f64>,
+        drift: f32,
+        count: usize,
+    ) {
+        for _ in 0..count {
+            let at = [self.rng.gen_range(x.clone()), self.rng.gen_range(y.clone())];
+            let scene = Scene::with_contact(sphere_with_push(&mut self.rng, at));
+            self.push(kind, self.main, scene, None, drift);
+        }
+    }
+
+    fn twists(&mut self) {
+        for k in 0..self.many(4, 12) {
+            let rng = &mut self.rng;
+            let at = [rng.gen_range(-10.0..=10.0), rng.gen_range(-6.0..=6.0)];
+            let mut contact = Contact::sphere(8.0, at, rng.gen_range(4.0..=6.0));
+            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            contact.torsion_nmm = sign * rng.gen_range(5.0..=20.0);
+            self.push(CaseKind::Twist, self.main, Scene::with_contact(contact), None, DRIFT);
+        }
+    }
+
+    fn rests(&mut self) {
+        for k in 0..self.many(6, 16) {
+            // Half under LED drift alone, half with the camera moved as well.
+            let motion = (k % 2 == 1).then(|| camera_motion(&mut self.rng));
+            self.push(CaseKind::Rest, self.main, Scene::rest(), motion, REST_DRIFT);
+        }
+    }
+
+    fn camera_motions(&mut self) {
+        for _ in 0..self.many(8, 24) {
+            let (at, force) = (self.anywhere(), self.rng.gen_range(1.0..=8.0));
+            let scene = Scene::with_contact(Contact::sphere(5.0, at, force));
+            let motion = Some(camera_motion(&mut self.rng));
+            self.push(CaseKind::CameraMotion, self.main, scene, motion, DRIFT);
+        }
+    }
+
+    fn damaged(&mut self) {
+        for k in 0..self.many(3, 8) {
+            let (at, force) = (self.anywhere(), self.rng.gen_range(2.0..=8.0));
+            let mut scene = Scene::with_contact(Contact::sphere(5.0, at, force));
+            let centre = self.anywhere();
+            scene.damage.push(if k % 2 == 0 {
+                Damage::Missing {
+                    centre_mm: centre,
+                    radius_mm: self.rng.gen_range(2.0..=5.0),
+                }
+            } else {
+                Damage::Smeared {
+                    centre_mm: centre,
+                    radius_mm: self.rng.gen_range(3.0..=6.0),
+                    smear_mm: 0.5,
+                }
+            });
+            self.push(CaseKind::Damaged, self.main, scene, None, DRIFT);
+        }
+    }
+
+    fn other_sizes(&mut self, sizes: &[(u32, u32)]) {
+        for &size in sizes {
+            for _ in 0..4 {
+                let (at, force) = (self.anywhere(), self.rng.gen_range(1.0..=8.0));
+                let scene = Scene::with_contact(Contact::sphere(5.0, at, force));
+                self.push(CaseKind::Resolution, size, scene, None, DRIFT);
+            }
+        }
+    }
+
+    fn edge_floor(&mut self) {
+        for force in FLOOR_FORCES_N {
+            for k in 0..self.many(2, 4) {
+                for angle in EDGE_FLOOR_ANGLES_DEG {
+                    // Near the centre on the first round, anywhere the edge fits on the others.
+                    let at = if k == 0 {
+                        [self.rng.gen_range(-3.0..=3.0), self.rng.gen_range(-3.0..=3.0)]
+                    } else {
+                        self.edge_anywhere()
+                    };
+                    let scene = Scene::with_contact(Contact::edge(20.0, 1.0, angle, at, force));
+                    self.push(CaseKind::EdgeFloor, self.main, scene, None, DRIFT);
+                }
+            }
+        }
     }
 }
 
