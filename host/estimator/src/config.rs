@@ -451,11 +451,7 @@ fn finite(key: &'static str, v: f64) -> Result<(), ConfigError> {
 }
 
 fn fraction(key: &'static str, v: f64) -> Result<(), ConfigError> {
-    if v.is_finite() && (0.0..=1.0).contains(&v) {
-        Ok(())
-    } else {
-        Err(invalid(key, v, "must be between 0 and 1"))
-    }
+    in_range(key, v, 0.0..=1.0, "must be between 0 and 1")
 }
 
 /// `v` within `range` (a NaN never is); `allowed` says so in the error.
