@@ -59,32 +59,25 @@
 //! moments of the pressure) comes from a second solve with the pressure's unknowns on the grid's nodes instead of its
 //! cells, which has no checkerboard noise (see `PressureBasis`).
 
-use std::sync::{Arc, Mutex};
-
 use nalgebra::{DMatrix, DVector};
 use nusense_geometry::{PadGeometry, Point2};
 
-use crate::config::{ElasticModel, SensorConfig};
-use crate::elastic::{image_matrix, parallax_shifts, Border, CameraView, Cell, ElasticError, PadResponse, PointKernel};
+use crate::elastic::Cell;
 use crate::linalg::{dot, gram, tr_mul_vec, Dense, UpdatedCholesky};
 
+mod build;
 mod noise;
 mod stage1;
 #[cfg(test)]
 mod test_support;
 
 pub use noise::{f_quantile, f_upper_tail, normal_quantile};
-use stage1::{motion_basis, MEASURED_NOISE_REACH_CELLS};
 pub use stage1::{Stage1, TestOutcome};
 
 /// Columns of the motion basis: translation (2), linear (4), perspective (2).
 pub const MOTION_PARAMETERS: usize = 8;
 /// Stage 1 pressure above this many of its own noise sigmas marks a cell as loaded.
 const SUPPORT_SIGMAS: f64 = 3.0;
-/// Lengths (cells) of the line shapes stage 2 also picks its loaded cells by, along the grid's rows, columns and
-/// diagonals, and the sides (cells) of the square shapes a line must explain better than.
-const LINE_LENGTHS_CELLS: [usize; 2] = [3, 5];
-const BLOCK_SIDES_CELLS: [usize; 3] = [1, 2, 3];
 /// Stage 2 gives a contact's shear a second shape, stage 1's own shear along the push (see
 /// `InverseModel::shear_along_push`), only when stage 1's net shear on its cells is at least this share of their net
 /// pressure. On the quick validation set stage 1 reads the plain presses' net shear at 0.01-0.58 of their pressure
@@ -101,9 +94,6 @@ const MAX_ACTIVE_SET_ITERATIONS: usize = 50;
 /// A local maximum of pressure starts its own contact only if the saddle towards a higher one dips below this
 /// fraction of its peak (otherwise it is a bump of the same contact).
 const SADDLE_FRACTION: f64 = 0.6;
-/// [`InverseModel::near_loads`] looks its distances up in a table built for reaches up to this many cells, the
-/// largest it is asked for.
-const NEAR_TABLE_REACH_CELLS: f64 = MEASURED_NOISE_REACH_CELLS;
 /// Whether a contact is elongated is judged on its core, each cell weighted by its pressure above this fraction of
 /// the contact's peak: the solve leaves a low ring of pressure around every contact (its noise, kept positive by
 /// p >= 0) whose shape is the noise's, and with it a round 3 mm press measures 14 mm by 11. Above the floor the
@@ -176,7 +166,7 @@ pub struct InverseModel {
     /// and P0 the projection off the motion basis: a shape w's least-squares amplitude in displacements d with
     /// motion-only residuals r is wᵀ A_pᵀ r / wᵀ G0 w, its noise sigma / sqrt(wᵀ G0 w).
     matched_gram: Dense,
-    /// The line shapes (see [`LINE_LENGTHS_CELLS`]) and the square ones, each with its sqrt(wᵀ G0 w) (unit load per
+    /// The line shapes (see [`LINE_LENGTHS_CELLS`](build::LINE_LENGTHS_CELLS)) and the square ones, each with its sqrt(wᵀ G0 w) (unit load per
     /// cell).
     line_shapes: Vec<(Vec<usize>, f64)>,
     block_shapes: Vec<(Vec<usize>, f64)>,
@@ -186,7 +176,7 @@ pub struct InverseModel {
     /// Normalisation length of the motion basis, mm.
     motion_length_mm: f64,
     false_alarm_probability: f64,
-    /// Per cell: the corners (index, distance from the cell's centre in mm) within [`NEAR_TABLE_REACH_CELLS`] of
+    /// Per cell: the corners (index, distance from the cell's centre in mm) within [`NEAR_TABLE_REACH_CELLS`](build::NEAR_TABLE_REACH_CELLS) of
     /// it, for [`InverseModel::near_loads`] (the same distances it would compute, once per sensor rather than
     /// thousands per frame).
     corners_near_cell: Vec<Vec<(usize, f64)>>,
@@ -359,292 +349,13 @@ impl SecondMoments {
     }
 }
 
-/// Models kept for reuse (a daemon re-tares often; tests build many estimators of a few configs).
-static MODELS: Mutex<Vec<(String, Arc<InverseModel>)>> = Mutex::new(Vec::new());
-/// What a model needs that does not depend on where the camera is: the layer's kernel (its spectral tables take
-/// most of a model's build) and the in-plane response. A re-tare after the camera moved builds a model for a new
-/// view, and only the parallax and the solve's matrices are made again.
-static VIEW_FREE_PARTS: Mutex<Vec<(String, Arc<ViewFreeParts>)>> = Mutex::new(Vec::new());
-const CACHE_SIZE: usize = 4;
-
-/// The entry of `cache` under `key`, built by `build` if absent; the oldest entry goes when the cache is full.
-fn cached<T, E>(
-    cache: &Mutex<Vec<(String, Arc<T>)>>,
-    key: String,
-    build: impl FnOnce() -> Result<T, E>,
-) -> Result<Arc<T>, E> {
-    let mut cache = cache.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some((_, value)) = cache.iter().find(|(k, _)| *k == key) {
-        return Ok(value.clone());
-    }
-    let value = Arc::new(build()?);
-    if cache.len() >= CACHE_SIZE {
-        cache.remove(0);
-    }
-    cache.push((key, value.clone()));
-    Ok(value)
-}
-
-struct ViewFreeParts {
-    kernel: PointKernel,
-    corners: Vec<Point2>,
-    cells: Vec<Cell>,
-    /// The in-plane response without the parallax.
-    response: PadResponse,
-    /// What sliding walls at the frame add to it (see [`crate::elastic::image_matrix`]), transposed: 3 per cell x
-    /// observations.
-    images_t: Dense,
-    /// The layered model's quarter cells (each cell's four, cell-major) and their in-plane response without the
-    /// parallax; none for the other models (see [`InverseModel::quarter_centres`]).
-    quarters: Option<(Vec<Cell>, PadResponse)>,
-}
-
-impl ViewFreeParts {
-    fn shared(config: &SensorConfig) -> Result<Arc<Self>, ElasticError> {
-        let key = format!("{:?}|{:?}", config.pad, config.elastic);
-        cached(&VIEW_FREE_PARTS, key, || Self::new(config))
-    }
-
-    fn new(config: &SensorConfig) -> Result<Self, ElasticError> {
-        let pad = config.pad;
-        let kernel = PointKernel::new(&config.elastic)?;
-        let corners: Vec<Point2> = pad.corners().map(|c| pad.corner_mm(c)).collect();
-        let size = [pad.pitch_x_mm(), pad.pitch_y_mm()];
-        let cells: Vec<Cell> = (0..pad.rows)
-            .flat_map(|row| (0..pad.cols).map(move |col| nusense_geometry::SquareIndex { row, col }))
-            .map(|cell| Cell {
-                centre_mm: pad.square_centre_mm(cell),
-                size_mm: size,
-            })
-            .collect();
-        let frame = [
-            pad.width_mm / 2.0 + config.elastic.border_margin_mm,
-            pad.height_mm / 2.0 + config.elastic.border_margin_mm,
-        ];
-        let border = match (
-            config.elastic.model,
-            config.elastic.bonded_border,
-            config.elastic.sliding_walls,
-        ) {
-            (ElasticModel::BondedLayer | ElasticModel::Layered, true, _) => Border::Clamped(frame),
-            (ElasticModel::BondedLayer | ElasticModel::Layered, false, true) => Border::Sliding(frame),
-            _ => Border::None,
-        };
-        let response = PadResponse::new(&kernel, &corners, &cells, border)?;
-        let images_t = Dense::from_nalgebra(&image_matrix(&kernel, &corners, &cells, frame).transpose());
-        let quarters = if config.elastic.model == ElasticModel::Layered {
-            let quarters: Vec<Cell> = cells
-                .iter()
-                .flat_map(|cell| {
-                    let size = [cell.size_mm[0] / 2.0, cell.size_mm[1] / 2.0];
-                    [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)].map(|(sx, sy)| Cell {
-                        centre_mm: [
-                            cell.centre_mm[0] + sx * size[0] / 2.0,
-                            cell.centre_mm[1] + sy * size[1] / 2.0,
-                        ],
-                        size_mm: size,
-                    })
-                })
-                .collect();
-            let response = PadResponse::new(&kernel, &corners, &quarters, border)?;
-            Some((quarters, response))
-        } else {
-            None
-        };
-        Ok(Self {
-            kernel,
-            corners,
-            cells,
-            response,
-            images_t,
-            quarters,
-        })
-    }
-}
-
 impl InverseModel {
-    /// The model for `config`, built once per distinct pad, elastic and inverse configuration and camera view in
-    /// this process.
-    /// `view`: where the camera is (from the rest frame's map), for the parallax of the pattern's normal
-    /// displacement; `None` leaves it out.
-    pub fn shared(config: &SensorConfig, view: Option<CameraView>) -> Result<Arc<Self>, ElasticError> {
-        let key = format!("{:?}|{:?}|{:?}|{:?}", config.pad, config.elastic, config.inverse, view);
-        cached(&MODELS, key, || Self::new(config, view))
-    }
-
-    pub fn new(config: &SensorConfig, view: Option<CameraView>) -> Result<Self, ElasticError> {
-        let pad = config.pad;
-        let parts = ViewFreeParts::shared(config)?;
-        let ViewFreeParts {
-            kernel, corners, cells, ..
-        } = &*parts;
-        let mut response = parts.response.clone();
-        let mut quarters = parts.quarters.clone();
-        let n = config.elastic.gel_refractive_index;
-        if let (Some(view), true) = (view, n > 0.0) {
-            let shifts = parallax_shifts(&view, n, corners);
-            response.add_parallax(kernel, corners, cells, &shifts);
-            if let Some((cells, response)) = &mut quarters {
-                response.add_parallax(kernel, corners, cells, &shifts);
-            }
-        }
-        let quarters = quarters.map(|(cells, response)| Quarters {
-            pressure_t: Dense::from_nalgebra(&DMatrix::from_fn(cells.len(), response.matrix.nrows(), |j, r| {
-                response.matrix[(r, 3 * j + 2)]
-            })),
-            centres_mm: cells.iter().map(|q| q.centre_mm).collect(),
-        });
-        let a = response.matrix;
-        let observations = a.nrows();
-        let motion_length_mm = (pad.width_mm.max(pad.height_mm)) / 2.0;
-        let b = motion_basis(corners, motion_length_mm);
-        let lambda = (config.inverse.noise_mm / config.inverse.traction_prior_n).powi(2);
-
-        let mut k = DMatrix::zeros(observations + MOTION_PARAMETERS, observations + MOTION_PARAMETERS);
-        let c = &a * a.transpose();
-        k.view_mut((0, 0), (observations, observations)).copy_from(&c);
-        for i in 0..observations {
-            k[(i, i)] += lambda;
-        }
-        k.view_mut((0, observations), (observations, MOTION_PARAMETERS))
-            .copy_from(&b);
-        k.view_mut((observations, 0), (MOTION_PARAMETERS, observations))
-            .copy_from(&b.transpose());
-        let inverse = k
-            .try_inverse()
-            .ok_or(ElasticError::Degenerate("the kriging system is singular"))?;
-        let s = inverse.columns(0, observations).into_owned();
-        let s11 = s.rows(0, observations).into_owned();
-
-        // The test: Q = P0 - lambda^2 S11^2 with P0 the projection off the motion basis.
-        let btb = b.transpose() * &b;
-        let btb_inv = btb
-            .clone()
-            .try_inverse()
-            .ok_or(ElasticError::Degenerate("the motion basis is degenerate"))?;
-        let p0 = DMatrix::identity(observations, observations) - &b * &btb_inv * b.transpose();
-        let s11_sq = &s11 * &s11;
-        let q = &p0 - &s11_sq * (lambda * lambda);
-        let trace = q.trace();
-        let trace_sq = q.iter().map(|v| v * v).sum::<f64>();
-        if !(trace > 0.0 && trace_sq > 0.0) {
-            return Err(ElasticError::Degenerate(
-                "the tractions explain nothing beyond the motion",
-            ));
-        }
-        let residual_share = (0..observations / 2)
-            .map(|i| lambda * lambda * (s11_sq[(2 * i, 2 * i)] + s11_sq[(2 * i + 1, 2 * i + 1)]))
-            .collect();
-        let pressure_columns = DMatrix::from_fn(observations, cells.len(), |r, j| a[(r, 3 * j + 2)]);
-        let pressure_explained = pressure_columns.transpose() * &q * &pressure_columns;
-        let operator = a.transpose() * &s11;
-        let pressure_noise = (0..cells.len()).map(|j| operator.row(3 * j + 2).norm()).collect();
-        let matched_gram = pressure_columns.transpose() * &p0 * &pressure_columns;
-        let (rows, cols) = (usize::from(pad.rows), usize::from(pad.cols));
-        let shape_norm = |shape: &[usize]| {
-            shape
-                .iter()
-                .flat_map(|&i| shape.iter().map(move |&j| (i, j)))
-                .map(|(i, j)| matched_gram[(i, j)])
-                .sum::<f64>()
-                .max(0.0)
-                .sqrt()
-        };
-        let with_norms = |shapes: Vec<Vec<usize>>| -> Vec<(Vec<usize>, f64)> {
-            shapes
-                .into_iter()
-                .map(|shape| {
-                    let norm = shape_norm(&shape);
-                    (shape, norm)
-                })
-                .filter(|(_, norm)| *norm > 0.0)
-                .collect()
-        };
-        let line_shapes = with_norms(line_shapes(rows, cols));
-        let block_shapes = with_norms(block_shapes(rows, cols));
-        let lines_per_cell = (LINE_LENGTHS_CELLS.iter().sum::<usize>() * 4) as f64;
-        let cell_false_pick = 0.5 * libm::erfc(SUPPORT_SIGMAS / std::f64::consts::SQRT_2);
-        let line_sigmas = normal_quantile(1.0 - cell_false_pick / lines_per_cell);
-
-        let mut model = Self {
-            pad,
-            a_t: Dense::from_nalgebra(&a.transpose()),
-            b_t: Dense::from_nalgebra(&b.transpose()),
-            gram_bb: Dense::from_nalgebra(&btb),
-            a: Dense::from_nalgebra(&a),
-            b: Dense::from_nalgebra(&b),
-            s: Dense::from_nalgebra(&s),
-            s_t: Dense::from_nalgebra(&s.transpose()),
-            a_t_pressure: Dense::from_nalgebra(&DMatrix::from_fn(cells.len(), observations, |j, r| a[(r, 3 * j + 2)])),
-            cells: cells.clone(),
-            observations,
-            lambda,
-            residual_share,
-            pressure_noise,
-            test_scale: trace_sq / trace,
-            test_dof: trace * trace / trace_sq,
-            reference_explained: 0.0,
-            pressure_explained: Dense::from_nalgebra(&pressure_explained),
-            matched_gram: Dense::from_nalgebra(&matched_gram),
-            line_shapes,
-            block_shapes,
-            line_sigmas,
-            motion_length_mm,
-            false_alarm_probability: config.inverse.false_alarm_probability,
-            corners_near_cell: Vec::new(),
-            images_t: parts.images_t.clone(),
-            quarters,
-        };
-        let table_reach = NEAR_TABLE_REACH_CELLS * pad.pitch_x_mm().max(pad.pitch_y_mm());
-        model.corners_near_cell = model
-            .cells
-            .iter()
-            .map(|cell| {
-                corners
-                    .iter()
-                    .map(|&p| corner_to_cell_mm(p, cell.centre_mm))
-                    .enumerate()
-                    .filter(|&(_, distance)| distance <= table_reach)
-                    .collect()
-            })
-            .collect();
-        let d = model.central_press_mm();
-        let stage = model.stage1(&d, &vec![true; observations / 2]);
-        model.reference_explained = stage.rss_rigid - stage.rss_full;
-        if !(model.reference_explained > 0.0) {
-            return Err(ElasticError::Degenerate("a press at the centre explains nothing"));
-        }
-        Ok(model)
-    }
-
     pub fn cells(&self) -> &[Cell] {
         &self.cells
     }
 
     pub fn pad(&self) -> &PadGeometry {
         &self.pad
-    }
-
-    /// The cells whose centres are nearest the pad's centre (four on an even grid).
-    fn central_cells(&self) -> Vec<usize> {
-        let distance = |c: &Cell| c.centre_mm[0].hypot(c.centre_mm[1]);
-        let nearest = self.cells.iter().map(distance).fold(f64::MAX, f64::min);
-        (0..self.cells.len())
-            .filter(|&j| distance(&self.cells[j]) <= nearest + 1e-9)
-            .collect()
-    }
-
-    /// The displacements (mm, 2 per corner, noise-free) of a 1 N press spread over the cells nearest the pad's
-    /// centre: the press the detection floor is stated for.
-    pub fn central_press_mm(&self) -> Vec<f64> {
-        let central = self.central_cells();
-        let mut press = vec![0.0; 3 * self.cells.len()];
-        for &j in &central {
-            press[3 * j + 2] = 1.0 / central.len() as f64;
-        }
-        let mut d = vec![0.0; self.observations];
-        self.a.mul_vec(&press, &mut d);
-        d
     }
 
     /// Stage 2 (see the module notes), seeded by a stage 1 result at noise `noise_mm`; regions carrying less normal
@@ -2271,11 +1982,6 @@ fn pattern_search<const N: usize>(
     (best, best_score)
 }
 
-/// Distance (mm) from a corner to a cell's centre, as [`InverseModel::near_loads`] compares it with its reach.
-fn corner_to_cell_mm(corner: Point2, centre: Point2) -> f64 {
-    (corner[0] - centre[0]).hypot(corner[1] - centre[1])
-}
-
 /// The 3 x 3 block around (r, c) inside the grid, the cell itself included.
 fn neighbourhood(r: isize, c: isize, rows: usize, cols: usize) -> impl Iterator<Item = (usize, usize)> {
     (-1..=1)
@@ -2283,46 +1989,6 @@ fn neighbourhood(r: isize, c: isize, rows: usize, cols: usize) -> impl Iterator<
         .filter_map(move |(nr, nc)| {
             (nr >= 0 && nc >= 0 && (nr as usize) < rows && (nc as usize) < cols).then_some((nr as usize, nc as usize))
         })
-}
-
-/// The line shapes of [`LINE_LENGTHS_CELLS`] along rows, columns and both diagonals, wholly inside a rows x cols grid
-/// (cells row-major).
-fn line_shapes(rows: usize, cols: usize) -> Vec<Vec<usize>> {
-    let mut shapes = Vec::new();
-    for length in LINE_LENGTHS_CELLS {
-        for (dr, dc) in [(0isize, 1isize), (1, 0), (1, 1), (1, -1)] {
-            for r in 0..rows as isize {
-                for c in 0..cols as isize {
-                    let shape: Vec<usize> = (0..length as isize)
-                        .map(|k| (r + k * dr, c + k * dc))
-                        .filter(|&(r, c)| r >= 0 && c >= 0 && (r as usize) < rows && (c as usize) < cols)
-                        .map(|(r, c)| r as usize * cols + c as usize)
-                        .collect();
-                    if shape.len() == length {
-                        shapes.push(shape);
-                    }
-                }
-            }
-        }
-    }
-    shapes
-}
-
-/// The square shapes of [`BLOCK_SIDES_CELLS`] wholly inside a rows x cols grid (cells row-major).
-fn block_shapes(rows: usize, cols: usize) -> Vec<Vec<usize>> {
-    let mut shapes = Vec::new();
-    for side in BLOCK_SIDES_CELLS {
-        for r in 0..(rows + 1).saturating_sub(side) {
-            for c in 0..(cols + 1).saturating_sub(side) {
-                shapes.push(
-                    (r..r + side)
-                        .flat_map(|r| (c..c + side).map(move |c| r * cols + c))
-                        .collect(),
-                );
-            }
-        }
-    }
-    shapes
 }
 
 /// min ½ xᵀ H x - gᵀ x with x_i >= 0 where `constrained[i]`, given `whole`, H's factor over all of its indices in
@@ -2404,6 +2070,8 @@ fn active_set(
 mod tests {
     use super::test_support::{cell_at, field, hertz_press, model, node_at, node_press, pseudo_gauss};
     use super::*;
+    use crate::config::{ElasticModel, SensorConfig};
+    use crate::elastic::{Border, PadResponse, PointKernel};
 
     /// The active-set solve as it was before the free set's factor was updated in place: a factorisation from
     /// scratch at every step.

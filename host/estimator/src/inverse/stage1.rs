@@ -4,10 +4,9 @@
 use nalgebra::{DMatrix, DVector};
 use nusense_geometry::Point2;
 
+use super::build::NEAR_TABLE_REACH_CELLS;
 use super::noise::NoiseEstimate;
-use super::{
-    f_quantile, f_upper_tail, neighbourhood, normal_quantile, InverseModel, MOTION_PARAMETERS, NEAR_TABLE_REACH_CELLS,
-};
+use super::{f_quantile, f_upper_tail, neighbourhood, normal_quantile, InverseModel, MOTION_PARAMETERS};
 use crate::linalg::dot;
 
 /// The noise estimate leaves out this fraction of the corners with the largest residuals...
