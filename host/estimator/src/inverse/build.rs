@@ -122,6 +122,31 @@ impl ViewFreeParts {
             quarters,
         })
     }
+
+    /// The in-plane response and the layered model's quarters' as the camera at `view` sees them: with the parallax
+    /// of the pattern's normal displacement through a gel of `refractive_index` (none without a view or an index).
+    fn seen_from(&self, view: Option<CameraView>, refractive_index: f64) -> (PadResponse, Option<Quarters>) {
+        let ViewFreeParts {
+            kernel, corners, cells, ..
+        } = self;
+        let mut response = self.response.clone();
+        let mut quarters = self.quarters.clone();
+        let n = refractive_index;
+        if let (Some(view), true) = (view, n > 0.0) {
+            let shifts = parallax_shifts(&view, n, corners);
+            response.add_parallax(kernel, corners, cells, &shifts);
+            if let Some((cells, response)) = &mut quarters {
+                response.add_parallax(kernel, corners, cells, &shifts);
+            }
+        }
+        let quarters = quarters.map(|(cells, response)| Quarters {
+            pressure_t: Dense::from_nalgebra(&DMatrix::from_fn(cells.len(), response.matrix.nrows(), |j, r| {
+                response.matrix[(r, 3 * j + 2)]
+            })),
+            centres_mm: cells.iter().map(|q| q.centre_mm).collect(),
+        });
+        (response, quarters)
+    }
 }
 
 /// Distance (mm) from a corner to a cell's centre, as [`InverseModel::near_loads`] compares it with its reach.
@@ -182,102 +207,23 @@ impl InverseModel {
     pub fn new(config: &SensorConfig, view: Option<CameraView>) -> Result<Self, ElasticError> {
         let pad = config.pad;
         let parts = ViewFreeParts::shared(config)?;
-        let ViewFreeParts {
-            kernel, corners, cells, ..
-        } = &*parts;
-        let mut response = parts.response.clone();
-        let mut quarters = parts.quarters.clone();
-        let n = config.elastic.gel_refractive_index;
-        if let (Some(view), true) = (view, n > 0.0) {
-            let shifts = parallax_shifts(&view, n, corners);
-            response.add_parallax(kernel, corners, cells, &shifts);
-            if let Some((cells, response)) = &mut quarters {
-                response.add_parallax(kernel, corners, cells, &shifts);
-            }
-        }
-        let quarters = quarters.map(|(cells, response)| Quarters {
-            pressure_t: Dense::from_nalgebra(&DMatrix::from_fn(cells.len(), response.matrix.nrows(), |j, r| {
-                response.matrix[(r, 3 * j + 2)]
-            })),
-            centres_mm: cells.iter().map(|q| q.centre_mm).collect(),
-        });
+        let ViewFreeParts { corners, cells, .. } = &*parts;
+        let (response, quarters) = parts.seen_from(view, config.elastic.gel_refractive_index);
         let a = response.matrix;
         let observations = a.nrows();
         let motion_length_mm = (pad.width_mm.max(pad.height_mm)) / 2.0;
         let b = motion_basis(corners, motion_length_mm);
         let lambda = (config.inverse.noise_mm / config.inverse.traction_prior_n).powi(2);
-
-        let mut k = DMatrix::zeros(observations + MOTION_PARAMETERS, observations + MOTION_PARAMETERS);
-        let c = &a * a.transpose();
-        k.view_mut((0, 0), (observations, observations)).copy_from(&c);
-        for i in 0..observations {
-            k[(i, i)] += lambda;
-        }
-        k.view_mut((0, observations), (observations, MOTION_PARAMETERS))
-            .copy_from(&b);
-        k.view_mut((observations, 0), (MOTION_PARAMETERS, observations))
-            .copy_from(&b.transpose());
-        let inverse = k
-            .try_inverse()
-            .ok_or(ElasticError::Degenerate("the kriging system is singular"))?;
-        let s = inverse.columns(0, observations).into_owned();
-        let s11 = s.rows(0, observations).into_owned();
-
-        // The test: Q = P0 - lambda^2 S11^2 with P0 the projection off the motion basis.
-        let btb = b.transpose() * &b;
-        let btb_inv = btb
-            .clone()
-            .try_inverse()
-            .ok_or(ElasticError::Degenerate("the motion basis is degenerate"))?;
-        let p0 = DMatrix::identity(observations, observations) - &b * &btb_inv * b.transpose();
-        let s11_sq = &s11 * &s11;
-        let q = &p0 - &s11_sq * (lambda * lambda);
-        let trace = q.trace();
-        let trace_sq = q.iter().map(|v| v * v).sum::<f64>();
-        if !(trace > 0.0 && trace_sq > 0.0) {
-            return Err(ElasticError::Degenerate(
-                "the tractions explain nothing beyond the motion",
-            ));
-        }
-        let residual_share = (0..observations / 2)
-            .map(|i| lambda * lambda * (s11_sq[(2 * i, 2 * i)] + s11_sq[(2 * i + 1, 2 * i + 1)]))
-            .collect();
-        let pressure_columns = DMatrix::from_fn(observations, cells.len(), |r, j| a[(r, 3 * j + 2)]);
-        let pressure_explained = pressure_columns.transpose() * &q * &pressure_columns;
-        let operator = a.transpose() * &s11;
-        let pressure_noise = (0..cells.len()).map(|j| operator.row(3 * j + 2).norm()).collect();
-        let matched_gram = pressure_columns.transpose() * &p0 * &pressure_columns;
-        let (rows, cols) = (usize::from(pad.rows), usize::from(pad.cols));
-        let shape_norm = |shape: &[usize]| {
-            shape
-                .iter()
-                .flat_map(|&i| shape.iter().map(move |&j| (i, j)))
-                .map(|(i, j)| matched_gram[(i, j)])
-                .sum::<f64>()
-                .max(0.0)
-                .sqrt()
-        };
-        let with_norms = |shapes: Vec<Vec<usize>>| -> Vec<(Vec<usize>, f64)> {
-            shapes
-                .into_iter()
-                .map(|shape| {
-                    let norm = shape_norm(&shape);
-                    (shape, norm)
-                })
-                .filter(|(_, norm)| *norm > 0.0)
-                .collect()
-        };
-        let line_shapes = with_norms(line_shapes(rows, cols));
-        let block_shapes = with_norms(block_shapes(rows, cols));
-        let lines_per_cell = (LINE_LENGTHS_CELLS.iter().sum::<usize>() * 4) as f64;
-        let cell_false_pick = 0.5 * libm::erfc(SUPPORT_SIGMAS / std::f64::consts::SQRT_2);
-        let line_sigmas = normal_quantile(1.0 - cell_false_pick / lines_per_cell);
+        let s = kriging_columns(&a, &b, lambda)?;
+        let test = TestOperators::new(&a, &b, &s, lambda, cells.len())?;
+        let (line_shapes, block_shapes) =
+            shape_filters(&test.matched_gram, usize::from(pad.rows), usize::from(pad.cols));
 
         let mut model = Self {
             pad,
             a_t: Dense::from_nalgebra(&a.transpose()),
             b_t: Dense::from_nalgebra(&b.transpose()),
-            gram_bb: Dense::from_nalgebra(&btb),
+            gram_bb: Dense::from_nalgebra(&test.btb),
             a: Dense::from_nalgebra(&a),
             b: Dense::from_nalgebra(&b),
             s: Dense::from_nalgebra(&s),
@@ -286,16 +232,16 @@ impl InverseModel {
             cells: cells.clone(),
             observations,
             lambda,
-            residual_share,
-            pressure_noise,
-            test_scale: trace_sq / trace,
-            test_dof: trace * trace / trace_sq,
+            residual_share: test.residual_share,
+            pressure_noise: test.pressure_noise,
+            test_scale: test.trace_sq / test.trace,
+            test_dof: test.trace * test.trace / test.trace_sq,
             reference_explained: 0.0,
-            pressure_explained: Dense::from_nalgebra(&pressure_explained),
-            matched_gram: Dense::from_nalgebra(&matched_gram),
+            pressure_explained: Dense::from_nalgebra(&test.pressure_explained),
+            matched_gram: Dense::from_nalgebra(&test.matched_gram),
             line_shapes,
             block_shapes,
-            line_sigmas,
+            line_sigmas: line_sigmas(),
             motion_length_mm,
             false_alarm_probability: config.inverse.false_alarm_probability,
             corners_near_cell: Vec::new(),
@@ -303,18 +249,7 @@ impl InverseModel {
             quarters,
         };
         let table_reach = NEAR_TABLE_REACH_CELLS * pad.pitch_x_mm().max(pad.pitch_y_mm());
-        model.corners_near_cell = model
-            .cells
-            .iter()
-            .map(|cell| {
-                corners
-                    .iter()
-                    .map(|&p| corner_to_cell_mm(p, cell.centre_mm))
-                    .enumerate()
-                    .filter(|&(_, distance)| distance <= table_reach)
-                    .collect()
-            })
-            .collect();
+        model.corners_near_cell = corners_near_cells(&model.cells, corners, table_reach);
         let d = model.central_press_mm();
         let stage = model.stage1(&d, &vec![true; observations / 2]);
         model.reference_explained = stage.rss_rigid - stage.rss_full;
@@ -345,4 +280,142 @@ impl InverseModel {
         self.a.mul_vec(&press, &mut d);
         d
     }
+}
+
+/// The first `observations` columns of the kriging system's inverse ([C B; Bᵀ 0] with C = A Aᵀ + lambda I, see the
+/// module notes), (obs + P) x obs.
+fn kriging_columns(a: &DMatrix<f64>, b: &DMatrix<f64>, lambda: f64) -> Result<DMatrix<f64>, ElasticError> {
+    let observations = a.nrows();
+    let mut k = DMatrix::zeros(observations + MOTION_PARAMETERS, observations + MOTION_PARAMETERS);
+    let c = a * a.transpose();
+    k.view_mut((0, 0), (observations, observations)).copy_from(&c);
+    for i in 0..observations {
+        k[(i, i)] += lambda;
+    }
+    k.view_mut((0, observations), (observations, MOTION_PARAMETERS))
+        .copy_from(b);
+    k.view_mut((observations, 0), (MOTION_PARAMETERS, observations))
+        .copy_from(&b.transpose());
+    let inverse = k
+        .try_inverse()
+        .ok_or(ElasticError::Degenerate("the kriging system is singular"))?;
+    Ok(inverse.columns(0, observations).into_owned())
+}
+
+/// What the contact test and the matched filter read off the kriging operator, for the fields of [`InverseModel`]
+/// of the same names.
+struct TestOperators {
+    /// BᵀB.
+    btb: DMatrix<f64>,
+    residual_share: Vec<f64>,
+    pressure_noise: Vec<f64>,
+    pressure_explained: DMatrix<f64>,
+    matched_gram: DMatrix<f64>,
+    /// The trace of Q and the sum of its entries' squares, for the Satterthwaite parameters.
+    trace: f64,
+    trace_sq: f64,
+}
+
+impl TestOperators {
+    /// From A, B, the kriging columns `s` ([`kriging_columns`]) and lambda, over `cells` cells.
+    fn new(
+        a: &DMatrix<f64>,
+        b: &DMatrix<f64>,
+        s: &DMatrix<f64>,
+        lambda: f64,
+        cells: usize,
+    ) -> Result<Self, ElasticError> {
+        let observations = a.nrows();
+        let s11 = s.rows(0, observations).into_owned();
+
+        // The test: Q = P0 - lambda^2 S11^2 with P0 the projection off the motion basis.
+        let btb = b.transpose() * b;
+        let btb_inv = btb
+            .clone()
+            .try_inverse()
+            .ok_or(ElasticError::Degenerate("the motion basis is degenerate"))?;
+        let p0 = DMatrix::identity(observations, observations) - b * &btb_inv * b.transpose();
+        let s11_sq = &s11 * &s11;
+        let q = &p0 - &s11_sq * (lambda * lambda);
+        let trace = q.trace();
+        let trace_sq = q.iter().map(|v| v * v).sum::<f64>();
+        if !(trace > 0.0 && trace_sq > 0.0) {
+            return Err(ElasticError::Degenerate(
+                "the tractions explain nothing beyond the motion",
+            ));
+        }
+        let residual_share = (0..observations / 2)
+            .map(|i| lambda * lambda * (s11_sq[(2 * i, 2 * i)] + s11_sq[(2 * i + 1, 2 * i + 1)]))
+            .collect();
+        let pressure_columns = DMatrix::from_fn(observations, cells, |r, j| a[(r, 3 * j + 2)]);
+        let pressure_explained = pressure_columns.transpose() * &q * &pressure_columns;
+        let operator = a.transpose() * &s11;
+        let pressure_noise = (0..cells).map(|j| operator.row(3 * j + 2).norm()).collect();
+        let matched_gram = pressure_columns.transpose() * &p0 * &pressure_columns;
+        Ok(Self {
+            btb,
+            residual_share,
+            pressure_noise,
+            pressure_explained,
+            matched_gram,
+            trace,
+            trace_sq,
+        })
+    }
+}
+
+/// The line shapes and the square ones on a rows x cols grid, each with its sqrt(wᵀ G0 w) (G0: `matched_gram`),
+/// those of none left out.
+#[allow(clippy::type_complexity)]
+fn shape_filters(
+    matched_gram: &DMatrix<f64>,
+    rows: usize,
+    cols: usize,
+) -> (Vec<(Vec<usize>, f64)>, Vec<(Vec<usize>, f64)>) {
+    let shape_norm = |shape: &[usize]| {
+        shape
+            .iter()
+            .flat_map(|&i| shape.iter().map(move |&j| (i, j)))
+            .map(|(i, j)| matched_gram[(i, j)])
+            .sum::<f64>()
+            .max(0.0)
+            .sqrt()
+    };
+    let with_norms = |shapes: Vec<Vec<usize>>| -> Vec<(Vec<usize>, f64)> {
+        shapes
+            .into_iter()
+            .map(|shape| {
+                let norm = shape_norm(&shape);
+                (shape, norm)
+            })
+            .filter(|(_, norm)| *norm > 0.0)
+            .collect()
+    };
+    (
+        with_norms(line_shapes(rows, cols)),
+        with_norms(block_shapes(rows, cols)),
+    )
+}
+
+/// The sigmas above which a line shape picks its cells: the cell test's false-pick rate per cell
+/// ([`SUPPORT_SIGMAS`]), shared among the line shapes through a cell.
+fn line_sigmas() -> f64 {
+    let lines_per_cell = (LINE_LENGTHS_CELLS.iter().sum::<usize>() * 4) as f64;
+    let cell_false_pick = 0.5 * libm::erfc(SUPPORT_SIGMAS / std::f64::consts::SQRT_2);
+    normal_quantile(1.0 - cell_false_pick / lines_per_cell)
+}
+
+/// Per cell: the corners (index, distance from the cell's centre in mm) within `table_reach` mm of it.
+fn corners_near_cells(cells: &[Cell], corners: &[Point2], table_reach: f64) -> Vec<Vec<(usize, f64)>> {
+    cells
+        .iter()
+        .map(|cell| {
+            corners
+                .iter()
+                .map(|&p| corner_to_cell_mm(p, cell.centre_mm))
+                .enumerate()
+                .filter(|&(_, distance)| distance <= table_reach)
+                .collect()
+        })
+        .collect()
 }
