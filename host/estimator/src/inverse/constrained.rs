@@ -128,6 +128,21 @@ pub(super) fn active_set(
     Some(x)
 }
 
+/// [`InverseModel::constrained_solve`]'s unknowns but the motion, each a combination of traction components
+/// (component index, weight), and the scale of each one's prior (its sigma in units of stage 1's per component).
+#[derive(Default)]
+struct Unknowns {
+    combinations: Vec<Vec<(usize, f64)>>,
+    prior_scale: Vec<f64>,
+}
+
+impl Unknowns {
+    fn push(&mut self, combination: Vec<(usize, f64)>, prior_scale: f64) {
+        self.combinations.push(combination);
+        self.prior_scale.push(prior_scale);
+    }
+}
+
 impl InverseModel {
     /// Least squares on the groups with pressure >= 0. Unknowns: each cell's pressure; per group the total
     /// tangential force (x, y) and the twisting moment, carried by the cells in proportion to stage 1's pressure
@@ -144,14 +159,52 @@ impl InverseModel {
         with_covariance: bool,
     ) -> Option<(Vec<f64>, [f64; MOTION_PARAMETERS], PressureCovariance)> {
         let cells = self.cells.len();
-        // Each unknown as a combination of traction components: (component index, weight).
-        let mut unknowns: Vec<Vec<(usize, f64)>> = Vec::new();
-        let mut prior_scale: Vec<f64> = Vec::new();
-        let prior = (self.lambda).sqrt().recip();
+        let mut unknowns = self.pressure_unknowns(groups, basis);
+        let pressures = unknowns.combinations.len();
+        let stage1_dual = Self::stage1_dual(seed, self.lambda);
+        for group in groups {
+            self.push_shear_unknowns(seed, &stage1_dual, group, &mut unknowns);
+        }
+        let nt = unknowns.combinations.len();
+        let n = nt + MOTION_PARAMETERS;
+        let (h, g) = self.normal_equations(d, valid, &unknowns);
+        let constrained: Vec<bool> = (0..n).map(|i| i < pressures).collect();
+        let whole = UpdatedCholesky::new(&h, (0..n).collect())?;
+        let x = active_set(&h, &g, &constrained, &whole)?;
+        let mut tractions = vec![0.0; 3 * cells];
+        for (k, combination) in unknowns.combinations.iter().enumerate() {
+            for &(component, weight) in combination {
+                tractions[component] += weight * x[k];
+            }
+        }
+        let motion = std::array::from_fn(|p| x[nt + p]);
+        // Per sigma^2, the covariance of the cells' pressures (the cell basis's unknowns: one per cell), from the
+        // unconstrained problem's H^-1 (the bound p >= 0 only narrows it), when asked for.
+        let covariance = if basis == PressureBasis::Cells && with_covariance {
+            let mut unknown_of = vec![None; cells];
+            for (k, combination) in unknowns.combinations.iter().take(pressures).enumerate() {
+                unknown_of[combination[0].0 / 3] = Some(k);
+            }
+            PressureCovariance {
+                unknown_of,
+                inverse: Some(whole.inverse_block(pressures)),
+            }
+        } else {
+            PressureCovariance {
+                unknown_of: Vec::new(),
+                inverse: None,
+            }
+        };
+        Some((tractions, motion, covariance))
+    }
+
+    /// [`Self::constrained_solve`]'s pressure unknowns in `basis`: one per cell of the groups, or one per node of
+    /// each group shared equally by the group's cells that meet there.
+    fn pressure_unknowns(&self, groups: &[Vec<usize>], basis: PressureBasis) -> Unknowns {
+        let mut unknowns = Unknowns::default();
         for group in groups.iter().filter(|_| basis == PressureBasis::Cells) {
             for &j in group {
-                unknowns.push(vec![(3 * j + 2, 1.0)]);
-                prior_scale.push(1.0);
+                unknowns.push(vec![(3 * j + 2, 1.0)], 1.0);
             }
         }
         for group in groups.iter().filter(|_| basis == PressureBasis::Nodes) {
@@ -162,69 +215,73 @@ impl InverseModel {
                     .filter(|j| group.binary_search(j).is_ok())
                     .collect();
                 let share = 1.0 / around.len() as f64;
-                unknowns.push(around.into_iter().map(|j| (3 * j + 2, share)).collect());
-                prior_scale.push(1.0);
+                unknowns.push(around.into_iter().map(|j| (3 * j + 2, share)).collect(), 1.0);
             }
         }
-        let pressures = unknowns.len();
-        let stage1_dual = Self::stage1_dual(seed, self.lambda);
-        for group in groups {
-            let raw: Vec<f64> = group.iter().map(|&j| seed.tractions[3 * j + 2].max(0.0)).collect();
-            let total: f64 = raw.iter().sum();
-            let weights: Vec<f64> = if total > 0.0 {
-                raw.iter().map(|w| w / total).collect()
-            } else {
-                vec![1.0 / group.len() as f64; group.len()]
-            };
-            let centre = [
-                group
-                    .iter()
-                    .zip(&weights)
-                    .map(|(&j, w)| w * self.cells[j].centre_mm[0])
-                    .sum::<f64>(),
-                group
-                    .iter()
-                    .zip(&weights)
-                    .map(|(&j, w)| w * self.cells[j].centre_mm[1])
-                    .sum::<f64>(),
-            ];
-            let arm = |j: usize| {
-                [
-                    self.cells[j].centre_mm[0] - centre[0],
-                    self.cells[j].centre_mm[1] - centre[1],
-                ]
-            };
-            let inertia: f64 = group
+        unknowns
+    }
+
+    /// [`Self::constrained_solve`]'s shear unknowns of one group: its total tangential force (x, y) spread like stage
+    /// 1's pressure, again spread like stage 1's shear along a push when there is one, and its twisting moment.
+    /// `stage1_dual`: [`Self::stage1_dual`] of `seed`.
+    fn push_shear_unknowns(&self, seed: &Stage1, stage1_dual: &[f64], group: &[usize], unknowns: &mut Unknowns) {
+        let raw: Vec<f64> = group.iter().map(|&j| seed.tractions[3 * j + 2].max(0.0)).collect();
+        let total: f64 = raw.iter().sum();
+        let weights: Vec<f64> = if total > 0.0 {
+            raw.iter().map(|w| w / total).collect()
+        } else {
+            vec![1.0 / group.len() as f64; group.len()]
+        };
+        let centre = [
+            group
                 .iter()
                 .zip(&weights)
-                .map(|(&j, w)| w * (arm(j)[0].powi(2) + arm(j)[1].powi(2)))
-                .sum();
-            // The shear has the pressure's shape and, on a pushed contact, a second one, stage 1's own shear along the
-            // push (see `shear_along_push`), each with its own (fx, fy). A push's shear is not where its pressure is:
-            // on the validation pad the pressure centre reads behind the push, and with the pressure's shape alone
-            // part of the push was explained by pressure (quick set, against that shape alone: force over the pad
-            // 0.36 -> 0.25 N, the pushes' normal force 0.56 -> 0.26 N RMS before `push_normal_share`, tangential
-            // direction worst 6.1 -> 3.1 deg).
-            let n = group.len() as f64;
-            let along = self.shear_along_push(seed, &stage1_dual, group);
-            for shape in std::iter::once(&weights).chain(along.as_ref()) {
-                unknowns.push(group.iter().zip(shape).map(|(&j, &w)| (3 * j, w)).collect());
-                unknowns.push(group.iter().zip(shape).map(|(&j, &w)| (3 * j + 1, w)).collect());
-                prior_scale.push(n);
-                prior_scale.push(n);
-            }
-            if inertia > 1e-9 {
-                let twist = group
-                    .iter()
-                    .zip(&weights)
-                    .flat_map(|(&j, &w)| [(3 * j, -w * arm(j)[1] / inertia), (3 * j + 1, w * arm(j)[0] / inertia)])
-                    .collect();
-                unknowns.push(twist);
-                prior_scale.push(n * inertia.sqrt());
-            }
+                .map(|(&j, w)| w * self.cells[j].centre_mm[0])
+                .sum::<f64>(),
+            group
+                .iter()
+                .zip(&weights)
+                .map(|(&j, w)| w * self.cells[j].centre_mm[1])
+                .sum::<f64>(),
+        ];
+        let arm = |j: usize| {
+            [
+                self.cells[j].centre_mm[0] - centre[0],
+                self.cells[j].centre_mm[1] - centre[1],
+            ]
+        };
+        let inertia: f64 = group
+            .iter()
+            .zip(&weights)
+            .map(|(&j, w)| w * (arm(j)[0].powi(2) + arm(j)[1].powi(2)))
+            .sum();
+        // The shear has the pressure's shape and, on a pushed contact, a second one, stage 1's own shear along the
+        // push (see `shear_along_push`), each with its own (fx, fy). A push's shear is not where its pressure is:
+        // on the validation pad the pressure centre reads behind the push, and with the pressure's shape alone
+        // part of the push was explained by pressure (quick set, against that shape alone: force over the pad
+        // 0.36 -> 0.25 N, the pushes' normal force 0.56 -> 0.26 N RMS before `push_normal_share`, tangential
+        // direction worst 6.1 -> 3.1 deg).
+        let n = group.len() as f64;
+        let along = self.shear_along_push(seed, stage1_dual, group);
+        for shape in std::iter::once(&weights).chain(along.as_ref()) {
+            unknowns.push(group.iter().zip(shape).map(|(&j, &w)| (3 * j, w)).collect(), n);
+            unknowns.push(group.iter().zip(shape).map(|(&j, &w)| (3 * j + 1, w)).collect(), n);
         }
-        let nt = unknowns.len();
-        let n = nt + MOTION_PARAMETERS;
+        if inertia > 1e-9 {
+            let twist = group
+                .iter()
+                .zip(&weights)
+                .flat_map(|(&j, &w)| [(3 * j, -w * arm(j)[1] / inertia), (3 * j + 1, w * arm(j)[0] / inertia)])
+                .collect();
+            unknowns.push(twist, n * inertia.sqrt());
+        }
+    }
+
+    /// The normal equations (H, g) of [`Self::constrained_solve`]'s least squares in `unknowns` and the motion over
+    /// the corners `valid`, with each unknown's prior on H's diagonal.
+    fn normal_equations(&self, d: &[f64], valid: &[bool], unknowns: &Unknowns) -> (DMatrix<f64>, DVector<f64>) {
+        let prior = (self.lambda).sqrt().recip();
+        let n = unknowns.combinations.len() + MOTION_PARAMETERS;
         // Columns of the reduced design matrix, masked rows zeroed.
         let rows = self.observations;
         // Column by column over contiguous slices (the design is column-major): each column the sum of its
@@ -232,7 +289,7 @@ impl InverseModel {
         // to zero (0.0 + w a, the same bits, a -0.0 product included) instead of zeroing the matrix first: that fill
         // took about a tenth of this solve's instructions.
         let mut columns: Vec<f64> = Vec::with_capacity(rows * n);
-        for combination in &unknowns {
+        for combination in &unknowns.combinations {
             let start = columns.len();
             let Some((&(component, weight), rest)) = combination.split_first() else {
                 columns.resize(start + rows, 0.0);
@@ -256,38 +313,11 @@ impl InverseModel {
             data[r] = 0.0;
         }
         let mut h = gram(&design);
-        for (k, scale) in prior_scale.iter().enumerate() {
+        for (k, scale) in unknowns.prior_scale.iter().enumerate() {
             h[(k, k)] += (1.0 / (prior * scale)).powi(2) * 1.0;
         }
         let g = tr_mul_vec(&design, data.as_slice());
-        let constrained: Vec<bool> = (0..n).map(|i| i < pressures).collect();
-        let whole = UpdatedCholesky::new(&h, (0..n).collect())?;
-        let x = active_set(&h, &g, &constrained, &whole)?;
-        let mut tractions = vec![0.0; 3 * cells];
-        for (k, combination) in unknowns.iter().enumerate() {
-            for &(component, weight) in combination {
-                tractions[component] += weight * x[k];
-            }
-        }
-        let motion = std::array::from_fn(|p| x[nt + p]);
-        // Per sigma^2, the covariance of the cells' pressures (the cell basis's unknowns: one per cell), from the
-        // unconstrained problem's H^-1 (the bound p >= 0 only narrows it), when asked for.
-        let covariance = if basis == PressureBasis::Cells && with_covariance {
-            let mut unknown_of = vec![None; cells];
-            for (k, combination) in unknowns.iter().take(pressures).enumerate() {
-                unknown_of[combination[0].0 / 3] = Some(k);
-            }
-            PressureCovariance {
-                unknown_of,
-                inverse: Some(whole.inverse_block(pressures)),
-            }
-        } else {
-            PressureCovariance {
-                unknown_of: Vec::new(),
-                inverse: None,
-            }
-        };
-        Some((tractions, motion, covariance))
+        (h, g)
     }
 
     /// Stage 1's kriging solution y (its tractions are Aᵀ y), from its residuals: lambda y on the corners it used, 0
