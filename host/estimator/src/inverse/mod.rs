@@ -58,6 +58,12 @@
 //! some 20 mm edges of the validation pad into lumps about 10 mm apart). The edge direction (second
 //! moments of the pressure) comes from a second solve with the pressure's unknowns on the grid's nodes instead of its
 //! cells, which has no checkerboard noise (see `PressureBasis`).
+//!
+//! The parts, one file each: `build` (the model, once per sensor config and camera view), `stage1` (the motion,
+//! stage 1 and the contact test), `noise` (the noise estimate, the F and normal quantiles), `constrained` (stage 2's
+//! solve with pressure >= 0), `stage2` (its passes), `regions` (its contacts), `forces` (a contact's force against
+//! the floor, its neighbours' far field and the border), `lines` and `pairs` (line loads, two presses against one
+//! line), `moments` (the edge direction).
 
 use nusense_geometry::{PadGeometry, Point2};
 
@@ -125,8 +131,8 @@ pub struct InverseModel {
     /// and P0 the projection off the motion basis: a shape w's least-squares amplitude in displacements d with
     /// motion-only residuals r is wᵀ A_pᵀ r / wᵀ G0 w, its noise sigma / sqrt(wᵀ G0 w).
     matched_gram: Dense,
-    /// The line shapes (see [`LINE_LENGTHS_CELLS`](build::LINE_LENGTHS_CELLS)) and the square ones, each with its sqrt(wᵀ G0 w) (unit load per
-    /// cell).
+    /// The line shapes (see `build::LINE_LENGTHS_CELLS`) and the square ones, each with its sqrt(wᵀ G0 w) (unit load
+    /// per cell).
     line_shapes: Vec<(Vec<usize>, f64)>,
     block_shapes: Vec<(Vec<usize>, f64)>,
     /// A line shape picks its cells above this many sigmas: the cell test's false-pick rate per cell
@@ -135,9 +141,9 @@ pub struct InverseModel {
     /// Normalisation length of the motion basis, mm.
     motion_length_mm: f64,
     false_alarm_probability: f64,
-    /// Per cell: the corners (index, distance from the cell's centre in mm) within [`NEAR_TABLE_REACH_CELLS`](build::NEAR_TABLE_REACH_CELLS) of
-    /// it, for [`InverseModel::near_loads`] (the same distances it would compute, once per sensor rather than
-    /// thousands per frame).
+    /// Per cell: the corners (index, distance from the cell's centre in mm) within
+    /// [`NEAR_TABLE_REACH_CELLS`](build::NEAR_TABLE_REACH_CELLS) of it, for [`InverseModel::near_loads`] (the same
+    /// distances it would compute, once per sensor rather than thousands per frame).
     corners_near_cell: Vec<Vec<(usize, f64)>>,
     /// What sliding walls at the frame add to the response, 3 per cell x observations (see
     /// [`Self::border_doubt`]).

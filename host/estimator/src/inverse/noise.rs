@@ -66,7 +66,8 @@ pub(super) struct NoiseEstimate {
     /// [`NOISE_CENSORED_SHARE`], and a load heavy enough to move most of them (whose cells are looked for at this
     /// scale, to leave their corners out of `mm`) inflates it less. Looked for at `mm`, the 6 N press of the real pair
     /// left 9 more corners near it in the test's noise, which it raised 6.2 -> 8.3 um (the detection floor 0.41 ->
-    /// 0.54 N). The test divides by it too when it is the larger (see [`InverseModel::verdict`](super::InverseModel::verdict)).
+    /// 0.54 N). The test divides by it too when it is the larger (see
+    /// [`InverseModel::verdict`](super::InverseModel::verdict)).
     pub(super) median_mm: f64,
 }
 
