@@ -112,12 +112,27 @@ impl InverseModel {
         let Some(solved) = solved else {
             return empty;
         };
+        self.stage2_of(d, valid, seed, solved, &halved, noise_mm)
+    }
+
+    /// Stage 2's result from its last pass, `solved` (`halved`: the cells of the contacts split in two): the
+    /// strongest contact's shape for its edge direction, the contacts' tractions alone, and their centres.
+    fn stage2_of(
+        &self,
+        d: &[f64],
+        valid: &[bool],
+        seed: &Stage1,
+        solved: Solved,
+        halved: &[usize],
+        noise_mm: f64,
+    ) -> Stage2 {
+        let cells = self.cells.len();
         let observed = Observed {
             d,
             valid,
             tractions: &solved.tractions,
         };
-        let edge_region = self.edge_region(observed, seed, &solved, &halved, noise_mm);
+        let edge_region = self.edge_region(observed, seed, &solved, halved, noise_mm);
         let Solved { motion, regions, .. } = solved;
         // Tractions outside the contacts are not reported (they are below the floor).
         let mut kept = vec![0.0; 3 * cells];
