@@ -212,29 +212,7 @@ impl InverseModel {
     ) -> Vec<Region> {
         let (cols, rows) = (usize::from(self.pad.cols), usize::from(self.pad.rows));
         let pressure = |j: usize| tractions[3 * j + 2];
-        let in_support = |j: usize| support.binary_search(&j).is_ok();
-        let climb = |mut j: usize| loop {
-            let (r, c) = ((j / cols) as isize, (j % cols) as isize);
-            let best = neighbourhood(r, c, rows, cols)
-                .map(|(nr, nc)| nr * cols + nc)
-                .filter(|&k| in_support(k))
-                .max_by(|&a, &b| pressure(a).total_cmp(&pressure(b)).then(b.cmp(&a)))
-                .unwrap_or(j);
-            if best == j || pressure(best) <= pressure(j) {
-                break j;
-            }
-            j = best;
-        };
-        let mut label: Vec<Option<usize>> = vec![None; rows * cols];
-        let mut peaks: Vec<usize> = Vec::new();
-        for &j in support.iter().filter(|&&j| pressure(j) > 0.0) {
-            let peak = climb(j);
-            let id = peaks.iter().position(|&p| p == peak).unwrap_or_else(|| {
-                peaks.push(peak);
-                peaks.len() - 1
-            });
-            label[j] = Some(id);
-        }
+        let (label, peaks) = self.basins(tractions, support);
         // Merge basins whose shared border is high relative to the lower peak.
         let mut parent: Vec<usize> = (0..peaks.len()).collect();
         fn root(parent: &mut [usize], mut i: usize) -> usize {
@@ -304,6 +282,37 @@ impl InverseModel {
             .collect();
         regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
         regions
+    }
+
+    /// The watershed's basins: each cell of the support with pressure labelled by the local maximum it climbs to
+    /// (per cell of the grid, an index into the maxima), and those maxima's cells.
+    fn basins(&self, tractions: &[f64], support: &[usize]) -> (Vec<Option<usize>>, Vec<usize>) {
+        let (cols, rows) = (usize::from(self.pad.cols), usize::from(self.pad.rows));
+        let pressure = |j: usize| tractions[3 * j + 2];
+        let in_support = |j: usize| support.binary_search(&j).is_ok();
+        let climb = |mut j: usize| loop {
+            let (r, c) = ((j / cols) as isize, (j % cols) as isize);
+            let best = neighbourhood(r, c, rows, cols)
+                .map(|(nr, nc)| nr * cols + nc)
+                .filter(|&k| in_support(k))
+                .max_by(|&a, &b| pressure(a).total_cmp(&pressure(b)).then(b.cmp(&a)))
+                .unwrap_or(j);
+            if best == j || pressure(best) <= pressure(j) {
+                break j;
+            }
+            j = best;
+        };
+        let mut label: Vec<Option<usize>> = vec![None; rows * cols];
+        let mut peaks: Vec<usize> = Vec::new();
+        for &j in support.iter().filter(|&&j| pressure(j) > 0.0) {
+            let peak = climb(j);
+            let id = peaks.iter().position(|&p| p == peak).unwrap_or_else(|| {
+                peaks.push(peak);
+                peaks.len() - 1
+            });
+            label[j] = Some(id);
+        }
+        (label, peaks)
     }
 
     /// A region of cells and their (fx, fy, fz).
