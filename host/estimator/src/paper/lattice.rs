@@ -91,6 +91,9 @@ pub trait CellColour {
     fn yellowness(&self, at: [f64; 2]) -> f64;
 }
 
+/// A quad's (row, col) relative to the seed of its walk.
+type RelativeCell = (i32, i32);
+
 struct Link {
     a: usize,
     b: usize,
@@ -198,16 +201,39 @@ pub fn assign_lattice(
 ) -> Result<LatticeAssignment, IndexingFailure> {
     let centres: Vec<[f64; 2]> = quads.iter().map(Quad::centre).collect();
     let links = diagonal_links(&centres, pairs)?;
+    let (relative, pieces) = connected_pieces(quads.len(), &links);
+    let lattice = fit_main_piece(&pieces[0], &relative, &centres)?;
+    let placed = place_pieces(&pieces, &relative, &centres, &lattice);
+    let parity = quad_parity(&placed, &centres, &lattice, colour, pad);
+    let offset = absolute_offset(&placed, &lattice, pad, roi_centre, parity)?;
+    let squares: Vec<Option<SquareIndex>> = placed
+        .iter()
+        .map(|cell| {
+            cell.map(|(r, c)| SquareIndex {
+                row: (r + offset.0) as u16,
+                col: (c + offset.1) as u16,
+            })
+        })
+        .collect();
+    let (corners, implausible_pairs) = closest_pair_per_corner(pairs, &squares);
+    Ok(LatticeAssignment {
+        squares,
+        corners,
+        implausible_pairs,
+    })
+}
 
-    // Relative indices by breadth-first walks over the links, one walk per connected piece.
-    let mut adjacency: Vec<Vec<(usize, (i32, i32))>> = vec![Vec::new(); quads.len()];
-    for link in &links {
+/// Relative indices by breadth-first walks over the links, one walk per connected piece; the pieces come
+/// largest first, each walk's indices relative to its own seed.
+fn connected_pieces(quad_count: usize, links: &[Link]) -> (Vec<Option<RelativeCell>>, Vec<Vec<usize>>) {
+    let mut adjacency: Vec<Vec<(usize, (i32, i32))>> = vec![Vec::new(); quad_count];
+    for link in links {
         adjacency[link.a].push((link.b, link.step));
         adjacency[link.b].push((link.a, (-link.step.0, -link.step.1)));
     }
-    let mut relative: Vec<Option<(i32, i32)>> = vec![None; quads.len()];
+    let mut relative: Vec<Option<RelativeCell>> = vec![None; quad_count];
     let mut pieces: Vec<Vec<usize>> = Vec::new();
-    for seed in 0..quads.len() {
+    for seed in 0..quad_count {
         if relative[seed].is_some() {
             continue;
         }
@@ -227,29 +253,45 @@ pub fn assign_lattice(
         pieces.push(piece);
     }
     pieces.sort_by_key(|p| std::cmp::Reverse(p.len()));
+    (relative, pieces)
+}
 
-    let main = &pieces[0];
+/// The affine lattice through the largest piece's quads, if the piece is big enough to fit one.
+fn fit_main_piece(
+    main: &[usize],
+    relative: &[Option<RelativeCell>],
+    centres: &[[f64; 2]],
+) -> Result<AffineLattice, IndexingFailure> {
     let samples: Vec<((i32, i32), [f64; 2])> = main
         .iter()
         .map(|&q| (relative[q].expect("walked"), centres[q]))
         .collect();
-    let lattice = (main.len() >= MIN_CONNECTED_QUADS)
+    (main.len() >= MIN_CONNECTED_QUADS)
         .then(|| AffineLattice::fit(&samples))
         .flatten()
         .ok_or(IndexingFailure::TooFewConnected {
             found: main.len(),
             needed: MIN_CONNECTED_QUADS,
-        })?;
+        })
+}
 
-    // Place the other pieces (often single quads whose corners found no partner) through the fitted lattice.
-    let mut placed: Vec<Option<(i32, i32)>> = vec![None; quads.len()];
+/// Per quad, its cell relative to the largest piece's seed: the largest piece as walked, the other pieces
+/// (often single quads whose corners found no partner) placed through the fitted lattice, largest first, each
+/// only if none of its cells is taken already.
+fn place_pieces(
+    pieces: &[Vec<usize>],
+    relative: &[Option<RelativeCell>],
+    centres: &[[f64; 2]],
+    lattice: &AffineLattice,
+) -> Vec<Option<RelativeCell>> {
+    let mut placed: Vec<Option<RelativeCell>> = vec![None; relative.len()];
     let mut taken: HashSet<(i32, i32)> = HashSet::new();
-    for &q in main {
+    for &q in &pieces[0] {
         placed[q] = relative[q];
         taken.insert(relative[q].expect("walked"));
     }
     for piece in &pieces[1..] {
-        if let Some(offset) = piece_offset(piece, &relative, &centres, &lattice) {
+        if let Some(offset) = piece_offset(piece, relative, centres, lattice) {
             let cells: Vec<(i32, i32)> = piece
                 .iter()
                 .map(|&q| {
@@ -265,19 +307,15 @@ pub fn assign_lattice(
             }
         }
     }
+    placed
+}
 
-    let parity = quad_parity(&placed, &centres, &lattice, colour, pad);
-    let offset = absolute_offset(&placed, &lattice, pad, roi_centre, parity)?;
-    let squares: Vec<Option<SquareIndex>> = placed
-        .iter()
-        .map(|cell| {
-            cell.map(|(r, c)| SquareIndex {
-                row: (r + offset.0) as u16,
-                col: (c + offset.1) as u16,
-            })
-        })
-        .collect();
-
+/// Per interior corner, the midpoint of the closest pair joining its two diagonal squares; and the count of
+/// pairs whose quads are unplaced or not diagonal neighbours.
+fn closest_pair_per_corner(
+    pairs: &[VertexPair],
+    squares: &[Option<SquareIndex>],
+) -> (BTreeMap<CornerIndex, [f64; 2]>, usize) {
     let mut corners: BTreeMap<CornerIndex, ([f64; 2], f64)> = BTreeMap::new();
     let mut implausible_pairs = 0;
     for pair in pairs {
@@ -299,11 +337,8 @@ pub fn assign_lattice(
             corners.insert(corner, (midpoint, pair.distance));
         }
     }
-    Ok(LatticeAssignment {
-        squares,
-        corners: corners.into_iter().map(|(k, (p, _))| (k, p)).collect(),
-        implausible_pairs,
-    })
+    let corners = corners.into_iter().map(|(k, (p, _))| (k, p)).collect();
+    (corners, implausible_pairs)
 }
 
 /// Pairs that join two different quads, each as a unit diagonal step in the lattice's own axes.
@@ -372,7 +407,7 @@ fn diagonal_links(centres: &[[f64; 2]], pairs: &[VertexPair]) -> Result<Vec<Link
 /// The index shift that puts a piece where the fitted lattice predicts it, keeping the colour parity.
 fn piece_offset(
     piece: &[usize],
-    relative: &[Option<(i32, i32)>],
+    relative: &[Option<RelativeCell>],
     centres: &[[f64; 2]],
     lattice: &AffineLattice,
 ) -> Option<(i32, i32)> {
