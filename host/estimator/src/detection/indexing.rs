@@ -32,10 +32,23 @@ fn dist2(a: Point2, b: Point2) -> f64 {
 
 /// `None` when the points do not form a diagonal lattice (fewer than 5 points or no two step directions).
 pub fn index_lattice(points: &[Point2]) -> Option<Indexed> {
-    let n = points.len();
-    if n < 5 {
+    if points.len() < 5 {
         return None;
     }
+    let step = median_nearest_distance(points);
+    let (down_right, up_right) = diagonal_steps(points, step)?;
+    let seed = nearest_to_centroid(points)?;
+    let (indices, conflicts) = walk_lattice(points, seed, down_right, up_right);
+    Some(Indexed {
+        indices,
+        down_right,
+        up_right,
+        conflicts,
+    })
+}
+
+/// The median over points of the distance to each one's nearest other point: one diagonal step.
+fn median_nearest_distance(points: &[Point2]) -> f64 {
     let mut nearest: Vec<f64> = points
         .iter()
         .enumerate()
@@ -49,7 +62,12 @@ pub fn index_lattice(points: &[Point2]) -> Option<Indexed> {
                 .sqrt()
         })
         .collect();
-    let step = median(&mut nearest);
+    median(&mut nearest)
+}
+
+/// The global diagonal steps (down-right, up-right): the component-wise medians of the vectors between points
+/// about one `step` apart, each turned to point right; `None` unless both directions have two vectors or more.
+fn diagonal_steps(points: &[Point2], step: f64) -> Option<(Point2, Point2)> {
     let (mut dr, mut ur) = (Vec::new(), Vec::new());
     for (i, &p) in points.iter().enumerate() {
         for &q in &points[i + 1..] {
@@ -76,14 +94,28 @@ pub fn index_lattice(points: &[Point2]) -> Option<Indexed> {
         let mut ys: Vec<f64> = vs.iter().map(|v| v[1]).collect();
         [median(&mut xs), median(&mut ys)]
     };
-    let down_right = component_median(&dr);
-    let up_right = component_median(&ur);
+    Some((component_median(&dr), component_median(&ur)))
+}
 
+/// The point nearest the points' centroid: the walk's seed, where the lattice is least distorted.
+fn nearest_to_centroid(points: &[Point2]) -> Option<usize> {
+    let n = points.len();
     let centre = [
         points.iter().map(|p| p[0]).sum::<f64>() / n as f64,
         points.iter().map(|p| p[1]).sum::<f64>() / n as f64,
     ];
-    let seed = (0..n).min_by(|&a, &b| dist2(points[a], centre).total_cmp(&dist2(points[b], centre)))?;
+    (0..n).min_by(|&a, &b| dist2(points[a], centre).total_cmp(&dist2(points[b], centre)))
+}
+
+/// Breadth-first walk from `seed` by the four diagonal steps; returns each point's relative index (if reached)
+/// and the count of points reached again with a different index.
+fn walk_lattice(
+    points: &[Point2],
+    seed: usize,
+    down_right: Point2,
+    up_right: Point2,
+) -> (Vec<Option<RelativeIndex>>, usize) {
+    let n = points.len();
     let mut indices = vec![None; n];
     // Each reached point carries the local step vectors it was reached with.
     let mut local = vec![(down_right, up_right); n];
@@ -100,17 +132,9 @@ pub fn index_lattice(points: &[Point2]) -> Option<Indexed> {
             ([-l_ur[0], -l_ur[1]], 1, -1, false),
         ];
         for (v, d_row, d_col, along_dr) in moves {
-            let predicted = [points[i][0] + v[0], points[i][1] + v[1]];
-            let tolerance2 = 0.3f64.powi(2) * (v[0] * v[0] + v[1] * v[1]);
-            let Some(j) = (0..n)
-                .filter(|&j| j != i)
-                .min_by(|&a, &b| dist2(points[a], predicted).total_cmp(&dist2(points[b], predicted)))
-            else {
+            let Some(j) = point_at_step(points, i, v) else {
                 continue;
             };
-            if dist2(points[j], predicted) > tolerance2 {
-                continue;
-            }
             let index = RelativeIndex {
                 row: here.row + d_row,
                 col: here.col + d_col,
@@ -131,12 +155,20 @@ pub fn index_lattice(points: &[Point2]) -> Option<Indexed> {
             }
         }
     }
-    Some(Indexed {
-        indices,
-        down_right,
-        up_right,
-        conflicts,
-    })
+    (indices, conflicts)
+}
+
+/// The point other than `i` nearest to point `i` moved by `v`, if within 30 % of the step's length.
+fn point_at_step(points: &[Point2], i: usize, v: Point2) -> Option<usize> {
+    let predicted = [points[i][0] + v[0], points[i][1] + v[1]];
+    let tolerance2 = 0.3f64.powi(2) * (v[0] * v[0] + v[1] * v[1]);
+    let j = (0..points.len())
+        .filter(|&j| j != i)
+        .min_by(|&a, &b| dist2(points[a], predicted).total_cmp(&dist2(points[b], predicted)))?;
+    if dist2(points[j], predicted) > tolerance2 {
+        return None;
+    }
+    Some(j)
 }
 
 #[cfg(test)]
