@@ -167,7 +167,31 @@ impl FastTracker {
         if found < needed {
             return Err(EstimateError::TooFewPoints { found, needed });
         }
-        let cells = local_cells(&pad, &coarse)?;
+        let mut tracker = Self::on_coarse_squares(pad, (width, height), thresholds, &coarse)?;
+        let squares_px = tracker.settle_reference(frame, &coarse)?;
+        let corners = corners_from_squares(&pad, &squares_px);
+        let relit = vec![false; squares_px.len()];
+        Ok((
+            tracker,
+            Detection {
+                squares: squares_px,
+                corners,
+                recovered: false,
+                measurement_passes: 1,
+                relit,
+            },
+        ))
+    }
+
+    /// A tracker whose cells (and the sampling stride) come from the full search's coarse squares; the squares
+    /// have no reference yet. A square without a cell of its own borrows another's, so that it is still searched.
+    fn on_coarse_squares(
+        pad: PadGeometry,
+        (width, height): (u32, u32),
+        thresholds: Thresholds,
+        coarse: &[Option<Point2>],
+    ) -> Result<Self, EstimateError> {
+        let cells = local_cells(&pad, coarse)?;
         let mut steps: Vec<f64> = cells.iter().flatten().map(CellFrame::min_step).collect();
         let stride = ((median(&mut steps) / SAMPLES_PER_CELL).round() as usize).max(1);
         let any_cell = cells
@@ -189,63 +213,67 @@ impl FastTracker {
                 window: Window::new(cell.unwrap_or(any_cell), WINDOW_HALF),
             })
             .collect();
-        let mut tracker = Self {
+        Ok(Self {
             pad,
             width,
             height,
             stride,
             squares,
-            previous: coarse.clone(),
+            previous: coarse.to_vec(),
             previous_area: Vec::new(),
             last_motion: Similarity::IDENTITY,
             thresholds,
-        };
-        let measured = tracker.measure(frame, &coarse, None)?;
+        })
+    }
+
+    /// Measures the reference frame's squares from the coarse ones, refreshes the cells from them and measures
+    /// again; the squares' reference positions, areas and brightness are then set, and the frame is the last
+    /// tracked one. Returns the reference squares (raw px).
+    fn settle_reference(
+        &mut self,
+        frame: &RgbImage,
+        coarse: &[Option<Point2>],
+    ) -> Result<Vec<Option<Point2>>, EstimateError> {
+        let measured = self.measure(frame, coarse, None)?;
         let mut squares_px = Vec::with_capacity(measured.len());
-        for (model, m) in tracker.squares.iter_mut().zip(&measured) {
+        for (model, m) in self.squares.iter_mut().zip(&measured) {
             model.reference = m.map(|(p, _)| p);
             model.reference_area = m.map(|(_, a)| a).unwrap_or(0.0);
             squares_px.push(model.reference);
         }
         // Refresh the cells from the refined reference so later windows follow the lens exactly.
-        tracker.refresh_cells(&squares_px)?;
+        self.refresh_cells(&squares_px)?;
         // Measure the reference again with those cells, from where the first pass ended, as every later frame is
         // measured: the reference is then where tracking the rest frame itself puts its squares, so that the same
         // frame again has no displacement (with the coarse cells' reference, its corners sat up to a few tenths of
         // a pixel off, which the contact test, judging by each frame's own noise, took for a load).
-        let measured = tracker.measure(frame, &squares_px, None)?;
+        let measured = self.measure(frame, &squares_px, None)?;
         squares_px.clear();
-        for (model, m) in tracker.squares.iter_mut().zip(&measured) {
+        for (model, m) in self.squares.iter_mut().zip(&measured) {
             if let Some((p, a)) = m {
                 model.reference = Some(*p);
                 model.reference_area = *a;
             }
             squares_px.push(model.reference);
         }
+        self.note_reference_brightness(frame);
+        self.previous = squares_px.clone();
+        self.previous_area = measured.iter().map(|m| m.map(|(_, a)| a)).collect();
+        Ok(squares_px)
+    }
+
+    /// Each referenced square's middle brightness in the reference frame (see [`LIGHT_CHANGE`]).
+    fn note_reference_brightness(&mut self, frame: &RgbImage) {
         let px = Pixels {
             raw: frame.as_raw(),
-            width: width as usize,
-            height: height as usize,
+            width: self.width as usize,
+            height: self.height as usize,
         };
-        for model in &mut tracker.squares {
+        for model in &mut self.squares {
             if let Some(p) = model.reference {
-                model.reference_brightness = mean_brightness(&px, p, model.cell(), CENTRE_HALF, tracker.stride);
+                model.reference_brightness = mean_brightness(&px, p, model.cell(), CENTRE_HALF, self.stride);
             }
         }
-        tracker.previous = squares_px.clone();
-        tracker.previous_area = measured.iter().map(|m| m.map(|(_, a)| a)).collect();
-        let corners = corners_from_squares(&pad, &squares_px);
-        let relit = vec![false; squares_px.len()];
-        Ok((
-            tracker,
-            Detection {
-                squares: squares_px,
-                corners,
-                recovered: false,
-                measurement_passes: 1,
-                relit,
-            },
-        ))
     }
 
     /// Makes the last tracked frame the reference: squares found there keep their new position and area (and the
