@@ -111,8 +111,8 @@ struct Rest {
     /// press the contact test's detection floor is stated for, so the floor press's gamma is the floor times this (see
     /// [`Estimator::line_touch`]).
     gamma_per_n: f64,
-    /// Per corner: moved by a change of light alone (see [`light_sensitive_corners`]); the contact test leaves these
-    /// corners out.
+    /// Per corner: moved by a change of light alone (see [`Estimator::light_sensitive_corners`]); the contact test
+    /// leaves these corners out.
     light_sensitive: Vec<bool>,
 }
 
