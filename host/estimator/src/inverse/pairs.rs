@@ -7,7 +7,8 @@ use super::lines::{pattern_search, shape_correlation};
 use super::moments::ROUND_EXTENT_PITCHES;
 use super::{InverseModel, Observed, Region, Stage1, Traction, SUPPORT_SIGMAS};
 
-/// [`InverseModel::split_pair`]'s two points' search stops at steps below this (mm).
+/// [`InverseModel::pair_against_line`]'s pattern search for the two points stops once its halved steps are all
+/// below this (mm).
 const PAIR_FIT_TOLERANCE_MM: f64 = 0.05;
 
 /// Two round loads against a line load, as [`InverseModel::pair_against_line`] finds them.
