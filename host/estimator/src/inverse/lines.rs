@@ -32,12 +32,12 @@ const SPREAD_HEXAGON: [Point2; 7] = [
 /// A uniform load along a straight segment.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct LineLoad {
-    pub centre_mm: Point2,
+    pub(super) centre_mm: Point2,
     /// Degrees from +x towards +y, in [0, 180).
-    pub angle_deg: f64,
-    pub length_mm: f64,
+    pub(super) angle_deg: f64,
+    pub(super) length_mm: f64,
     /// Each of its points spread over a hexagon of this radius, mm (see [`InverseModel::line_shape`]).
-    pub spread_mm: f64,
+    pub(super) spread_mm: f64,
 }
 
 /// A load shape's (cell, share) correlation with the matched filter's `matched` correlations of the frame.
