@@ -177,8 +177,9 @@ impl InverseModel {
     /// bilinearly among the four cell centres around it (clamped to the outermost cells' centres), as (cell,
     /// share); with `spread_mm` > 0 each point is first spread evenly over itself and a hexagon of points that far
     /// around it (a disc's coarse stand-in: the cells are 3.3 mm apart).
-    /// The shares are summed in `dense` (one per cell, all zero or empty on entry and left all zero): a search that lays
-    /// many shapes passes the same buffer, so that each shape reads back and clears only the cells its points reach.
+    /// The shares are summed in `dense` (one per cell, all zero or empty on entry and left all zero): a search
+    /// that lays many shapes passes the same buffer, so that each shape reads back and clears only the cells its
+    /// points reach.
     pub(super) fn line_shape(
         &self,
         centre: Point2,

@@ -14,12 +14,12 @@ const SADDLE_FRACTION: f64 = 0.6;
 
 impl InverseModel {
     /// The layered model's contact centres: each region's pressure solved again on its cells' quarters (pressure >= 0
-    /// on each, the region's shear as stage 2's without its twist, the motion free, the same prior per unit area as stage 2's cells),
-    /// with the other regions' tractions taken off the displacements; the centre is the quarters' pressure centroid,
-    /// and the region's torque is taken about it. The layered kernel is sharper than the cells: on the quick
-    /// validation set it reads localisation 0.44 -> 0.40 mm (other sizes 0.39 -> 0.27), and with the validation
-    /// pad's own stack 0.40 -> 0.27 mm. Not for the equivalent layer: its kernel is not the pad's, and the finer
-    /// unknowns fit its error (0.33 -> 0.36 mm).
+    /// on each, the region's shear as stage 2's without its twist, the motion free, the same prior per unit area as
+    /// stage 2's cells), with the other regions' tractions taken off the displacements; the centre is the quarters'
+    /// pressure centroid, and the region's torque is taken about it. The layered kernel is sharper than the cells: on
+    /// the quick validation set it reads localisation 0.44 -> 0.40 mm (other sizes 0.39 -> 0.27), and with the
+    /// validation pad's own stack 0.40 -> 0.27 mm. Not for the equivalent layer: its kernel is not the pad's, and the
+    /// finer unknowns fit its error (0.33 -> 0.36 mm).
     pub(super) fn quarter_centres(&self, d: &[f64], valid: &[bool], tractions: &[f64], regions: &mut [Region]) {
         let Some(quarter_cells) = &self.quarters else { return };
         let rows = self.observations;
