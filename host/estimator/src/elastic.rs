@@ -4,7 +4,9 @@
 //!
 //! - **Bonded layer** (the default): one isotropic elastic layer of thickness h = `cover_mm + gel_mm`, loaded on its
 //!   top surface, bonded to a rigid base at its bottom, observed at depth d = `cover_mm` (the pattern layer, under
-//!   the skin's equivalent thickness of gel).
+//!   the skin's equivalent thickness of gel). Its normal displacement, which the camera sees as parallax, is not the
+//!   pad's (it is fitted in-plane): with `elastic.normal_from_stack` the parallax takes it from the stack as built
+//!   instead ([`normal_stack`]).
 //! - **Layered**: the stack as built, a stiff skin with the pattern at its bottom over soft gel (and optionally a
 //!   bond layer), bonded to the rigid plate; see [`stack_spectra`].
 //!
@@ -28,7 +30,7 @@ use nalgebra::{DMatrix, DVector};
 use nusense_geometry::Point2;
 use thiserror::Error;
 
-use crate::config::{ElasticConfig, ElasticModel};
+use crate::config::{ElasticConfig, ElasticModel, EQUIVALENT_LAYER_KPA, LAYERED_GEL_KPA};
 
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum ElasticError {
@@ -762,6 +764,17 @@ fn with_images(q: Point2, walls: Option<Point2>) -> impl Iterator<Item = (Point2
     })
 }
 
+/// The stack whose normal displacement the parallax sees when it is not `config`'s own model's (see
+/// [`ElasticConfig::normal_from_stack`]): the equivalent layer's stack as built, its moduli in proportion to
+/// `config.shear_modulus_kpa`.
+pub fn normal_stack(config: &ElasticConfig) -> Option<ElasticConfig> {
+    (config.model == ElasticModel::BondedLayer && config.normal_from_stack).then(|| ElasticConfig {
+        model: ElasticModel::Layered,
+        shear_modulus_kpa: config.shear_modulus_kpa * LAYERED_GEL_KPA / EQUIVALENT_LAYER_KPA,
+        ..*config
+    })
+}
+
 /// The matrix of cell forces (N; fx, fy, fz per cell) to in-plane displacements (mm; x, y per observation point),
 /// with the pad clamped along a rectangle or held between sliding walls when asked.
 #[derive(Clone, Debug)]
@@ -813,7 +826,8 @@ impl PadResponse {
 
     /// Adds what the camera sees of the pattern's normal displacement: a point that moves by w towards the camera
     /// appears shifted in the pattern's plane by w times `shifts[i]` (its ray's in-plane slope where it moves, see
-    /// [`parallax_shifts`]). Cell-averaged like the in-plane response; the border's reactions (if any) are not
+    /// [`parallax_shifts`]). w is `kernel`'s normal displacement, which need not be the in-plane response's kernel
+    /// (see [`normal_stack`]). Cell-averaged like the in-plane response; the border's reactions (if any) are not
     /// applied to it.
     pub fn add_parallax(&mut self, kernel: &PointKernel, observations: &[Point2], cells: &[Cell], shifts: &[Point2]) {
         for (j, cell) in cells.iter().enumerate() {

@@ -114,3 +114,52 @@ fn a_heavy_press_near_the_border_is_one_contact_with_its_force() {
         );
     }
 }
+
+/// (fx, fy, fz) of a 6.5 N press of a 3 mm flat punch at `at`, in the pad model's newtons.
+fn read_flat(renderer: &ValidationRenderer, estimator: &mut Estimator, at: [f64; 2]) -> [f64; 3] {
+    let reading = read_press(renderer, estimator, Contact::flat_punch(3.0, at, 6.5));
+    let touch = reading.touch.expect("a 6.5 N press is a contact");
+    touch.force_vector_n.expect("the inverse reports a force vector")
+}
+
+/// A flat punch sinks the pattern under it by over 1 mm at 6.5 N, uniformly across its face, and the camera sees
+/// that as a uniform shift away from its foot: read with too little normal displacement, the rest of it is a
+/// tangential force pointing outwards and extra pressure. The equivalent layer's normal displacement is 0.3-0.6 of
+/// the validation pad's (a stiff skin over soft gel sinks further and wider), the stack's as built 0.9-1.3
+/// (`elastic.normal_from_stack`). Measured, tangential over normal force with the equivalent layer's normal
+/// displacement (the default, `normal_from_stack = false`): 0.102 at (-18, 10), 0.057 at (-16, -8), 0.064 at (-20, 0),
+/// 0.038, 0.033, 0.023, 0.048 at the others, outwards on the left; with the stack's: 0.044, 0.037, 0.019, 0.013, 0.042,
+/// 0.018, 0.018. The force against the centre's: 0.93-1.11 and 0.97-1.10.
+#[test]
+fn a_flat_press_far_from_the_camera_has_no_tangential_force_with_the_stacks_normal_displacement() {
+    let renderer = ValidationRenderer::new(SIZE).unwrap();
+    let reference = renderer.reference(7).unwrap();
+    let mut config = SensorConfig::default();
+    config.elastic.normal_from_stack = true;
+    let mut estimator = Estimator::new(config, Mode::Inverse, &reference).unwrap();
+    let centre = read_flat(&renderer, &mut estimator, [0.0, 0.0]);
+    for at in [
+        [-18.0, 10.0],
+        [-16.0, -8.0],
+        [-20.0, 0.0],
+        [-12.0, 14.0],
+        [18.0, 10.0],
+        [20.0, -6.0],
+        [5.0, -14.0],
+    ] {
+        let f = read_flat(&renderer, &mut estimator, at);
+        let (ratio, tangential) = (f[2] / centre[2], f[0].hypot(f[1]) / f[2]);
+        assert!(
+            tangential <= 0.05,
+            "{at:?}: tangential force {:?} under {:.3} N",
+            [f[0], f[1]],
+            f[2]
+        );
+        assert!(
+            (ratio - 1.0).abs() <= 0.12,
+            "{at:?}: {:.3} N against {:.3} N at the centre",
+            f[2],
+            centre[2]
+        );
+    }
+}

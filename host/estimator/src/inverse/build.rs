@@ -9,7 +9,9 @@ use nusense_geometry::Point2;
 use super::stage1::{motion_basis, MEASURED_NOISE_REACH_CELLS};
 use super::{normal_quantile, InverseModel, Quarters, MOTION_PARAMETERS, SUPPORT_SIGMAS};
 use crate::config::{ElasticModel, SensorConfig};
-use crate::elastic::{image_matrix, parallax_shifts, Border, CameraView, Cell, ElasticError, PadResponse, PointKernel};
+use crate::elastic::{
+    image_matrix, normal_stack, parallax_shifts, Border, CameraView, Cell, ElasticError, PadResponse, PointKernel,
+};
 use crate::linalg::Dense;
 
 /// Lengths (cells) of the line shapes stage 2 also picks its loaded cells by, along the grid's rows, columns and
@@ -49,6 +51,9 @@ fn cached<T, E>(
 
 struct ViewFreeParts {
     kernel: PointKernel,
+    /// The kernel whose normal displacement the parallax sees, when it is not `kernel`'s (see
+    /// [`crate::elastic::normal_stack`]).
+    normal: Option<PointKernel>,
     corners: Vec<Point2>,
     cells: Vec<Cell>,
     /// The in-plane response without the parallax.
@@ -70,6 +75,9 @@ impl ViewFreeParts {
     fn new(config: &SensorConfig) -> Result<Self, ElasticError> {
         let pad = config.pad;
         let kernel = PointKernel::new(&config.elastic)?;
+        let normal = normal_stack(&config.elastic)
+            .map(|stack| PointKernel::new(&stack))
+            .transpose()?;
         let corners: Vec<Point2> = pad.corners().map(|c| pad.corner_mm(c)).collect();
         let size = [pad.pitch_x_mm(), pad.pitch_y_mm()];
         let cells: Vec<Cell> = (0..pad.rows)
@@ -115,6 +123,7 @@ impl ViewFreeParts {
         };
         Ok(Self {
             kernel,
+            normal,
             corners,
             cells,
             response,
@@ -127,16 +136,21 @@ impl ViewFreeParts {
     /// of the pattern's normal displacement through a gel of `refractive_index` (none without a view or an index).
     fn seen_from(&self, view: Option<CameraView>, refractive_index: f64) -> (PadResponse, Option<Quarters>) {
         let ViewFreeParts {
-            kernel, corners, cells, ..
+            kernel,
+            normal,
+            corners,
+            cells,
+            ..
         } = self;
         let mut response = self.response.clone();
         let mut quarters = self.quarters.clone();
         let n = refractive_index;
         if let (Some(view), true) = (view, n > 0.0) {
             let shifts = parallax_shifts(&view, n, corners);
-            response.add_parallax(kernel, corners, cells, &shifts);
+            let normal = normal.as_ref().unwrap_or(kernel);
+            response.add_parallax(normal, corners, cells, &shifts);
             if let Some((cells, response)) = &mut quarters {
-                response.add_parallax(kernel, corners, cells, &shifts);
+                response.add_parallax(normal, corners, cells, &shifts);
             }
         }
         let quarters = quarters.map(|(cells, response)| Quarters {
