@@ -366,9 +366,51 @@ pub fn write_session(
         path: dir.display().to_string(),
         source,
     })?;
+    // One generator for the whole session, drawn in a fixed order (script, then F/T noise), so that a seed gives
+    // the same session byte for byte.
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
+    let script = session_script(kind, options, &mut rng);
+    let viscoelastic = (kind == SessionKind::Hysteresis).then_some(options.viscoelastic);
+    let (ft_csv, frames) = play_script(&script, options, viscoelastic, &mut rng);
+    let ft_log = dir.join("ft.csv");
+    write(&ft_log, &ft_csv)?;
+
+    let model = SensorModel::real(options.width, options.height);
+    let damage = (kind == SessionKind::Damage).then(|| damage_truth(&model));
+    let renderer = Renderer::new(model)?;
+    let mut files = SessionFiles {
+        recording: dir.join(if kind == SessionKind::Damage {
+            "damaged.mcap"
+        } else {
+            "session.mcap"
+        }),
+        intact: None,
+        ft_log,
+        targets: None,
+        truth: dir.join("truth.json"),
+        truth_data: SessionTruth {
+            kind,
+            frame_interval_s: 1.0 / options.frame_rate_hz,
+            ft_offset_s: options.ft_offset_s,
+            viscoelastic,
+            touches: script.touches,
+            frames,
+            damage,
+        },
+    };
+    record_session(&renderer, options, dir, &mut files, progress)?;
+    if kind == SessionKind::Localisation {
+        files.targets = Some(write_targets(dir, options.grid)?);
+    }
+    let json = serde_json::to_string_pretty(&files.truth_data).expect("truth is plain data");
+    write(&files.truth, &json)?;
+    Ok(files)
+}
+
+/// What the session scripts: the force and the sphere's place over time.
+fn session_script(kind: SessionKind, options: &SessionOptions, rng: &mut ChaCha8Rng) -> Script {
     let n = options.repetitions;
-    let script = match kind {
+    match kind {
         SessionKind::Calibration => calibration_script(n),
         SessionKind::Hysteresis => hysteresis_script(n.div_ceil(2)),
         SessionKind::Repeatability => {
@@ -377,11 +419,8 @@ pub fn write_session(
             let touches = (0..n)
                 .map(|k| {
                     let drift = k as f64;
-                    let position = [
-                        4.0 + 0.12 * drift + spread.sample(&mut rng),
-                        -3.0 + spread.sample(&mut rng),
-                    ];
-                    (position, 6.0 - 0.08 * drift + force_spread.sample(&mut rng))
+                    let position = [4.0 + 0.12 * drift + spread.sample(rng), -3.0 + spread.sample(rng)];
+                    (position, 6.0 - 0.08 * drift + force_spread.sample(rng))
                 })
                 .collect();
             touch_script(0.5, touches)
@@ -390,8 +429,16 @@ pub fn write_session(
             touch_script(0.5, target_grid(options.grid).into_iter().map(|p| (p, 6.0)).collect())
         }
         SessionKind::Damage => touch_script(0.5, vec![([6.0, -4.0], 6.0), ([10.0, 6.0], 5.0)]),
-    };
-    let viscoelastic = (kind == SessionKind::Hysteresis).then_some(options.viscoelastic);
+    }
+}
+
+/// Plays the script: the F/T sensor's log (CSV, its clock and noise) and what happens at each camera frame.
+fn play_script(
+    script: &Script,
+    options: &SessionOptions,
+    viscoelastic: Option<Viscoelastic>,
+    rng: &mut ChaCha8Rng,
+) -> (String, Vec<FrameTruth>) {
     let ft_step = 1.0 / options.ft_rate_hz;
     let frame_step = 1.0 / options.frame_rate_hz;
     let start_s = START_US as f64 * 1e-6;
@@ -412,7 +459,7 @@ pub fn write_session(
             }
             None => applied,
         };
-        let mut sample = || noise.sample(&mut rng);
+        let mut sample = || noise.sample(rng);
         // Compression reads negative on the F/T sensor's z axis, as it does on most.
         ft_csv.push_str(&format!(
             "{:.6},{:.4},{:.4},{:.4},{:.5},{:.5},{:.5}\n",
@@ -437,14 +484,15 @@ pub fn write_session(
             });
         }
     }
-    let ft_log = dir.join("ft.csv");
-    write(&ft_log, &ft_csv)?;
+    (ft_csv, frames)
+}
 
-    let model = SensorModel::real(options.width, options.height);
-    let damage = (kind == SessionKind::Damage).then(|| DamageTruth {
+/// The damage session's disc of missing ink, and the corners it costs.
+fn damage_truth(model: &SensorModel) -> DamageTruth {
+    DamageTruth {
         centre_mm: DAMAGE_CENTRE_MM,
         radius_mm: DAMAGE_RADIUS_MM,
-        corners_lost: corners_lost(&model, DAMAGE_CENTRE_MM, DAMAGE_RADIUS_MM),
+        corners_lost: corners_lost(model, DAMAGE_CENTRE_MM, DAMAGE_RADIUS_MM),
         corners_in_disc: model
             .pad
             .corners()
@@ -453,74 +501,49 @@ pub fn write_session(
                 (p[0] - DAMAGE_CENTRE_MM[0]).hypot(p[1] - DAMAGE_CENTRE_MM[1]) < DAMAGE_RADIUS_MM
             })
             .count(),
-    });
-    let renderer = Renderer::new(model)?;
-    let mut files = SessionFiles {
-        recording: dir.join(if kind == SessionKind::Damage {
-            "damaged.mcap"
-        } else {
-            "session.mcap"
-        }),
-        intact: None,
-        ft_log,
-        targets: None,
-        truth: dir.join("truth.json"),
-        truth_data: SessionTruth {
-            kind,
-            frame_interval_s: frame_step,
-            ft_offset_s: options.ft_offset_s,
-            viscoelastic,
-            touches: script.touches,
-            frames,
-            damage: damage.clone(),
-        },
-    };
-    let total = files.truth_data.frames.len() * if damage.is_some() { 2 } else { 1 };
+    }
+}
+
+/// Records the session's frames into `files.recording`; a damage session first records them on the intact pad
+/// (`intact.mcap`), then on the damaged one.
+fn record_session(
+    renderer: &Renderer,
+    options: &SessionOptions,
+    dir: &Path,
+    files: &mut SessionFiles,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(), SessionError> {
+    let frames = &files.truth_data.frames;
+    let damage = files.truth_data.damage.as_ref();
+    let total = frames.len() * if damage.is_some() { 2 } else { 1 };
     let mut done = 0;
-    let mut step = |progress: &mut dyn FnMut(usize, usize)| {
+    let mut step = |_| {
         done += 1;
         progress(done, total);
     };
-    if let Some(damage) = &damage {
-        let intact = dir.join("intact.mcap");
-        record(&renderer, options, &files.truth_data.frames, &[], &intact, &mut |_| {
-            step(progress)
-        })?;
-        let ink = Damage::Missing {
-            centre_mm: damage.centre_mm,
-            radius_mm: damage.radius_mm,
-        };
-        record(
-            &renderer,
-            options,
-            &files.truth_data.frames,
-            &[ink],
-            &files.recording,
-            &mut |_| step(progress),
-        )?;
-        files.intact = Some(intact);
-    } else {
-        record(
-            &renderer,
-            options,
-            &files.truth_data.frames,
-            &[],
-            &files.recording,
-            &mut |_| step(progress),
-        )?;
+    let Some(damage) = damage else {
+        return record(renderer, options, frames, &[], &files.recording, &mut step);
+    };
+    let intact = dir.join("intact.mcap");
+    record(renderer, options, frames, &[], &intact, &mut step)?;
+    let ink = Damage::Missing {
+        centre_mm: damage.centre_mm,
+        radius_mm: damage.radius_mm,
+    };
+    record(renderer, options, frames, &[ink], &files.recording, &mut step)?;
+    files.intact = Some(intact);
+    Ok(())
+}
+
+/// The localisation session's targets, as `targets.csv`.
+fn write_targets(dir: &Path, grid: [usize; 2]) -> Result<PathBuf, SessionError> {
+    let targets = dir.join("targets.csv");
+    let mut csv = String::from("x_mm,y_mm\n");
+    for t in target_grid(grid) {
+        csv.push_str(&format!("{},{}\n", t[0], t[1]));
     }
-    if kind == SessionKind::Localisation {
-        let targets = dir.join("targets.csv");
-        let mut csv = String::from("x_mm,y_mm\n");
-        for t in target_grid(options.grid) {
-            csv.push_str(&format!("{},{}\n", t[0], t[1]));
-        }
-        write(&targets, &csv)?;
-        files.targets = Some(targets);
-    }
-    let json = serde_json::to_string_pretty(&files.truth_data).expect("truth is plain data");
-    write(&files.truth, &json)?;
-    Ok(files)
+    write(&targets, &csv)?;
+    Ok(targets)
 }
 
 fn write(path: &Path, text: &str) -> Result<(), SessionError> {
