@@ -257,6 +257,23 @@ pub fn report(
     source: &str,
 ) -> Result<Report, ReportError> {
     let result = analyse(readings, forces, options)?;
+    let plots = calibration_plots(&result, readings, forces)?;
+    let markdown = calibration_markdown(&result, options, source);
+    let json = serde_json::json!({ "kind": "calibration", "source": source, "result": result });
+    Ok(Report {
+        kind: "calibration",
+        markdown,
+        plots,
+        json,
+    })
+}
+
+/// The report's charts: the force line, its residuals, the clock offset's correlation and the aligned session.
+fn calibration_plots(
+    result: &CalibrationResult,
+    readings: &[SessionReading],
+    forces: &[ForceSample],
+) -> Result<Vec<(String, String)>, ReportError> {
     let fit = &result.fit;
     let gamma_max = result.samples.iter().map(|s| s.0).fold(0.0, f64::max);
     let line = |a: f64, b: f64| vec![(0.0, b), (gamma_max, a * gamma_max + b)];
@@ -314,14 +331,18 @@ pub fn report(
                 .map(|r| (r.time_s - start, fit.a * r.gamma + fit.b))
                 .collect(),
         ));
-    let plots = vec![
+    Ok(vec![
         plot("calibration.svg", &calibration)?,
         plot("residuals.svg", &residuals)?,
         plot("offset.svg", &offset)?,
         plot("timeline.svg", &timeline)?,
-    ];
+    ])
+}
+
+fn calibration_markdown(result: &CalibrationResult, options: &CalibrationOptions, source: &str) -> String {
+    let fit = &result.fit;
     let pct = |v: f64| format!("{:.0} %", v * 100.0);
-    let markdown = format!(
+    format!(
         "# Calibration report\n\nRecording: `{source}`; {readings} readings, {forces} force samples.\n\n\
          ## Clocks\n\nF/T clock = camera clock {offset:+.4} s (correlation {corr:.4} at the best lag; lags searched \
          every {step:.4} s within ±{max_lag} s, the peak refined between them).\n\n![offset](offset.svg)\n\n\
@@ -361,12 +382,5 @@ pub fn report(
         max_res = result.max_abs_residual_n,
         r2 = result.r_squared,
         paper = result.paper_rmse_n,
-    );
-    let json = serde_json::json!({ "kind": "calibration", "source": source, "result": result });
-    Ok(Report {
-        kind: "calibration",
-        markdown,
-        plots,
-        json,
-    })
+    )
 }
