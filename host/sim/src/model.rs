@@ -350,73 +350,61 @@ impl SensorModel {
         }
     }
 
+    /// Refuses a model that cannot be rendered, naming the first field that is wrong.
     pub fn validate(&self) -> Result<(), ModelError> {
-        let positive = |field: &'static str, value: f64| {
-            if value.is_finite() && value > 0.0 {
-                Ok(())
-            } else {
-                Err(ModelError::BadValue {
-                    field,
-                    expected: "a finite number > 0",
-                    value,
-                })
-            }
-        };
-        let non_negative = |field: &'static str, value: f64| {
-            if value.is_finite() && value >= 0.0 {
-                Ok(())
-            } else {
-                Err(ModelError::BadValue {
-                    field,
-                    expected: "a finite number >= 0",
-                    value,
-                })
-            }
-        };
+        self.validate_frame_and_pose()?;
+        self.validate_mechanics()?;
+        self.validate_imaging()?;
+        self.validate_mesh()?;
+        let normal = self.pose.rotation().map(|row| row[2]);
+        let centre = self.pose.pad_to_camera([0.0, 0.0]);
+        let facing = normal[0] * centre[0] + normal[1] * centre[1] + normal[2] * centre[2];
+        if !(centre[2] > 0.0 && facing.abs() > 1e-6) {
+            return Err(ModelError::PadBehindCamera(self.pose));
+        }
+        self.camera()?;
+        Ok(())
+    }
+
+    fn validate_frame_and_pose(&self) -> Result<(), ModelError> {
         positive("width", f64::from(self.width))?;
         positive("height", f64::from(self.height))?;
-        if self.pad.rows < 2 || self.pad.cols < 2 {
-            return Err(ModelError::BadValue {
-                field: "pad.rows/cols",
-                expected: "at least 2 cells each way",
-                value: f64::from(self.pad.rows.min(self.pad.cols)),
-            });
-        }
+        let fewest_cells = self.pad.rows.min(self.pad.cols);
+        check(
+            fewest_cells >= 2,
+            "pad.rows/cols",
+            "at least 2 cells each way",
+            f64::from(fewest_cells),
+        )?;
         positive("pad.width_mm", self.pad.width_mm)?;
         positive("pad.height_mm", self.pad.height_mm)?;
         positive("pose.distance_mm", self.pose.distance_mm)?;
-        for v in self.pose.shift_mm.iter().chain(&self.pose.rotation_deg) {
-            if !v.is_finite() {
-                return Err(ModelError::BadValue {
-                    field: "pose",
-                    expected: "finite numbers",
-                    value: *v,
-                });
-            }
+        for &v in self.pose.shift_mm.iter().chain(&self.pose.rotation_deg) {
+            check(v.is_finite(), "pose", "finite numbers", v)?;
         }
+        Ok(())
+    }
+
+    fn validate_mechanics(&self) -> Result<(), ModelError> {
         match &self.mechanics {
             Mechanics::HalfSpace(material) => {
                 positive("material.layer_depth_mm", material.layer_depth_mm)?;
                 positive("material.shear_modulus_kpa", material.shear_modulus_kpa)?;
-                let nu = material.poisson_ratio;
-                if !(nu.is_finite() && (0.0..=0.5).contains(&nu)) {
-                    return Err(ModelError::BadValue {
-                        field: "material.poisson_ratio",
-                        expected: "between 0 and 0.5",
-                        value: nu,
-                    });
-                }
+                within(
+                    "material.poisson_ratio",
+                    material.poisson_ratio,
+                    0.0..=0.5,
+                    "between 0 and 0.5",
+                )
             }
-            Mechanics::Layered(pad) => {
-                if let Some((field, value)) = pad.problem() {
-                    return Err(ModelError::BadValue {
-                        field,
-                        expected: "see the field's name",
-                        value,
-                    });
-                }
-            }
+            Mechanics::Layered(pad) => match pad.problem() {
+                Some((field, value)) => check(false, field, "see the field's name", value),
+                None => Ok(()),
+            },
         }
+    }
+
+    fn validate_imaging(&self) -> Result<(), ModelError> {
         non_negative("shot_noise", f64::from(self.shot_noise))?;
         for glare in &self.glare {
             let ok = glare.centre.iter().all(|v| v.is_finite())
@@ -424,21 +412,14 @@ impl SensorModel {
                 && glare.radius > 0.0
                 && glare.level.is_finite()
                 && glare.level >= 0.0;
-            if !ok {
-                return Err(ModelError::BadValue {
-                    field: "glare",
-                    expected: "finite centres, radius > 0, level >= 0",
-                    value: glare.radius,
-                });
-            }
+            check(ok, "glare", "finite centres, radius > 0, level >= 0", glare.radius)?;
         }
-        if !(self.yellow_fill.is_finite() && self.yellow_fill > 0.0 && self.yellow_fill <= 1.0) {
-            return Err(ModelError::BadValue {
-                field: "yellow_fill",
-                expected: "in (0, 1]",
-                value: self.yellow_fill,
-            });
-        }
+        check(
+            self.yellow_fill.is_finite() && self.yellow_fill > 0.0 && self.yellow_fill <= 1.0,
+            "yellow_fill",
+            "in (0, 1]",
+            self.yellow_fill,
+        )?;
         non_negative("rim_width_mm", self.rim_width_mm)?;
         non_negative("texture_amplitude", f64::from(self.texture_amplitude))?;
         positive(
@@ -449,41 +430,50 @@ impl SensorModel {
         positive("lighting.spread_mm", self.lighting.spread_mm)?;
         non_negative("lighting.ambient", f64::from(self.lighting.ambient))?;
         non_negative("exposure", f64::from(self.exposure))?;
-        if !(self.vignetting.is_finite() && (0.0..=1.0).contains(&self.vignetting)) {
-            return Err(ModelError::BadValue {
-                field: "vignetting",
-                expected: "between 0 and 1",
-                value: f64::from(self.vignetting),
-            });
-        }
+        within("vignetting", f64::from(self.vignetting), 0.0..=1.0, "between 0 and 1")?;
         non_negative("noise_sigma", f64::from(self.noise_sigma))?;
         non_negative("blur_px", f64::from(self.blur_px))?;
         if let Some(q) = self.jpeg_quality {
-            if !(1..=100).contains(&q) {
-                return Err(ModelError::BadValue {
-                    field: "jpeg_quality",
-                    expected: "1..=100",
-                    value: f64::from(q),
-                });
-            }
+            check((1..=100).contains(&q), "jpeg_quality", "1..=100", f64::from(q))?;
         }
-        positive("mesh_step_mm", self.mesh_step_mm)?;
-        if self.mesh_step_mm > 5.0 {
-            return Err(ModelError::BadValue {
-                field: "mesh_step_mm",
-                expected: "at most 5 mm",
-                value: self.mesh_step_mm,
-            });
-        }
-        let normal = self.pose.rotation().map(|row| row[2]);
-        let centre = self.pose.pad_to_camera([0.0, 0.0]);
-        let facing = normal[0] * centre[0] + normal[1] * centre[1] + normal[2] * centre[2];
-        if !(centre[2] > 0.0 && facing.abs() > 1e-6) {
-            return Err(ModelError::PadBehindCamera(self.pose));
-        }
-        self.camera()?;
         Ok(())
     }
+
+    fn validate_mesh(&self) -> Result<(), ModelError> {
+        positive("mesh_step_mm", self.mesh_step_mm)?;
+        check(
+            self.mesh_step_mm <= 5.0,
+            "mesh_step_mm",
+            "at most 5 mm",
+            self.mesh_step_mm,
+        )
+    }
+}
+
+/// `field` is wrong unless `ok`; `value` is what it holds.
+fn check(ok: bool, field: &'static str, expected: &'static str, value: f64) -> Result<(), ModelError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ModelError::BadValue { field, expected, value })
+    }
+}
+
+fn positive(field: &'static str, value: f64) -> Result<(), ModelError> {
+    check(value.is_finite() && value > 0.0, field, "a finite number > 0", value)
+}
+
+fn non_negative(field: &'static str, value: f64) -> Result<(), ModelError> {
+    check(value.is_finite() && value >= 0.0, field, "a finite number >= 0", value)
+}
+
+fn within(
+    field: &'static str,
+    value: f64,
+    range: std::ops::RangeInclusive<f64>,
+    expected: &'static str,
+) -> Result<(), ModelError> {
+    check(value.is_finite() && range.contains(&value), field, expected, value)
 }
 
 #[cfg(test)]
@@ -542,6 +532,66 @@ mod tests {
         let mut m = SensorModel::real(640, 480);
         m.jpeg_quality = Some(0);
         assert!(m.validate().is_err());
+    }
+
+    #[test]
+    fn every_checked_value_names_its_field_when_wrong() {
+        type Spoil = fn(&mut SensorModel);
+        let spoils: [(&str, Spoil); 24] = [
+            ("width", |m| m.width = 0),
+            ("pad.rows/cols", |m| m.pad.cols = 1),
+            ("pad.width_mm", |m| m.pad.width_mm = f64::NAN),
+            ("pad.height_mm", |m| m.pad.height_mm = 0.0),
+            ("pose.distance_mm", |m| m.pose.distance_mm = -5.0),
+            ("pose", |m| m.pose.shift_mm[1] = f64::INFINITY),
+            ("pose", |m| m.pose.rotation_deg[2] = f64::NAN),
+            ("material.layer_depth_mm", |m| {
+                m.mechanics = Mechanics::HalfSpace(Material {
+                    layer_depth_mm: 0.0,
+                    ..Material::real()
+                })
+            }),
+            ("material.poisson_ratio", |m| {
+                m.mechanics = Mechanics::HalfSpace(Material {
+                    poisson_ratio: f64::NAN,
+                    ..Material::real()
+                })
+            }),
+            ("shot_noise", |m| m.shot_noise = -1.0),
+            ("glare", |m| {
+                m.glare = vec![Glare {
+                    centre: [0.5, 0.5],
+                    radius: 0.1,
+                    level: -1.0,
+                }]
+            }),
+            ("yellow_fill", |m| m.yellow_fill = 1.5),
+            ("rim_width_mm", |m| m.rim_width_mm = f64::NAN),
+            ("texture_amplitude", |m| m.texture_amplitude = -0.1),
+            ("lighting.nominal_current_ma", |m| m.lighting.nominal_current_ma = 0.0),
+            ("lighting.bar_offset_mm", |m| m.lighting.bar_offset_mm = -1.0),
+            ("lighting.spread_mm", |m| m.lighting.spread_mm = f64::INFINITY),
+            ("lighting.ambient", |m| m.lighting.ambient = f32::NAN),
+            ("exposure", |m| m.exposure = -1.0),
+            ("vignetting", |m| m.vignetting = 1.5),
+            ("noise_sigma", |m| m.noise_sigma = f32::NAN),
+            ("blur_px", |m| m.blur_px = -0.5),
+            ("jpeg_quality", |m| m.jpeg_quality = Some(101)),
+            ("mesh_step_mm", |m| m.mesh_step_mm = 6.0),
+        ];
+        for (expected_field, spoil) in spoils {
+            let mut m = SensorModel::real(640, 480);
+            spoil(&mut m);
+            match m.validate() {
+                Err(ModelError::BadValue { field, .. }) => assert_eq!(field, expected_field),
+                other => panic!("{expected_field}: {other:?}"),
+            }
+        }
+        let mut behind = SensorModel::real(640, 480);
+        // Edge-on: the pad's plane passes through the camera.
+        behind.pose.rotation_deg = [90.0, 0.0, 0.0];
+        behind.pose.shift_mm = [0.0, 0.0];
+        assert!(matches!(behind.validate(), Err(ModelError::PadBehindCamera(_))));
     }
 
     #[test]
