@@ -812,32 +812,82 @@ fn pixel_geometry(
     window: Option<&Window>,
 ) -> (Vec<PixelGeometry>, Vec<[f32; 2]>) {
     let (w, h) = (model.width as usize, model.height as usize);
-    let rotation = model.pose.rotation();
-    let t = [model.pose.shift_mm[0], model.pose.shift_mm[1], model.pose.distance_mm];
-    let normal = [rotation[0][2], rotation[1][2], rotation[2][2]];
-    let normal_dot_t = normal[0] * t[0] + normal[1] * t[1] + normal[2] * t[2];
-    // Rotation is orthonormal: pad coordinates of a camera vector v are R^T v.
-    let to_pad = |v: [f64; 3]| -> [f64; 3] {
-        std::array::from_fn(|k| rotation[0][k] * v[0] + rotation[1][k] * v[1] + rotation[2][k] * v[2])
+    let rays = RayCaster::new(model, camera, window);
+    let mut lattice: Vec<Option<[f64; 2]>> = Vec::with_capacity((w + 1) * (h + 1));
+    let mut slopes: Vec<[f64; 2]> = Vec::with_capacity(if window.is_some() { (w + 1) * (h + 1) } else { 0 });
+    for j in 0..=h {
+        for i in 0..=w {
+            let hit = rays.cast(i as f64, j as f64);
+            lattice.push(hit.map(|(q, _)| q));
+            if window.is_some() {
+                slopes.push(hit.map_or([0.0, 0.0], |(_, s)| s));
+            }
+        }
+    }
+    let parallax = if window.is_some() {
+        pixel_parallax(&slopes, w, h)
+    } else {
+        Vec::new()
     };
-    let camera_in_pad = to_pad(t).map(|v| -v);
-    // Where the pixel's ray meets the pattern's plane (pad mm), and the parallax there.
-    let cast = |x: f64, y: f64| -> Option<([f64; 2], [f64; 2])> {
-        let n = camera.raw_to_normalized([x, y])?;
+    (pixel_footprints(&lattice, w, h, f64::from(model.blur_px)), parallax)
+}
+
+/// Where a pixel's ray meets the pattern's plane: straight, or through the window's plate and gel.
+struct RayCaster<'a> {
+    camera: &'a Camera,
+    window: Option<&'a Window>,
+    rotation: [[f64; 3]; 3],
+    /// The pad's centre in camera coordinates.
+    t: [f64; 3],
+    /// The pad's normal in camera coordinates.
+    normal: [f64; 3],
+    normal_dot_t: f64,
+    camera_in_pad: [f64; 3],
+}
+
+impl<'a> RayCaster<'a> {
+    fn new(model: &SensorModel, camera: &'a Camera, window: Option<&'a Window>) -> Self {
+        let rotation = model.pose.rotation();
+        let t = [model.pose.shift_mm[0], model.pose.shift_mm[1], model.pose.distance_mm];
+        let normal = [rotation[0][2], rotation[1][2], rotation[2][2]];
+        let normal_dot_t = normal[0] * t[0] + normal[1] * t[1] + normal[2] * t[2];
+        let mut rays = Self {
+            camera,
+            window,
+            rotation,
+            t,
+            normal,
+            normal_dot_t,
+            camera_in_pad: [0.0; 3],
+        };
+        rays.camera_in_pad = rays.to_pad(t).map(|v| -v);
+        rays
+    }
+
+    /// Rotation is orthonormal: pad coordinates of a camera vector v are R^T v.
+    fn to_pad(&self, v: [f64; 3]) -> [f64; 3] {
+        let rotation = &self.rotation;
+        std::array::from_fn(|k| rotation[0][k] * v[0] + rotation[1][k] * v[1] + rotation[2][k] * v[2])
+    }
+
+    /// Where the ray of raw pixel (x, y) meets the pattern's plane (pad mm), and the parallax there.
+    fn cast(&self, x: f64, y: f64) -> Option<([f64; 2], [f64; 2])> {
+        let n = self.camera.raw_to_normalized([x, y])?;
         let d = [n[0], n[1], 1.0];
-        match window {
+        let (normal, t) = (self.normal, self.t);
+        match self.window {
             None => {
-                let s = normal_dot_t / (normal[0] * d[0] + normal[1] * d[1] + normal[2] * d[2]);
+                let s = self.normal_dot_t / (normal[0] * d[0] + normal[1] * d[1] + normal[2] * d[2]);
                 if !(s.is_finite() && s > 0.0) {
                     return None;
                 }
-                let hit = to_pad([s * d[0] - t[0], s * d[1] - t[1], s * d[2] - t[2]]);
+                let hit = self.to_pad([s * d[0] - t[0], s * d[1] - t[1], s * d[2] - t[2]]);
                 Some(([hit[0], hit[1]], [0.0, 0.0]))
             }
             Some(window) => {
                 // Straight through air to the plate, then bent at each flat interface (Snell).
-                let d = to_pad(d);
-                let c = camera_in_pad;
+                let d = self.to_pad(d);
+                let c = self.camera_in_pad;
                 let s = (-(window.plate_mm + window.gel_mm) - c[2]) / d[2];
                 if !(s.is_finite() && s > 0.0) {
                     return None;
@@ -857,37 +907,29 @@ fn pixel_geometry(
                 ))
             }
         }
-    };
-    let mut lattice: Vec<Option<[f64; 2]>> = Vec::with_capacity((w + 1) * (h + 1));
-    let mut slopes: Vec<[f64; 2]> = Vec::with_capacity(if window.is_some() { (w + 1) * (h + 1) } else { 0 });
-    for j in 0..=h {
-        for i in 0..=w {
-            let hit = cast(i as f64, j as f64);
-            lattice.push(hit.map(|(q, _)| q));
-            if window.is_some() {
-                slopes.push(hit.map_or([0.0, 0.0], |(_, s)| s));
-            }
-        }
     }
-    let parallax: Vec<[f32; 2]> = if window.is_some() {
-        (0..h)
-            .flat_map(|j| (0..w).map(move |i| (i, j)))
-            .map(|(i, j)| {
-                let corners = [
-                    j * (w + 1) + i,
-                    j * (w + 1) + i + 1,
-                    (j + 1) * (w + 1) + i,
-                    (j + 1) * (w + 1) + i + 1,
-                ];
-                let mean = |k: usize| corners.iter().map(|&c| slopes[c][k]).sum::<f64>() / 4.0;
-                [mean(0) as f32, mean(1) as f32]
-            })
-            .collect()
-    } else {
-        Vec::new()
-    };
-    // Gaussian blur of sigma s adds 3 s^2 to the squared half-width of an equivalent box (variances h^2 / 3 + s^2).
-    let blur = f64::from(model.blur_px);
+}
+
+/// Each pixel's parallax: the mean of its four corners' ray slopes in the gel.
+fn pixel_parallax(slopes: &[[f64; 2]], w: usize, h: usize) -> Vec<[f32; 2]> {
+    (0..h)
+        .flat_map(|j| (0..w).map(move |i| (i, j)))
+        .map(|(i, j)| {
+            let corners = [
+                j * (w + 1) + i,
+                j * (w + 1) + i + 1,
+                (j + 1) * (w + 1) + i,
+                (j + 1) * (w + 1) + i + 1,
+            ];
+            let mean = |k: usize| corners.iter().map(|&c| slopes[c][k]).sum::<f64>() / 4.0;
+            [mean(0) as f32, mean(1) as f32]
+        })
+        .collect()
+}
+
+/// Each pixel's centre and half-extent on the pad from its four corners, widened by the optical blur (`blur`
+/// px); a pixel whose rays miss the pad is nowhere.
+fn pixel_footprints(lattice: &[Option<[f64; 2]>], w: usize, h: usize, blur: f64) -> Vec<PixelGeometry> {
     let mut geometry = Vec::with_capacity(w * h);
     for j in 0..h {
         for i in 0..w {
@@ -904,6 +946,8 @@ fn pixel_geometry(
                     let along_y = [(c[0] + d[0] - a[0] - b[0]) / 2.0, (c[1] + d[1] - a[1] - b[1]) / 2.0];
                     let half_x = 0.5 * (along_x[0].abs() + along_y[0].abs());
                     let half_y = 0.5 * (along_x[1].abs() + along_y[1].abs());
+                    // Gaussian blur of sigma s adds 3 s^2 to the squared half-width of an equivalent box
+                    // (variances h^2 / 3 + s^2).
                     let widen = |half: f64| (half * half * (1.0 + 12.0 * blur * blur)).sqrt().max(1e-6);
                     PixelGeometry {
                         q: [centre[0] as f32, centre[1] as f32],
@@ -918,7 +962,7 @@ fn pixel_geometry(
             geometry.push(pixel);
         }
     }
-    (geometry, parallax)
+    geometry
 }
 
 /// Each LED bar lies `bar_offset_mm` outside one edge of the pattern, as long as that edge; its light falls
