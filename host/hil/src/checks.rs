@@ -4,12 +4,14 @@
 use std::time::{Duration, Instant};
 
 use nusense_protocol::{Channel, DeviceError, Side, Status, Telemetry, CHANNEL_COUNT, PROTOCOL_VERSION};
+use serde::Serialize;
 use serde_json::{json, Value};
 
 use super::camera::BrightnessProbe;
+use super::telemetry_timing::{ControlLoopTiming, TelemetrySamples, TelemetryTiming};
 use super::{BoardClock, CheckResult, HilOptions, HilReport, RunningTarget, Verdict};
 use nusense_board::{BoardLink, LinkError};
-use nusense_estimator::stats::{mean, pearson, quantile, std_dev};
+use nusense_estimator::stats::{mean, pearson, quantile};
 
 /// Consecutive telemetry frames within tolerance that count as "settled".
 const SETTLED_RUN: usize = 5;
@@ -598,121 +600,103 @@ fn telemetry_rate_and_jitter(session: &mut Session) -> Outcome {
     std::thread::sleep(Duration::from_millis(u64::from(options.telemetry_period_ms) * 3));
     while link.next_telemetry(Duration::ZERO)?.is_some() {}
     let started = Instant::now();
-    let mut arrivals = Vec::new();
-    let mut uptimes = Vec::new();
-    let mut loop_timings = Vec::new();
+    let mut samples = TelemetrySamples::default();
     while started.elapsed() < options.telemetry_window {
         if let Some(telemetry) = link.next_telemetry(TELEMETRY_POLL)? {
-            arrivals.push(started.elapsed().as_secs_f64() * 1e3);
-            uptimes.push(telemetry.uptime_us);
-            loop_timings.push(telemetry.loop_timing);
+            samples.arrivals_ms.push(started.elapsed().as_secs_f64() * 1e3);
+            samples.uptimes_us.push(telemetry.uptime_us);
+            samples.loop_timings.push(telemetry.loop_timing);
         }
     }
     let window_ms = started.elapsed().as_secs_f64() * 1e3;
-    if uptimes.len() < 3 {
+    if samples.uptimes_us.len() < 3 {
         return Err(CheckError::NoTelemetry(options.telemetry_window));
     }
-    let requested_hz = 1e3 / period_ms;
-    let host_rate_hz = arrivals.len() as f64 / (window_ms / 1e3);
-    let board_span_ms = (uptimes[uptimes.len() - 1].saturating_sub(uptimes[0])) as f64 / 1e3;
-    let board_rate_hz = (uptimes.len() - 1) as f64 / (board_span_ms / 1e3).max(f64::EPSILON);
-    let board_intervals: Vec<f64> = uptimes
-        .windows(2)
-        .map(|w| w[1].saturating_sub(w[0]) as f64 / 1e3)
-        .collect();
-    let host_intervals: Vec<f64> = arrivals.windows(2).map(|w| w[1] - w[0]).collect();
-    let deviation = |intervals: &[f64]| -> Vec<f64> { intervals.iter().map(|i| (i - period_ms).abs()).collect() };
-    let board_jitter_std = std_dev(&board_intervals).unwrap_or(0.0);
-    let board_p99_dev = quantile(&deviation(&board_intervals), 0.99).unwrap_or(0.0);
-    let host_jitter_std = std_dev(&host_intervals).unwrap_or(0.0);
-    let host_p99_dev = quantile(&deviation(&host_intervals), 0.99).unwrap_or(0.0);
-    // Board time over host time while the frames came: 1 for a board on a crystal; an emulator starved of CPU
-    // runs its clock slow, and then sends at the requested rate of its own clock only.
-    let host_span_ms = arrivals[arrivals.len() - 1] - arrivals[0];
-    let board_clock_ratio = (host_span_ms > 0.0).then(|| board_span_ms / host_span_ms);
-    let missed = board_intervals.iter().filter(|&&i| i > 1.5 * period_ms).count();
-    session.board_clock_ratio = board_clock_ratio;
-    // The control loop's own period over the window, as the board measured it (board clock).
-    let steps: u64 = loop_timings.iter().map(|t| u64::from(t.steps)).sum();
-    let loop_summary = if steps == 0 {
-        Value::Null
-    } else {
-        let mean = loop_timings
-            .iter()
-            .map(|t| f64::from(t.period_mean_us) * f64::from(t.steps))
-            .sum::<f64>()
-            / steps as f64;
-        json!({
-            "steps": steps,
-            "period_mean_us": mean,
-            "period_min_us": loop_timings.iter().filter(|t| t.steps > 0).map(|t| t.period_min_us).min(),
-            "period_max_us": loop_timings.iter().map(|t| t.period_max_us).max(),
-        })
-    };
-    let rate_ok = |rate: f64| (rate - requested_hz).abs() <= options.rate_tolerance * requested_hz;
-    let mut problems = Vec::new();
-    if !rate_ok(board_rate_hz) {
-        problems.push(format!("board sends at {board_rate_hz:.1} Hz"));
-    }
-    // An emulator's clock runs as fast as the host lets it: its rate is judged on its own clock (above) and the
-    // slowdown reported; a real board must also deliver in wall time.
-    if session.clock == BoardClock::WallClock && !rate_ok(host_rate_hz) {
-        let clock = match board_clock_ratio {
-            Some(ratio) if (ratio - 1.0).abs() > options.rate_tolerance => {
-                format!(" (the board's clock ran at {ratio:.2}x wall time)")
-            }
-            _ => String::new(),
-        };
-        problems.push(format!("host receives {host_rate_hz:.1} Hz{clock}"));
-    }
-    if board_p99_dev > options.max_jitter_fraction * period_ms {
-        problems.push(format!("board-side p99 interval deviation {board_p99_dev:.2} ms"));
-    }
-    let details = json!({
-        "period_ms": period_ms,
-        "requested_hz": requested_hz,
-        "frames": uptimes.len(),
-        "window_ms": window_ms,
-        "board_rate_hz": board_rate_hz,
-        "host_rate_hz": host_rate_hz,
-        "board_interval_std_ms": board_jitter_std,
-        "board_interval_p99_deviation_ms": board_p99_dev,
-        "host_interval_std_ms": host_jitter_std,
-        "host_interval_p99_deviation_ms": host_p99_dev,
-        "host_interval_max_ms": host_intervals.iter().copied().fold(0.0, f64::max),
-        "missed_intervals": missed,
-        "board_clock_ratio": board_clock_ratio,
-        "judged_on": match session.clock {
+    let timing = TelemetryTiming::of(&samples, period_ms, window_ms);
+    session.board_clock_ratio = timing.board_clock_ratio;
+    let problems = telemetry_problems(&timing, session.clock, options);
+    let summary = telemetry_summary(&timing, session.clock);
+    let details = TelemetryDetails {
+        timing,
+        judged_on: match session.clock {
             BoardClock::WallClock => "wall clock",
             BoardClock::Emulated => "board clock (emulated)",
         },
-        "rate_tolerance_percent": options.rate_tolerance * 100.0,
-        "max_jitter_ms": options.max_jitter_fraction * period_ms,
-        "control_loop": loop_summary,
-    });
-    let clock = match (session.clock, board_clock_ratio) {
-        (BoardClock::Emulated, Some(ratio)) => {
-            format!(" (judged on the board's clock, which ran at {ratio:.2}x wall time)")
-        }
-        _ => String::new(),
+        rate_tolerance_percent: options.rate_tolerance * 100.0,
+        max_jitter_ms: options.max_jitter_fraction * period_ms,
     };
-    let loop_text = match (
-        loop_summary["period_mean_us"].as_f64(),
-        loop_summary["period_min_us"].as_u64(),
-        loop_summary["period_max_us"].as_u64(),
-    ) {
-        (Some(mean), Some(min), Some(max)) => format!("; control loop {mean:.1} us ({min}-{max} us)"),
-        _ => String::new(),
-    };
-    let summary = format!(
-        "{requested_hz:.0} Hz requested: board {board_rate_hz:.1} Hz, host {host_rate_hz:.1} Hz{clock}; jitter board \
-         std {board_jitter_std:.3} ms p99 {board_p99_dev:.3} ms, host std {host_jitter_std:.2} ms p99 {host_p99_dev:.2} ms{loop_text}"
-    );
+    let details = serde_json::to_value(details).expect("plain numbers and text");
     if problems.is_empty() {
         Ok((Verdict::Pass, summary, details))
     } else {
         Ok((Verdict::Fail, format!("{}; {summary}", problems.join("; ")), details))
     }
+}
+
+/// The telemetry check's details: the timing and what it was judged against.
+#[derive(Serialize)]
+struct TelemetryDetails {
+    #[serde(flatten)]
+    timing: TelemetryTiming,
+    judged_on: &'static str,
+    rate_tolerance_percent: f64,
+    max_jitter_ms: f64,
+}
+
+/// Where the stream misses the requested rate or jitter.
+fn telemetry_problems(timing: &TelemetryTiming, clock: BoardClock, options: &HilOptions) -> Vec<String> {
+    let rate_ok = |rate: f64| (rate - timing.requested_hz).abs() <= options.rate_tolerance * timing.requested_hz;
+    let mut problems = Vec::new();
+    if !rate_ok(timing.board_rate_hz) {
+        problems.push(format!("board sends at {:.1} Hz", timing.board_rate_hz));
+    }
+    // An emulator's clock runs as fast as the host lets it: its rate is judged on its own clock (above) and the
+    // slowdown reported; a real board must also deliver in wall time.
+    if clock == BoardClock::WallClock && !rate_ok(timing.host_rate_hz) {
+        let slow_clock = match timing.board_clock_ratio {
+            Some(ratio) if (ratio - 1.0).abs() > options.rate_tolerance => {
+                format!(" (the board's clock ran at {ratio:.2}x wall time)")
+            }
+            _ => String::new(),
+        };
+        problems.push(format!("host receives {:.1} Hz{slow_clock}", timing.host_rate_hz));
+    }
+    if timing.board_interval_p99_deviation_ms > options.max_jitter_fraction * timing.period_ms {
+        problems.push(format!(
+            "board-side p99 interval deviation {:.2} ms",
+            timing.board_interval_p99_deviation_ms
+        ));
+    }
+    problems
+}
+
+fn telemetry_summary(timing: &TelemetryTiming, clock: BoardClock) -> String {
+    let clock = match (clock, timing.board_clock_ratio) {
+        (BoardClock::Emulated, Some(ratio)) => {
+            format!(" (judged on the board's clock, which ran at {ratio:.2}x wall time)")
+        }
+        _ => String::new(),
+    };
+    let loop_text = match &timing.control_loop {
+        Some(ControlLoopTiming {
+            period_mean_us: mean,
+            period_min_us: Some(min),
+            period_max_us: Some(max),
+            ..
+        }) => format!("; control loop {mean:.1} us ({min}-{max} us)"),
+        _ => String::new(),
+    };
+    format!(
+        "{:.0} Hz requested: board {:.1} Hz, host {:.1} Hz{clock}; jitter board std {:.3} ms p99 {:.3} ms, host std \
+         {:.2} ms p99 {:.2} ms{loop_text}",
+        timing.requested_hz,
+        timing.board_rate_hz,
+        timing.host_rate_hz,
+        timing.board_interval_std_ms,
+        timing.board_interval_p99_deviation_ms,
+        timing.host_interval_std_ms,
+        timing.host_interval_p99_deviation_ms,
+    )
 }
 
 fn round_trip_latency(session: &mut Session) -> Outcome {

@@ -12,6 +12,7 @@ mod checks;
 pub mod emulator;
 pub mod light;
 pub mod target;
+mod telemetry_timing;
 
 use std::time::Duration;
 
