@@ -13,7 +13,7 @@ use std::process::ExitCode;
 use anyhow::{anyhow, bail, Context};
 use nusense_daemon::api::{self, AccessPolicy, AppState, RecordingsDir};
 use nusense_daemon::foxglove_live::FoxgloveLive;
-use nusense_daemon::pipeline::PipelineHandle;
+use nusense_daemon::pipeline::{BoardChoice, FrameChoice, PipelineHandle};
 use nusense_daemon::zenoh_out::{self, ZenohOut, ZenohSensor};
 use nusense_ros2::{sensor_token, DiscoveryRange, Ros2Out, Ros2Settings};
 use tokio::signal::unix::{signal, SignalKind};
@@ -76,16 +76,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     init_logging();
-    let token = args.token.clone().filter(|t| !t.is_empty());
-    if !args.listen.ip().is_loopback() && token.is_none() {
-        bail!(
-            "listening on {} (beyond this machine) requires a token: pass --token or set NUSENSE_TOKEN",
-            args.listen
-        );
-    }
-    if let Some(addr) = args.foxglove.filter(|a| !a.ip().is_loopback()) {
-        bail!("--foxglove {addr}: the Foxglove server has no authentication, so it listens on loopback only");
-    }
+    let token = access_token(&args)?;
     let recordings_dir = match args.recordings.clone() {
         Some(dir) => dir,
         None => RecordingsDir::default_location()
@@ -99,19 +90,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let sources = sensor_sources(&args.source, args.sensors, &args.paired)?;
     // Every sensor of one daemon is simulated, or none is.
     let config = source_config(args.source.config.as_ref(), &sources[0].0)?;
-    match sources.as_slice() {
-        [(frames, board)] => eprintln!("{}", describe_start(frames, board)),
-        [(frames, board), ..] if args.paired.is_empty() => eprintln!(
-            "{}; {} sensors, each its own simulated camera and virtual board",
-            describe_start(frames, board),
-            sources.len()
-        ),
-        several => {
-            for (i, (frames, board)) in several.iter().enumerate() {
-                eprintln!("{} (sensor {})", describe_start(frames, board), i + 1);
-            }
-        }
-    }
+    describe_sources(&sources, args.paired.is_empty());
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -151,32 +130,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let access = AccessPolicy::new(local, &args.allow_host, token.as_deref());
         let state = AppState::new(handle, scene, access, RecordingsDir::new(recordings_dir.clone()));
         let zenoh = match zenoh_config {
-            Some(zenoh_config) => {
-                let mut served = Vec::new();
-                for (i, (sensor, serial)) in sensors.iter().zip(&serials).enumerate() {
-                    let api = match i {
-                        0 => state.clone(),
-                        _ => state.for_sensor(sensor.pipeline.handle(), sensor.scene.clone()),
-                    };
-                    let serial = serial.as_ref().map_err(|why| {
-                        anyhow!("--zenoh names each sensor by its LED board's serial number: {why:#}")
-                    })?;
-                    served.push(ZenohSensor {
-                        serial: serial.clone(),
-                        api,
-                    });
-                }
-                let serials: Vec<String> = served.iter().map(|s| s.serial.clone()).collect();
-                let zenoh = ZenohOut::start(zenoh_config, served).await?;
-                eprintln!("nusense serve: on Zenoh as nusense/{{{}}}/", serials.join(","));
-                // Its own line, endpoints separated by spaces, before the dashboard's: clients (and the tests, which
-                // pass port 0) read the port the system gave from it.
-                match zenoh.listening_on().await {
-                    endpoints if endpoints.is_empty() => eprintln!("nusense serve: Zenoh listens nowhere"),
-                    endpoints => eprintln!("nusense serve: Zenoh listening on {}", endpoints.join(" ")),
-                }
-                Some(zenoh)
-            }
+            Some(zenoh_config) => Some(start_zenoh(zenoh_config, &sensors, &serials, &state).await?),
             None => None,
         };
         eprintln!(
@@ -201,6 +155,73 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     drop(sensors);
     eprintln!("nusense serve: stopped");
     Ok(ExitCode::SUCCESS)
+}
+
+/// The token requests must carry, if any. Refuses to listen beyond loopback without one, and Foxglove beyond
+/// loopback at all (its protocol has no authentication).
+fn access_token(args: &Args) -> anyhow::Result<Option<String>> {
+    let token = args.token.clone().filter(|t| !t.is_empty());
+    if !args.listen.ip().is_loopback() && token.is_none() {
+        bail!(
+            "listening on {} (beyond this machine) requires a token: pass --token or set NUSENSE_TOKEN",
+            args.listen
+        );
+    }
+    if let Some(addr) = args.foxglove.filter(|a| !a.ip().is_loopback()) {
+        bail!("--foxglove {addr}: the Foxglove server has no authentication, so it listens on loopback only");
+    }
+    Ok(token)
+}
+
+/// Says on stderr what each sensor runs on; `simulated`: the sensors are the simulator's, all alike.
+fn describe_sources(sources: &[(FrameChoice, BoardChoice)], simulated: bool) {
+    match sources {
+        [(frames, board)] => eprintln!("{}", describe_start(frames, board)),
+        [(frames, board), ..] if simulated => eprintln!(
+            "{}; {} sensors, each its own simulated camera and virtual board",
+            describe_start(frames, board),
+            sources.len()
+        ),
+        several => {
+            for (i, (frames, board)) in several.iter().enumerate() {
+                eprintln!("{} (sensor {})", describe_start(frames, board), i + 1);
+            }
+        }
+    }
+}
+
+/// Every sensor on Zenoh, named by its board's serial number: the first through `state`, the others through
+/// their own API state.
+async fn start_zenoh(
+    zenoh_config: zenoh_out::Config,
+    sensors: &[Sensor],
+    serials: &[anyhow::Result<String>],
+    state: &AppState,
+) -> anyhow::Result<ZenohOut> {
+    let mut served = Vec::new();
+    for (i, (sensor, serial)) in sensors.iter().zip(serials).enumerate() {
+        let api = match i {
+            0 => state.clone(),
+            _ => state.for_sensor(sensor.pipeline.handle(), sensor.scene.clone()),
+        };
+        let serial = serial
+            .as_ref()
+            .map_err(|why| anyhow!("--zenoh names each sensor by its LED board's serial number: {why:#}"))?;
+        served.push(ZenohSensor {
+            serial: serial.clone(),
+            api,
+        });
+    }
+    let serials: Vec<String> = served.iter().map(|s| s.serial.clone()).collect();
+    let zenoh = ZenohOut::start(zenoh_config, served).await?;
+    eprintln!("nusense serve: on Zenoh as nusense/{{{}}}/", serials.join(","));
+    // Its own line, endpoints separated by spaces, before the dashboard's: clients (and the tests, which pass port
+    // 0) read the port the system gave from it.
+    match zenoh.listening_on().await {
+        endpoints if endpoints.is_empty() => eprintln!("nusense serve: Zenoh listens nowhere"),
+        endpoints => eprintln!("nusense serve: Zenoh listening on {}", endpoints.join(" ")),
+    }
+    Ok(zenoh)
 }
 
 /// The sensor's ROS 2 node, named after its board's serial number; a sensor without one is `unknown`.

@@ -21,7 +21,10 @@ use zenoh::bytes::Encoding;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::Publisher;
 use zenoh::query::{Query, Queryable};
-use zenoh::{Config, Session, Wait};
+use zenoh::{Session, Wait};
+
+/// The Zenoh configuration this module builds and takes, re-exported so that its callers need not depend on zenoh.
+pub use zenoh::Config;
 
 use crate::api::{status_message, versioned, AppState};
 use crate::commands::{apply_led_request, tare};
