@@ -9,7 +9,8 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use nusense_daemon::pipeline::{open_sources, Pipeline};
+use nusense_capture::SourceInfo;
+use nusense_daemon::pipeline::{open_sources, Pipeline, PipelineHandle};
 use nusense_daemon::record::{recover, RecorderOptions, SensorContext, DEFAULT_FLUSH_INTERVAL};
 
 use super::common::{
@@ -61,15 +62,7 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         describe_start(&frames, &board).replacen("nusense serve", "nusense record", 1)
     );
     let sources = open_sources(&frames, &board).context("opening the frame source and LED board")?;
-    let source = sources.frames.info();
-    let mut identity = BTreeMap::from([
-        ("source_kind".to_string(), source.kind.to_string()),
-        ("source".to_string(), source.name),
-        ("width".to_string(), source.width.to_string()),
-        ("height".to_string(), source.height.to_string()),
-        ("fps".to_string(), source.fps.to_string()),
-        ("mode".to_string(), args.source.mode.to_string()),
-    ]);
+    let mut identity = source_identity(&sources.frames.info(), &args.source);
     let pipeline = Pipeline::start(
         sources.frames,
         sources.board,
@@ -96,35 +89,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("creating {}", output.display()))?;
     eprintln!("nusense record: writing {} (stop with Ctrl-C)", output.display());
 
-    let interrupted = Arc::new(AtomicBool::new(false));
-    let flag = interrupted.clone();
-    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
-    let _signal = std::thread::spawn(move || {
-        runtime.block_on(async {
-            let _ = tokio::signal::ctrl_c().await;
-        });
-        flag.store(true, Ordering::Relaxed);
-    });
+    let interrupted = ctrl_c_flag()?;
     let started = Instant::now();
-    let deadline = args
-        .duration
-        .filter(|d| d.is_finite() && *d > 0.0)
-        .map(Duration::from_secs_f64);
-    loop {
-        std::thread::sleep(Duration::from_millis(20));
-        let status = handle.status();
-        // Counted in measured frames, not captured ones: the estimator's first frame (building the rest frame's
-        // model) can take longer than a burst of captures, and a recording of frames without their readings
-        // would be cut short of what was asked.
-        let done_frames = args.frames.is_some_and(|n| status.frames_processed >= n);
-        let done_time = deadline.is_some_and(|d| started.elapsed() >= d);
-        let source_ended = status.capture_finished
-            && status.frames_processed >= status.frames_captured.saturating_sub(status.frames_dropped);
-        let failed = status.recording.as_ref().is_some_and(|r| r.failure.is_some());
-        if interrupted.load(Ordering::Relaxed) || done_frames || done_time || source_ended || failed {
-            break;
-        }
-    }
+    wait_until_done(&handle, &args, started, &interrupted);
     let summary = handle
         .stop_recording()
         .with_context(|| format!("recording {}", output.display()))?;
@@ -143,6 +110,56 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         );
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// What the recording says of its frame source, in its sensor metadata.
+fn source_identity(source: &SourceInfo, args: &SourceArgs) -> BTreeMap<String, String> {
+    BTreeMap::from([
+        ("source_kind".to_string(), source.kind.to_string()),
+        ("source".to_string(), source.name.clone()),
+        ("width".to_string(), source.width.to_string()),
+        ("height".to_string(), source.height.to_string()),
+        ("fps".to_string(), source.fps.to_string()),
+        ("mode".to_string(), args.mode.to_string()),
+    ])
+}
+
+/// Set once Ctrl-C (SIGINT) arrives; the recording then stops cleanly.
+fn ctrl_c_flag() -> anyhow::Result<Arc<AtomicBool>> {
+    let interrupted = Arc::new(AtomicBool::new(false));
+    let flag = interrupted.clone();
+    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+    std::thread::spawn(move || {
+        runtime.block_on(async {
+            let _ = tokio::signal::ctrl_c().await;
+        });
+        flag.store(true, Ordering::Relaxed);
+    });
+    Ok(interrupted)
+}
+
+/// Returns once the recording is to stop: interrupted, enough frames or time, the source ended, or the recording
+/// failed.
+fn wait_until_done(handle: &PipelineHandle, args: &Args, started: Instant, interrupted: &AtomicBool) {
+    let deadline = args
+        .duration
+        .filter(|d| d.is_finite() && *d > 0.0)
+        .map(Duration::from_secs_f64);
+    loop {
+        std::thread::sleep(Duration::from_millis(20));
+        let status = handle.status();
+        // Counted in measured frames, not captured ones: the estimator's first frame (building the rest frame's
+        // model) can take longer than a burst of captures, and a recording of frames without their readings
+        // would be cut short of what was asked.
+        let done_frames = args.frames.is_some_and(|n| status.frames_processed >= n);
+        let done_time = deadline.is_some_and(|d| started.elapsed() >= d);
+        let source_ended = status.capture_finished
+            && status.frames_processed >= status.frames_captured.saturating_sub(status.frames_dropped);
+        let failed = status.recording.as_ref().is_some_and(|r| r.failure.is_some());
+        if interrupted.load(Ordering::Relaxed) || done_frames || done_time || source_ended || failed {
+            return;
+        }
+    }
 }
 
 fn run_recover(input: &Path, output: &Path, json: bool) -> anyhow::Result<ExitCode> {

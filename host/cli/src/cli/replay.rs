@@ -2,15 +2,15 @@
 //! as it goes; the first frame is the rest frame. Prints a table, or with --json one reading message per line
 //! (`nusense_daemon::ReadingMessage`, as the daemon and `analyze --json` write them).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Context;
-use nusense_capture::{unix_time_us, CaptureError, FrameSource, ImageFolder};
+use nusense_capture::{unix_time_us, CaptureError, Frame, FrameSource, ImageFolder};
 use nusense_daemon::record::McapReplay;
 use nusense_daemon::{ReadingMessage, SCHEMA_VERSION};
-use nusense_estimator::{Estimator, Mode};
+use nusense_estimator::{Estimator, Mode, Reading};
 
 use super::common::{load_config, EXIT_SOME_FRAMES_FAILED};
 
@@ -31,18 +31,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     let config = load_config(args.config.as_ref())?;
-    let mut source: Box<dyn FrameSource> = if args.input.is_dir() {
-        Box::new(ImageFolder::open(&args.input, f64::INFINITY, false)?.unpaced())
-    } else {
-        let replay = McapReplay::open(&args.input, false)?.unpaced();
-        if replay.truncated {
-            eprintln!(
-                "nusense replay: {} was cut short (its recorder was killed); replaying what survived",
-                args.input.display()
-            );
-        }
-        Box::new(replay)
-    };
+    let mut source = open_frames(&args.input)?;
     let mut estimator: Option<Estimator> = None;
     let mut frames = 0usize;
     let mut failures = 0usize;
@@ -79,53 +68,15 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
         let result = image
             .map_err(|error| error.to_string())
             .and_then(|image| estimator.estimate(&image).map_err(|error| error.to_string()));
+        failures += usize::from(result.is_err());
         if args.json {
-            let (estimate, error) = match result {
-                Ok(reading) => (Some(reading), None),
-                Err(error) => {
-                    failures += 1;
-                    (None, Some(error))
-                }
-            };
-            let message = ReadingMessage {
-                schema_version: SCHEMA_VERSION,
-                frame_id: index as u64,
-                file: None,
-                capture_time_us: frame.capture_time_us,
-                processed_time_us: unix_time_us(),
-                latency_ms: frame.captured_at.elapsed().as_secs_f64() * 1e3,
-                queue_ms: 0.0,
-                reference_frame_id: Some(0),
-                estimate,
-                error,
-                led: None,
-            };
+            let message = reading_message(index, &frame, result);
             println!(
                 "{}",
                 serde_json::to_string(&message).context("cannot write a reading as JSON")?
             );
-            continue;
-        }
-        match result {
-            Ok(r) => println!(
-                "{:>6} {:>8} {:>9.3} {:>10.5} {:>16} {:>8} {:>4}/{:<4}",
-                index,
-                if r.is_contact() { "yes" } else { "no" },
-                r.force_n(),
-                r.gamma.gamma,
-                r.contact_mm()
-                    .map(|c| format!("{:.1}, {:.1}", c[0], c[1]))
-                    .unwrap_or_else(|| "-".into()),
-                r.edge_angle_deg()
-                    .map(|a| format!("{a:.1}"))
-                    .unwrap_or_else(|| "-".into()),
-                r.counts.points_detected,
-                r.counts.points_expected
-            ),
-            Err(error) => {
-                failures += 1;
-                println!("{index:>6} error: {error}");
-            }
+        } else {
+            println!("{}", table_row(index, &result));
         }
     }
     if frames == 0 {
@@ -140,4 +91,62 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
     } else {
         ExitCode::from(EXIT_SOME_FRAMES_FAILED)
     })
+}
+
+/// The frames of a folder of images or of an MCAP recording, as fast as they can be read.
+fn open_frames(input: &Path) -> anyhow::Result<Box<dyn FrameSource>> {
+    if input.is_dir() {
+        return Ok(Box::new(ImageFolder::open(input, f64::INFINITY, false)?.unpaced()));
+    }
+    let replay = McapReplay::open(input, false)?.unpaced();
+    if replay.truncated {
+        eprintln!(
+            "nusense replay: {} was cut short (its recorder was killed); replaying what survived",
+            input.display()
+        );
+    }
+    Ok(Box::new(replay))
+}
+
+/// The frame's reading as the daemon publishes it; the rest frame is frame 0.
+fn reading_message(index: usize, frame: &Frame, result: Result<Reading, String>) -> ReadingMessage {
+    let (estimate, error) = match result {
+        Ok(reading) => (Some(reading), None),
+        Err(error) => (None, Some(error)),
+    };
+    ReadingMessage {
+        schema_version: SCHEMA_VERSION,
+        frame_id: index as u64,
+        file: None,
+        capture_time_us: frame.capture_time_us,
+        processed_time_us: unix_time_us(),
+        latency_ms: frame.captured_at.elapsed().as_secs_f64() * 1e3,
+        queue_ms: 0.0,
+        reference_frame_id: Some(0),
+        estimate,
+        error,
+        led: None,
+    }
+}
+
+/// The frame's line of the table (see the header in [`run`]).
+fn table_row(index: usize, result: &Result<Reading, String>) -> String {
+    match result {
+        Ok(r) => format!(
+            "{:>6} {:>8} {:>9.3} {:>10.5} {:>16} {:>8} {:>4}/{:<4}",
+            index,
+            if r.is_contact() { "yes" } else { "no" },
+            r.force_n(),
+            r.gamma.gamma,
+            r.contact_mm()
+                .map(|c| format!("{:.1}, {:.1}", c[0], c[1]))
+                .unwrap_or_else(|| "-".into()),
+            r.edge_angle_deg()
+                .map(|a| format!("{a:.1}"))
+                .unwrap_or_else(|| "-".into()),
+            r.counts.points_detected,
+            r.counts.points_expected
+        ),
+        Err(error) => format!("{index:>6} error: {error}"),
+    }
 }
