@@ -229,19 +229,7 @@ pub fn run_validation_with(
         ));
         let renderer = ValidationRenderer::new(size)?;
         let reference = renderer.reference(seed)?;
-        let mut estimators: Vec<Option<Estimator>> = modes
-            .iter()
-            .enumerate()
-            .map(
-                |(m, &mode)| match Estimator::new(configs[m].clone(), mode, &reference) {
-                    Ok(e) => Some(e),
-                    Err(error) => {
-                        errors[m].get_or_insert_with(|| format!("{}x{} rest frame: {error}", size.0, size.1));
-                        None
-                    }
-                },
-            )
-            .collect();
+        let mut estimators = estimators_for(&configs, modes, &reference, size, &mut errors);
         let cases: Vec<_> = set.cases.iter().filter(|c| c.size == size).collect();
         for (k, case) in cases.iter().enumerate() {
             progress(&format!(
@@ -258,18 +246,9 @@ pub fn run_validation_with(
                 None => renderer.render(case)?,
             };
             for (m, estimator) in estimators.iter_mut().enumerate() {
-                let (observed, elapsed_ms) = match estimator {
-                    Some(estimator) => {
-                        let started = Instant::now();
-                        let reading = estimator.estimate(&frame);
-                        let elapsed = started.elapsed().as_secs_f64() * 1e3;
-                        match reading.ok().and_then(|r| serde_json::to_value(r).ok()) {
-                            Some(value) => (Some(value), (size_index == 0).then_some(elapsed)),
-                            None => (None, None),
-                        }
-                    }
-                    None => (None, None),
-                };
+                let (observed, elapsed_ms) = read_timed(estimator.as_mut(), &frame);
+                // Speed is the main size's alone.
+                let elapsed_ms = elapsed_ms.filter(|_| size_index == 0);
                 record(&CaseRecord {
                     mode: modes[m],
                     case: &case.name,
@@ -290,9 +269,59 @@ pub fn run_validation_with(
             }
         }
     }
+    Ok(report_of(profile, seed, set.cases.len(), sizes, modes, &scored, errors))
+}
+
+/// One estimator per mode for this size's rest frame; a mode whose estimator cannot be built has none, and its
+/// first such error is kept in `errors`.
+fn estimators_for(
+    configs: &[SensorConfig],
+    modes: &[Mode],
+    reference: &RgbImage,
+    size: (u32, u32),
+    errors: &mut [Option<String>],
+) -> Vec<Option<Estimator>> {
+    modes
+        .iter()
+        .enumerate()
+        .map(|(m, &mode)| match Estimator::new(configs[m].clone(), mode, reference) {
+            Ok(e) => Some(e),
+            Err(error) => {
+                errors[m].get_or_insert_with(|| format!("{}x{} rest frame: {error}", size.0, size.1));
+                None
+            }
+        })
+        .collect()
+}
+
+/// The estimator's reading of `frame` as JSON and how long it took (ms); none when it has no estimator or no
+/// reading.
+fn read_timed(estimator: Option<&mut Estimator>, frame: &RgbImage) -> (Option<serde_json::Value>, Option<f64>) {
+    let Some(estimator) = estimator else {
+        return (None, None);
+    };
+    let started = Instant::now();
+    let reading = estimator.estimate(frame);
+    let elapsed = started.elapsed().as_secs_f64() * 1e3;
+    match reading.ok().and_then(|r| serde_json::to_value(r).ok()) {
+        Some(value) => (Some(value), Some(elapsed)),
+        None => (None, None),
+    }
+}
+
+/// Every mode's figures, with its speed against the baseline's (the paper's mode if run, else the first).
+fn report_of(
+    profile: Profile,
+    seed: u64,
+    frames: usize,
+    sizes: Vec<(u32, u32)>,
+    modes: &[Mode],
+    scored: &[Vec<Scored>],
+    errors: Vec<Option<String>>,
+) -> ValidationReport {
     let mut figures: Vec<ModeFigures> = modes
         .iter()
-        .zip(&scored)
+        .zip(scored)
         .zip(errors)
         .map(|((&mode, scored), error)| ModeFigures {
             error,
@@ -307,15 +336,15 @@ pub fn run_validation_with(
             _ => None,
         };
     }
-    Ok(ValidationReport {
+    ValidationReport {
         profile,
         seed,
-        frames: set.cases.len(),
+        frames,
         sizes,
         baseline: modes.get(baseline_index).map(ToString::to_string).unwrap_or_default(),
         modes: figures,
         machine: crate::report::Machine::this(),
-    })
+    }
 }
 
 /// Each mode's sensor config, as `nusense calibrate` would leave it for the validation sensor: the gamma modes'
