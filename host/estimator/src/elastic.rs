@@ -506,8 +506,7 @@ pub fn stack_layers(config: &ElasticConfig) -> Vec<Layer> {
 /// scaled by mu_ref k, so the values returned are k times the transfer functions times mu_ref, and vanish at k = 0
 /// (a layer on a plate moves by a finite amount under a uniform traction).
 pub fn stack_spectra(k: f64, layers: &[Layer], d: f64, mu_ref: f64) -> (Spectra, [f64; 2]) {
-    let n = layers.len();
-    if !(k > 0.0) || n == 0 {
+    if !(k > 0.0) || layers.is_empty() {
         return (
             Spectra {
                 ll: 0.0,
@@ -517,7 +516,27 @@ pub fn stack_spectra(k: f64, layers: &[Layer], d: f64, mu_ref: f64) -> (Spectra,
             [0.0, 0.0],
         );
     }
-    // Which layer the pattern lies in, and its depth in it (on an interface both layers agree).
+    let at = pattern_layer(layers, d);
+    let nan = (
+        Spectra {
+            ll: f64::NAN,
+            ln: f64::NAN,
+            tt: f64::NAN,
+        },
+        [f64::NAN; 2],
+    );
+    let Some(([ll, ln], vertical)) = plane_strain_response(k, layers, at, mu_ref) else {
+        return nan;
+    };
+    let Some(tt) = transverse_response(k, layers, at, mu_ref) else {
+        return nan;
+    };
+    (Spectra { ll, ln, tt }, vertical)
+}
+
+/// Which layer the pattern at depth `d` lies in, and its depth in it (on an interface both layers agree).
+fn pattern_layer(layers: &[Layer], d: f64) -> (usize, f64) {
+    let n = layers.len();
     let mut top = 0.0;
     let mut at = (n - 1, layers[n - 1].thickness_mm);
     for (j, layer) in layers.iter().enumerate() {
@@ -527,31 +546,41 @@ pub fn stack_spectra(k: f64, layers: &[Layer], d: f64, mu_ref: f64) -> (Spectra,
         }
         top += layer.thickness_mm;
     }
-    // In-plane and normal displacement rows of layer j's four unknowns at local depth z.
-    let rows = |layer: &Layer, z: f64| {
-        let kappa = 3.0 - 4.0 * layer.poisson_ratio;
-        let s = layer.thickness_mm - z;
-        let (et, eb) = ((-k * z).exp(), (-k * s).exp());
-        let (kz, ks) = (k * z, k * s);
-        let u = [et, kz * et, eb, ks * eb];
-        let w = [et, (kappa + kz) * et, -eb, -(kappa + ks) * eb];
-        let c = 1.0 - 2.0 * layer.poisson_ratio;
-        let q = 2.0 * (1.0 - layer.poisson_ratio);
-        let ratio = layer.shear_modulus / mu_ref;
-        let sxz = [
-            -2.0 * ratio * et,
-            -2.0 * ratio * (kz + c) * et,
-            2.0 * ratio * eb,
-            2.0 * ratio * (ks + c) * eb,
-        ];
-        let szz = [
-            -2.0 * ratio * et,
-            -2.0 * ratio * (kz + q) * et,
-            -2.0 * ratio * eb,
-            -2.0 * ratio * (ks + q) * eb,
-        ];
-        [u, w, sxz, szz]
-    };
+    at
+}
+
+/// In-plane and normal displacement, shear and normal stress rows of a layer's four plane-strain unknowns at local
+/// depth z (see [`stack_spectra`]).
+fn plane_strain_rows(layer: &Layer, k: f64, z: f64, mu_ref: f64) -> [[f64; 4]; 4] {
+    let kappa = 3.0 - 4.0 * layer.poisson_ratio;
+    let s = layer.thickness_mm - z;
+    let (et, eb) = ((-k * z).exp(), (-k * s).exp());
+    let (kz, ks) = (k * z, k * s);
+    let u = [et, kz * et, eb, ks * eb];
+    let w = [et, (kappa + kz) * et, -eb, -(kappa + ks) * eb];
+    let c = 1.0 - 2.0 * layer.poisson_ratio;
+    let q = 2.0 * (1.0 - layer.poisson_ratio);
+    let ratio = layer.shear_modulus / mu_ref;
+    let sxz = [
+        -2.0 * ratio * et,
+        -2.0 * ratio * (kz + c) * et,
+        2.0 * ratio * eb,
+        2.0 * ratio * (ks + c) * eb,
+    ];
+    let szz = [
+        -2.0 * ratio * et,
+        -2.0 * ratio * (kz + q) * et,
+        -2.0 * ratio * eb,
+        -2.0 * ratio * (ks + q) * eb,
+    ];
+    [u, w, sxz, szz]
+}
+
+/// The plane-strain (sagittal) part at the pattern (layer `at.0`, depth `at.1`): [ll, ln] and the normal
+/// displacement's [from t_x, from p]; none if the system is singular.
+fn plane_strain_response(k: f64, layers: &[Layer], at: (usize, f64), mu_ref: f64) -> Option<([f64; 2], [f64; 2])> {
+    let n = layers.len();
+    let rows = |layer: &Layer, z: f64| plane_strain_rows(layer, k, z, mu_ref);
     let size = 4 * n;
     let mut m = DMatrix::zeros(size, size);
     let mut rhs = DMatrix::zeros(size, 2);
@@ -577,32 +606,30 @@ pub fn stack_spectra(k: f64, layers: &[Layer], d: f64, mu_ref: f64) -> (Spectra,
         m[(size - 2, 4 * (n - 1) + c)] = plate[0][c];
         m[(size - 1, 4 * (n - 1) + c)] = plate[1][c];
     }
-    let nan = (
-        Spectra {
-            ll: f64::NAN,
-            ln: f64::NAN,
-            tt: f64::NAN,
-        },
-        [f64::NAN; 2],
-    );
-    let Some(x) = m.lu().solve(&rhs) else {
-        return nan;
-    };
+    let x = m.lu().solve(&rhs)?;
     let observed = rows(&layers[at.0], at.1);
     let value = |row: &[f64; 4], col: usize| (0..4).map(|c| row[c] * x[(4 * at.0 + c, col)]).sum::<f64>();
     // This basis's sin/cos phases make the cross terms the opposite sign of [`Spectra`]'s.
     let (ll, ln) = (value(&observed[0], 0), -value(&observed[0], 1));
     let vertical = [-value(&observed[1], 0), value(&observed[1], 1)];
-    // Transverse: p_j, q_j per layer.
+    Some(([ll, ln], vertical))
+}
+
+/// Displacement and shear stress rows of a layer's two transverse (antiplane) unknowns p, q at local depth z.
+fn transverse_rows(layer: &Layer, k: f64, z: f64, mu_ref: f64) -> [[f64; 2]; 2] {
+    let s = layer.thickness_mm - z;
+    let (et, eb) = ((-k * z).exp(), (-k * s).exp());
+    let ratio = layer.shear_modulus / mu_ref;
+    [[et, eb], [-ratio * et, ratio * eb]]
+}
+
+/// The transverse part at the pattern: tt; none if the system is singular.
+fn transverse_response(k: f64, layers: &[Layer], at: (usize, f64), mu_ref: f64) -> Option<f64> {
+    let n = layers.len();
+    let sh = |layer: &Layer, z: f64| transverse_rows(layer, k, z, mu_ref);
     let size = 2 * n;
     let mut m = DMatrix::zeros(size, size);
     let mut rhs = DVector::zeros(size);
-    let sh = |layer: &Layer, z: f64| {
-        let s = layer.thickness_mm - z;
-        let (et, eb) = ((-k * z).exp(), (-k * s).exp());
-        let ratio = layer.shear_modulus / mu_ref;
-        [[et, eb], [-ratio * et, ratio * eb]]
-    };
     let surface = sh(&layers[0], 0.0);
     m[(0, 0)] = surface[1][0];
     m[(0, 1)] = surface[1][1];
@@ -619,12 +646,9 @@ pub fn stack_spectra(k: f64, layers: &[Layer], d: f64, mu_ref: f64) -> (Spectra,
     let plate = sh(&layers[n - 1], layers[n - 1].thickness_mm);
     m[(size - 1, 2 * (n - 1))] = plate[0][0];
     m[(size - 1, 2 * (n - 1) + 1)] = plate[0][1];
-    let Some(x) = m.lu().solve(&rhs) else {
-        return nan;
-    };
+    let x = m.lu().solve(&rhs)?;
     let observed = sh(&layers[at.0], at.1);
-    let tt = observed[0][0] * x[2 * at.0] + observed[0][1] * x[2 * at.0 + 1];
-    (Spectra { ll, ln, tt }, vertical)
+    Some(observed[0][0] * x[2 * at.0] + observed[0][1] * x[2 * at.0 + 1])
 }
 
 /// One Catmull-Rom segment at `t` in [0, 1) between p1 and p2.
