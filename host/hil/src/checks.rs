@@ -3,9 +3,9 @@
 
 use std::time::{Duration, Instant};
 
-use nusense_protocol::{Channel, DeviceError, Side, Status, Telemetry, CHANNEL_COUNT, PROTOCOL_VERSION};
+use nusense_protocol::{Channel, DeviceError, LinkCounters, Side, Status, Telemetry, CHANNEL_COUNT, PROTOCOL_VERSION};
 use serde::Serialize;
-use serde_json::{json, Value};
+use serde_json::Value;
 
 use super::camera::BrightnessProbe;
 use super::telemetry_timing::{ControlLoopTiming, TelemetrySamples, TelemetryTiming};
@@ -68,6 +68,19 @@ impl Deadline {
 }
 
 type Outcome = Result<(Verdict, String, Value), CheckError>;
+
+/// A check's details as the report's JSON: each check has its own typed struct.
+fn details(details: impl Serialize) -> Value {
+    serde_json::to_value(details).expect("check details are plain numbers and text")
+}
+
+/// A check that ended in an error (or, for the reopen, could not reopen).
+#[derive(Serialize)]
+struct ErrorDetails {
+    error: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    reopen_ms: Option<f64>,
+}
 
 #[derive(Debug, thiserror::Error)]
 enum CheckError {
@@ -155,7 +168,11 @@ pub fn run_suite(
                 if matches!(error, CheckError::Link(ref e) if e.is_disconnect()) {
                     session.link = None;
                 }
-                (Verdict::Fail, error.to_string(), json!({ "error": error.to_string() }))
+                let error_details = details(ErrorDetails {
+                    error: error.to_string(),
+                    reopen_ms: None,
+                });
+                (Verdict::Fail, error.to_string(), error_details)
             }
         };
         let result = CheckResult {
@@ -262,19 +279,19 @@ fn handshake_and_versions(session: &mut Session) -> Outcome {
     session.initial = Some(status);
     session.max_current_ma = Some(info.max_current_ma);
     session.max_total_current_ma = Some(info.max_total_current_ma);
-    let details = json!({
-        "handshake_ms": handshake_ms,
-        "open_attempts": attempts,
-        "protocol_version": info.protocol_version,
-        "host_protocol_version": PROTOCOL_VERSION,
-        "firmware_version": info.firmware_version.as_str(),
-        "git_hash": info.git_hash.as_str(),
-        "board_id": info.board_id.as_str(),
-        "serial_number": serial,
-        "channel_count": info.channel_count,
-        "max_current_ma": info.max_current_ma,
-        "host_version": env!("CARGO_PKG_VERSION"),
-        "latched_faults_at_start": faults,
+    let details = details(HandshakeDetails {
+        handshake_ms,
+        open_attempts: attempts,
+        protocol_version: info.protocol_version,
+        host_protocol_version: PROTOCOL_VERSION,
+        firmware_version: info.firmware_version.as_str(),
+        git_hash: info.git_hash.as_str(),
+        board_id: info.board_id.as_str(),
+        serial_number: &serial,
+        channel_count: info.channel_count,
+        max_current_ma: info.max_current_ma,
+        host_version: env!("CARGO_PKG_VERSION"),
+        latched_faults_at_start: faults,
     });
     if problems.is_empty() {
         let summary = format!(
@@ -290,6 +307,22 @@ fn handshake_and_versions(session: &mut Session) -> Outcome {
     } else {
         Ok((Verdict::Fail, problems.join("; "), details))
     }
+}
+
+#[derive(Serialize)]
+struct HandshakeDetails<'a> {
+    handshake_ms: f64,
+    open_attempts: u32,
+    protocol_version: u16,
+    host_protocol_version: u16,
+    firmware_version: &'a str,
+    git_hash: &'a str,
+    board_id: &'a str,
+    serial_number: &'a str,
+    channel_count: u8,
+    max_current_ma: u16,
+    host_version: &'static str,
+    latched_faults_at_start: Vec<String>,
 }
 
 /// The current after a change, once it has settled (or the wait ran out).
@@ -312,16 +345,26 @@ impl Settled {
             .fold(0.0, f64::max)
     }
 
-    fn to_json(&self) -> Value {
-        json!({
-            "target_ma": self.target_ma,
-            "settled_after_ms": self.settled_after_ms,
-            "measured_ma": self.mean_ma,
-            "reported_setpoint_ma": self.reported_setpoint_ma,
-            "worst_error_percent": self.worst_error() * 100.0,
-            "over_current_fault": self.over_current,
-        })
+    fn details(&self) -> SettledDetails {
+        SettledDetails {
+            target_ma: self.target_ma,
+            settled_after_ms: self.settled_after_ms,
+            measured_ma: self.mean_ma,
+            reported_setpoint_ma: self.reported_setpoint_ma,
+            worst_error_percent: self.worst_error() * 100.0,
+            over_current_fault: self.over_current,
+        }
     }
+}
+
+#[derive(Serialize)]
+struct SettledDetails {
+    target_ma: u16,
+    settled_after_ms: Option<f64>,
+    measured_ma: [f64; CHANNEL_COUNT],
+    reported_setpoint_ma: [u16; CHANNEL_COUNT],
+    worst_error_percent: f64,
+    over_current_fault: bool,
 }
 
 /// Sets every string to `request_ma`, waits until the telemetry says all of them carry the current the board
@@ -417,9 +460,12 @@ fn led_ramp(session: &mut Session) -> Outcome {
                 settled.reported_setpoint_ma
             ));
         }
-        steps.push(settled.to_json());
+        steps.push(settled.details());
     }
-    let details = json!({ "tolerance_percent": tolerance * 100.0, "steps": steps });
+    let details = details(RampDetails {
+        tolerance_percent: tolerance * 100.0,
+        steps,
+    });
     if failures.is_empty() {
         let summary = format!(
             "{} setpoints {:?} mA, all strings within {:.2} % (limit {:.0} %)",
@@ -434,8 +480,30 @@ fn led_ramp(session: &mut Session) -> Outcome {
     }
 }
 
+#[derive(Serialize)]
+struct RampDetails {
+    tolerance_percent: f64,
+    steps: Vec<SettledDetails>,
+}
+
 /// Least correlation between LED current and mean image brightness accepted as "follows".
 const MIN_BRIGHTNESS_CORRELATION: f64 = 0.95;
+
+#[derive(Serialize)]
+struct BrightnessStep {
+    setpoint_ma: u16,
+    measured_ma: f64,
+    mean_luma: f64,
+}
+
+#[derive(Serialize)]
+struct BrightnessDetails {
+    camera: String,
+    steps: Vec<BrightnessStep>,
+    correlation: Option<f64>,
+    strictly_increasing: bool,
+    min_correlation: f64,
+}
 
 fn brightness_follows_current(session: &mut Session, camera: &mut dyn BrightnessProbe) -> Outcome {
     let mut currents = Vec::new();
@@ -447,16 +515,20 @@ fn brightness_follows_current(session: &mut Session, camera: &mut dyn Brightness
         let mean_current = settled.mean_ma.iter().sum::<f64>() / CHANNEL_COUNT as f64;
         currents.push(mean_current);
         brightness.push(level);
-        steps.push(json!({ "setpoint_ma": setpoint, "measured_ma": mean_current, "mean_luma": level }));
+        steps.push(BrightnessStep {
+            setpoint_ma: setpoint,
+            measured_ma: mean_current,
+            mean_luma: level,
+        });
     }
     let increasing = brightness.windows(2).all(|pair| pair[1] > pair[0]);
     let correlation = pearson(&currents, &brightness);
-    let details = json!({
-        "camera": camera.describe(),
-        "steps": steps,
-        "correlation": correlation,
-        "strictly_increasing": increasing,
-        "min_correlation": MIN_BRIGHTNESS_CORRELATION,
+    let details = details(BrightnessDetails {
+        camera: camera.describe(),
+        steps,
+        correlation,
+        strictly_increasing: increasing,
+        min_correlation: MIN_BRIGHTNESS_CORRELATION,
     });
     let levels: Vec<String> = brightness.iter().map(|b| format!("{b:.1}")).collect();
     let summary = format!(
@@ -540,9 +612,15 @@ fn camera_confirms_each_current(session: &mut Session, camera: &mut dyn Brightne
             }
         }
         per_ma.push((luma - dark) / reported.max(1.0));
-        steps.push(json!({ "side": side.to_string(), "reported_ma": reported, "mean_luma": luma, "camera_ma": seen }));
+        steps.push(SideLight {
+            side: side.to_string(),
+            reported_ma: reported,
+            mean_luma: luma,
+            camera_ma: seen,
+        });
     }
-    let calibrated = steps.iter().all(|s| !s["camera_ma"].is_null());
+    // A camera calibrated in mA gives every side's current (a NaN, which JSON cannot hold, is no current).
+    let calibrated = steps.iter().all(|s| s.camera_ma.is_some_and(f64::is_finite));
     if !calibrated {
         // Without a calibration in mA, each side's light per reported mA must match the others'.
         let mut sorted = per_ma.clone();
@@ -556,39 +634,52 @@ fn camera_confirms_each_current(session: &mut Session, camera: &mut dyn Brightne
             }
         }
     }
-    let details = json!({
-        "camera": camera.describe(),
-        "setpoint_ma": setpoint,
-        "dark_luma": dark,
-        "calibrated_in_ma": calibrated,
-        "tolerance_percent": CAMERA_CURRENT_TOLERANCE * 100.0,
-        "sides": steps,
-    });
-    if problems.is_empty() {
-        let summary = if calibrated {
-            let readings: Vec<String> = steps
-                .iter()
-                .map(|s| {
-                    format!(
-                        "{} {:.1}/{:.1}",
-                        s["side"].as_str().unwrap_or("?"),
-                        s["reported_ma"].as_f64().unwrap_or(0.0),
-                        s["camera_ma"].as_f64().unwrap_or(0.0)
-                    )
-                })
-                .collect();
-            format!(
-                "each string alone, reported/camera mA: {} (within {:.0} %)",
-                readings.join(", "),
-                CAMERA_CURRENT_TOLERANCE * 100.0
-            )
-        } else {
-            "each string alone gives the same light per reported mA as the others (uncalibrated camera)".into()
-        };
-        Ok((Verdict::Pass, summary, details))
+    let (verdict, summary) = if !problems.is_empty() {
+        (Verdict::Fail, problems.join("; "))
+    } else if calibrated {
+        let readings: Vec<String> = steps
+            .iter()
+            .map(|s| format!("{} {:.1}/{:.1}", s.side, s.reported_ma, s.camera_ma.unwrap_or(0.0)))
+            .collect();
+        let summary = format!(
+            "each string alone, reported/camera mA: {} (within {:.0} %)",
+            readings.join(", "),
+            CAMERA_CURRENT_TOLERANCE * 100.0
+        );
+        (Verdict::Pass, summary)
     } else {
-        Ok((Verdict::Fail, problems.join("; "), details))
-    }
+        let summary = "each string alone gives the same light per reported mA as the others (uncalibrated camera)";
+        (Verdict::Pass, summary.to_string())
+    };
+    let details = details(CameraCurrentDetails {
+        camera: camera.describe(),
+        setpoint_ma: setpoint,
+        dark_luma: dark,
+        calibrated_in_ma: calibrated,
+        tolerance_percent: CAMERA_CURRENT_TOLERANCE * 100.0,
+        sides: steps,
+    });
+    Ok((verdict, summary, details))
+}
+
+/// One string alone: the current the board reports, the light the camera sees, and (a calibrated camera) the
+/// current that light means.
+#[derive(Serialize)]
+struct SideLight {
+    side: String,
+    reported_ma: f64,
+    mean_luma: f64,
+    camera_ma: Option<f64>,
+}
+
+#[derive(Serialize)]
+struct CameraCurrentDetails {
+    camera: String,
+    setpoint_ma: u16,
+    dark_luma: f64,
+    calibrated_in_ma: bool,
+    tolerance_percent: f64,
+    sides: Vec<SideLight>,
 }
 
 fn telemetry_rate_and_jitter(session: &mut Session) -> Outcome {
@@ -699,6 +790,21 @@ fn telemetry_summary(timing: &TelemetryTiming, clock: BoardClock) -> String {
     )
 }
 
+#[derive(Serialize)]
+struct LatencyDetails {
+    pings: usize,
+    answered: usize,
+    failed: usize,
+    p50_ms: Option<f64>,
+    p90_ms: Option<f64>,
+    p99_ms: Option<f64>,
+    max_ms: Option<f64>,
+    max_p99_ms: f64,
+    link_retries: u64,
+    link_timeouts: u64,
+    board_clock_ratio: Option<f64>,
+}
+
 fn round_trip_latency(session: &mut Session) -> Outcome {
     let options = session.options;
     let link = session.link()?;
@@ -723,15 +829,18 @@ fn round_trip_latency(session: &mut Session) -> Outcome {
         .copied()
         .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v))));
     let stats = link.stats();
-    let details = json!({
-        "pings": options.pings,
-        "answered": latencies_ms.len(),
-        "failed": errors,
-        "p50_ms": p50, "p90_ms": p90, "p99_ms": p99, "max_ms": max,
-        "max_p99_ms": options.max_p99_latency_ms,
-        "link_retries": stats.retries,
-        "link_timeouts": stats.timeouts,
-        "board_clock_ratio": session.board_clock_ratio,
+    let details = details(LatencyDetails {
+        pings: options.pings,
+        answered: latencies_ms.len(),
+        failed: errors,
+        p50_ms: p50,
+        p90_ms: p90,
+        p99_ms: p99,
+        max_ms: max,
+        max_p99_ms: options.max_p99_latency_ms,
+        link_retries: stats.retries,
+        link_timeouts: stats.timeouts,
+        board_clock_ratio: session.board_clock_ratio,
     });
     let fmt = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.3}"));
     // Under emulation the round trip is judged in the board's time: wall time scaled by how fast its clock ran
@@ -778,11 +887,11 @@ fn over_limit_is_clamped(session: &mut Session) -> Outcome {
         Ok(()) => {}
         Err(LinkError::Device(DeviceError::BadArgument(argument))) => {
             let summary = format!("the board rejected {request} mA ({argument}) instead of clamping it");
-            return Ok((
-                Verdict::Fail,
-                summary,
-                json!({ "request_ma": request, "rejected": true }),
-            ));
+            let details = details(RejectedDetails {
+                request_ma: request,
+                rejected: true,
+            });
+            return Ok((Verdict::Fail, summary, details));
         }
         Err(error) => return Err(error.into()),
     }
@@ -800,12 +909,12 @@ fn over_limit_is_clamped(session: &mut Session) -> Outcome {
     if settled.over_current {
         problems.push("the over-current fault tripped".into());
     }
-    let details = json!({
-        "request_ma": request,
-        "limit_ma": limit,
-        "budget_share_ma": budget_share,
-        "reported_setpoint_ma": reported,
-        "settled": settled.to_json(),
+    let details = details(ClampDetails {
+        request_ma: request,
+        limit_ma: limit,
+        budget_share_ma: budget_share,
+        reported_setpoint_ma: &reported,
+        settled: settled.details(),
     });
     // Back to nominal so the remaining checks do not run the strings at their limit.
     session.link()?.set_led(Channel::All, NOMINAL_MA, true)?;
@@ -818,6 +927,22 @@ fn over_limit_is_clamped(session: &mut Session) -> Outcome {
     } else {
         Ok((Verdict::Fail, problems.join("; "), details))
     }
+}
+
+/// The board refused an over-limit request instead of clamping it.
+#[derive(Serialize)]
+struct RejectedDetails {
+    request_ma: u16,
+    rejected: bool,
+}
+
+#[derive(Serialize)]
+struct ClampDetails<'a> {
+    request_ma: u16,
+    limit_ma: u16,
+    budget_share_ma: u16,
+    reported_setpoint_ma: &'a [u16],
+    settled: SettledDetails,
 }
 
 fn recovery_after_reopen(session: &mut Session) -> Outcome {
@@ -836,7 +961,10 @@ fn recovery_after_reopen(session: &mut Session) -> Outcome {
         Ok(opened) => opened,
         Err(error) => {
             let summary = format!("could not reopen within {:?}: {error}", options.recovery_timeout);
-            let details = json!({ "reopen_ms": started.elapsed().as_secs_f64() * 1e3, "error": error.to_string() });
+            let details = details(ErrorDetails {
+                error: error.to_string(),
+                reopen_ms: Some(started.elapsed().as_secs_f64() * 1e3),
+            });
             return Ok((Verdict::Fail, summary, details));
         }
     };
@@ -847,12 +975,12 @@ fn recovery_after_reopen(session: &mut Session) -> Outcome {
     link.stream_telemetry(options.telemetry_period_ms)?;
     let telemetry = link.next_telemetry(Duration::from_secs(1))?;
     link.stream_telemetry(0)?;
-    let details = json!({
-        "attempts": attempts,
-        "reopen_ms": reopen_ms,
-        "ping_after_reopen_ms": ping_ms,
-        "telemetry_after_reopen": telemetry.is_some(),
-        "wire_errors_after_reopen": link.counters(),
+    let details = details(ReopenDetails {
+        attempts,
+        reopen_ms,
+        ping_after_reopen_ms: ping_ms,
+        telemetry_after_reopen: telemetry.is_some(),
+        wire_errors_after_reopen: link.counters(),
     });
     if telemetry.is_none() {
         return Ok((
@@ -866,6 +994,15 @@ fn recovery_after_reopen(session: &mut Session) -> Outcome {
         if attempts == 1 { "" } else { "s" }
     );
     Ok((Verdict::Pass, summary, details))
+}
+
+#[derive(Serialize)]
+struct ReopenDetails {
+    attempts: u32,
+    reopen_ms: f64,
+    ping_after_reopen_ms: f64,
+    telemetry_after_reopen: bool,
+    wire_errors_after_reopen: LinkCounters,
 }
 
 /// Puts the board back as the suite found it: stream off, each string's setpoint and enable.
