@@ -70,7 +70,7 @@ impl Deadline {
 type Outcome = Result<(Verdict, String, Value), CheckError>;
 
 /// A check's details as the report's JSON: each check has its own typed struct.
-fn details(details: impl Serialize) -> Value {
+fn as_json(details: impl Serialize) -> Value {
     serde_json::to_value(details).expect("check details are plain numbers and text")
 }
 
@@ -168,7 +168,7 @@ pub fn run_suite(
                 if matches!(error, CheckError::Link(ref e) if e.is_disconnect()) {
                     session.link = None;
                 }
-                let error_details = details(ErrorDetails {
+                let error_details = as_json(ErrorDetails {
                     error: error.to_string(),
                     reopen_ms: None,
                 });
@@ -279,7 +279,7 @@ fn handshake_and_versions(session: &mut Session) -> Outcome {
     session.initial = Some(status);
     session.max_current_ma = Some(info.max_current_ma);
     session.max_total_current_ma = Some(info.max_total_current_ma);
-    let details = details(HandshakeDetails {
+    let details = as_json(HandshakeDetails {
         handshake_ms,
         open_attempts: attempts,
         protocol_version: info.protocol_version,
@@ -325,15 +325,20 @@ struct HandshakeDetails<'a> {
     latched_faults_at_start: Vec<String>,
 }
 
-/// The current after a change, once it has settled (or the wait ran out).
+/// The current after a change, once it has settled (or the wait ran out); in the report under these names (see
+/// [`SettledDetails`]).
+#[derive(Serialize)]
 struct Settled {
     target_ma: u16,
     /// Time from the request to the first of [`SETTLED_RUN`] frames within tolerance; `None` if it never settled.
     settled_after_ms: Option<f64>,
+    #[serde(rename = "measured_ma")]
     mean_ma: [f64; CHANNEL_COUNT],
     reported_setpoint_ma: [u16; CHANNEL_COUNT],
+    #[serde(rename = "over_current_fault")]
     over_current: bool,
     /// Board time of the last frame averaged: the camera looks at the light of this moment or later.
+    #[serde(skip)]
     uptime_us: u64,
 }
 
@@ -345,26 +350,20 @@ impl Settled {
             .fold(0.0, f64::max)
     }
 
-    fn details(&self) -> SettledDetails {
+    fn into_details(self) -> SettledDetails {
         SettledDetails {
-            target_ma: self.target_ma,
-            settled_after_ms: self.settled_after_ms,
-            measured_ma: self.mean_ma,
-            reported_setpoint_ma: self.reported_setpoint_ma,
             worst_error_percent: self.worst_error() * 100.0,
-            over_current_fault: self.over_current,
+            settled: self,
         }
     }
 }
 
+/// A settled current with its worst error, as the report shows it.
 #[derive(Serialize)]
 struct SettledDetails {
-    target_ma: u16,
-    settled_after_ms: Option<f64>,
-    measured_ma: [f64; CHANNEL_COUNT],
-    reported_setpoint_ma: [u16; CHANNEL_COUNT],
+    #[serde(flatten)]
+    settled: Settled,
     worst_error_percent: f64,
-    over_current_fault: bool,
 }
 
 /// Sets every string to `request_ma`, waits until the telemetry says all of them carry the current the board
@@ -460,9 +459,9 @@ fn led_ramp(session: &mut Session) -> Outcome {
                 settled.reported_setpoint_ma
             ));
         }
-        steps.push(settled.details());
+        steps.push(settled.into_details());
     }
-    let details = details(RampDetails {
+    let details = as_json(RampDetails {
         tolerance_percent: tolerance * 100.0,
         steps,
     });
@@ -523,7 +522,7 @@ fn brightness_follows_current(session: &mut Session, camera: &mut dyn Brightness
     }
     let increasing = brightness.windows(2).all(|pair| pair[1] > pair[0]);
     let correlation = pearson(&currents, &brightness);
-    let details = details(BrightnessDetails {
+    let details = as_json(BrightnessDetails {
         camera: camera.describe(),
         steps,
         correlation,
@@ -651,7 +650,7 @@ fn camera_confirms_each_current(session: &mut Session, camera: &mut dyn Brightne
         let summary = "each string alone gives the same light per reported mA as the others (uncalibrated camera)";
         (Verdict::Pass, summary.to_string())
     };
-    let details = details(CameraCurrentDetails {
+    let details = as_json(CameraCurrentDetails {
         camera: camera.describe(),
         setpoint_ma: setpoint,
         dark_luma: dark,
@@ -716,7 +715,7 @@ fn telemetry_rate_and_jitter(session: &mut Session) -> Outcome {
         rate_tolerance_percent: options.rate_tolerance * 100.0,
         max_jitter_ms: options.max_jitter_fraction * period_ms,
     };
-    let details = serde_json::to_value(details).expect("plain numbers and text");
+    let details = as_json(details);
     if problems.is_empty() {
         Ok((Verdict::Pass, summary, details))
     } else {
@@ -829,7 +828,7 @@ fn round_trip_latency(session: &mut Session) -> Outcome {
         .copied()
         .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v))));
     let stats = link.stats();
-    let details = details(LatencyDetails {
+    let details = as_json(LatencyDetails {
         pings: options.pings,
         answered: latencies_ms.len(),
         failed: errors,
@@ -887,7 +886,7 @@ fn over_limit_is_clamped(session: &mut Session) -> Outcome {
         Ok(()) => {}
         Err(LinkError::Device(DeviceError::BadArgument(argument))) => {
             let summary = format!("the board rejected {request} mA ({argument}) instead of clamping it");
-            let details = details(RejectedDetails {
+            let details = as_json(RejectedDetails {
                 request_ma: request,
                 rejected: true,
             });
@@ -909,12 +908,12 @@ fn over_limit_is_clamped(session: &mut Session) -> Outcome {
     if settled.over_current {
         problems.push("the over-current fault tripped".into());
     }
-    let details = details(ClampDetails {
+    let details = as_json(ClampDetails {
         request_ma: request,
         limit_ma: limit,
         budget_share_ma: budget_share,
         reported_setpoint_ma: &reported,
-        settled: settled.details(),
+        settled: settled.into_details(),
     });
     // Back to nominal so the remaining checks do not run the strings at their limit.
     session.link()?.set_led(Channel::All, NOMINAL_MA, true)?;
@@ -961,7 +960,7 @@ fn recovery_after_reopen(session: &mut Session) -> Outcome {
         Ok(opened) => opened,
         Err(error) => {
             let summary = format!("could not reopen within {:?}: {error}", options.recovery_timeout);
-            let details = details(ErrorDetails {
+            let details = as_json(ErrorDetails {
                 error: error.to_string(),
                 reopen_ms: Some(started.elapsed().as_secs_f64() * 1e3),
             });
@@ -975,7 +974,7 @@ fn recovery_after_reopen(session: &mut Session) -> Outcome {
     link.stream_telemetry(options.telemetry_period_ms)?;
     let telemetry = link.next_telemetry(Duration::from_secs(1))?;
     link.stream_telemetry(0)?;
-    let details = details(ReopenDetails {
+    let details = as_json(ReopenDetails {
         attempts,
         reopen_ms,
         ping_after_reopen_ms: ping_ms,
