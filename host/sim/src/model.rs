@@ -98,6 +98,14 @@ impl PadPose {
         mat_mul(&rz, &mat_mul(&ry, &rx))
     }
 
+    /// The camera's centre in pad coordinates (mm; negative z: the camera is below the pad). The rotation is
+    /// orthonormal, so a camera vector v is R^T v in pad coordinates, and the camera sits at -R^T t.
+    pub fn camera_in_pad(&self) -> [f64; 3] {
+        let r = self.rotation();
+        let t = [self.shift_mm[0], self.shift_mm[1], self.distance_mm];
+        std::array::from_fn(|k| -(r[0][k] * t[0] + r[1][k] * t[1] + r[2][k] * t[2]))
+    }
+
     /// A point of the pad plane (pad mm) in camera coordinates.
     pub fn pad_to_camera(&self, p: [f64; 2]) -> [f64; 3] {
         let r = self.rotation();

@@ -390,8 +390,7 @@ impl Renderer {
         // In pad coordinates the camera sits at c (c_z < 0); find the ray's angle in air whose path through air,
         // plate and gel reaches p sideways.
         let r = pose.rotation();
-        let t = [pose.shift_mm[0], pose.shift_mm[1], pose.distance_mm];
-        let c: [f64; 3] = std::array::from_fn(|k| -(r[0][k] * t[0] + r[1][k] * t[1] + r[2][k] * t[2]));
+        let c = pose.camera_in_pad();
         let gel = window.gel_mm - towards_camera_mm;
         let air = -c[2] - window.plate_mm - window.gel_mm;
         if !(air > 0.0 && gel >= 0.0) {
@@ -851,17 +850,15 @@ impl<'a> RayCaster<'a> {
         let t = [model.pose.shift_mm[0], model.pose.shift_mm[1], model.pose.distance_mm];
         let normal = [rotation[0][2], rotation[1][2], rotation[2][2]];
         let normal_dot_t = normal[0] * t[0] + normal[1] * t[1] + normal[2] * t[2];
-        let mut rays = Self {
+        Self {
             camera,
             window,
             rotation,
             t,
             normal,
             normal_dot_t,
-            camera_in_pad: [0.0; 3],
-        };
-        rays.camera_in_pad = rays.to_pad(t).map(|v| -v);
-        rays
+            camera_in_pad: model.pose.camera_in_pad(),
+        }
     }
 
     /// Rotation is orthonormal: pad coordinates of a camera vector v are R^T v.
