@@ -113,3 +113,47 @@ fn a_long_edge_does_not_raise_the_noise_its_contact_is_tested_at() {
         );
     }
 }
+
+/// A 30 mm, 5 N edge along the rows and along the columns, moved across two cell pitches a third of a pitch at a
+/// time, with the parallax's normal displacement from the equivalent layer and from the stack as built
+/// (`elastic.normal_from_stack`): one contact at the edge's centre along the edge, at every place. The cell map cuts
+/// such an edge into two to four lumps, depending on where it crosses the cells; judged two at a time, they were
+/// listed as two to four contacts at 2 of these 12 places with the equivalent layer's normal displacement and 5 of 12
+/// with the stack's (`join_long_groups` now judges a group of lumps whole).
+#[test]
+fn a_long_edge_is_one_contact_wherever_it_crosses_the_cell_rows() {
+    let renderer = Renderer::new(SensorModel::validation(1024, 768)).expect("the validation sensor model is valid");
+    let reference = render(&renderer, &Scene::rest(), 1);
+    let pitch_mm = 40.0 / 12.0;
+    for normal_from_stack in [false, true] {
+        let mut config = SensorConfig::default();
+        config.elastic.normal_from_stack = normal_from_stack;
+        let mut estimator =
+            Estimator::new(config, Mode::Inverse, &reference).expect("the rest frame shows the pattern");
+        for (angle, centre) in [(0.0_f64, [8.0, 2.5]), (90.0, [3.0, 0.0])] {
+            for k in 0_u32..6 {
+                let across = f64::from(k) * pitch_mm / 3.0;
+                let at = [
+                    centre[0] - angle.to_radians().sin() * across,
+                    centre[1] + angle.to_radians().cos() * across,
+                ];
+                let scene = Scene::with_contact(Contact::edge(30.0, 1.0, angle, at, HEAVY_N));
+                let reading = read(&mut estimator, &render(&renderer, &scene, 30 + 2 * u64::from(k)));
+                let label = format!("normal_from_stack {normal_from_stack}, 30 mm at {angle} deg through {at:?} mm");
+                let contacts = reading.contacts();
+                assert_eq!(contacts.len(), 1, "{label}: {contacts:?}");
+                let centre_mm = contacts[0].centre_mm;
+                let off = (centre_mm[0] - at[0]).hypot(centre_mm[1] - at[1]);
+                assert!(
+                    off < 1.65,
+                    "{label}: read at {centre_mm:?}, {off:.2} mm from the edge's centre"
+                );
+                let direction = reading
+                    .edge_angle_deg()
+                    .unwrap_or_else(|| panic!("{label}: no direction"));
+                let error = (direction - angle + 90.0).rem_euclid(180.0) - 90.0;
+                assert!(error.abs() < 3.0, "{label}: direction {direction:.1} deg");
+            }
+        }
+    }
+}

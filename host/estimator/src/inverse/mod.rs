@@ -55,7 +55,9 @@
 //! displacements better than its own pressure does (`InverseModel::lines_extending`). Two regions side by side are one
 //! long contact when a straight line load explains them better than two round loads by the test's margin and the
 //! pressure between them is more than two round presses leave there (`InverseModel::join_cut_lines`: the cell map cuts
-//! some 20 mm edges of the validation pad into lumps about 10 mm apart). The edge direction (second
+//! some 20 mm edges of the validation pad into lumps about 10 mm apart); after the last pass, all the contacts of one
+//! loaded group are one when a line explains their union so (`InverseModel::join_long_groups`: pairwise, the lumps of
+//! a 30 mm edge can each fail the other tests). The edge direction (second
 //! moments of the pressure) comes from a second solve with the pressure's unknowns on the grid's nodes instead of its
 //! cells, which has no checkerboard noise (see `PressureBasis`).
 //!

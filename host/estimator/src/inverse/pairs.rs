@@ -237,6 +237,55 @@ impl InverseModel {
         }
     }
 
+    /// A loaded group the cell map cut into two or more contacts is one long contact when a straight line load
+    /// explains the union of its contacts better than two round loads by more than [`SUPPORT_SIGMAS`]^2 times the
+    /// noise at `noise_mm`: [`Self::join_cut_lines`]' test, on the whole group at once. Judged two at a time, the
+    /// parts can each fail `join_cut_lines`' other tests (the gap between two lumps of a 30 mm edge is at the margin
+    /// of [`Self::gap_exceeds_two_presses`]; a weak lump between two strong ones does not hold its own), and a lump
+    /// [`Self::split_pair`] halved is never joined there. Moved across the cell rows a sixth of a pitch at a time, a
+    /// 30 mm 5 N edge along the rows of the validation sensor was listed as two to four contacts at 4 of 12 places
+    /// (with `elastic.normal_from_stack`, 5 of 12, and 5 of 12 along the columns). Taken whole, a line explains such
+    /// edges better than a pair by 2500-2800 sigma^2, and two round presses in one group are the other way, by
+    /// 21-2650 sigma^2. This runs on stage 2's last pass only: a contact joined earlier carries more than any line
+    /// through it, and so would stop the second pass from carrying it further along the line shapes (see
+    /// `lines_extending`; a 30 mm 2 N edge then read 15 % light). The cells of halved contacts it joins leave
+    /// `halved`.
+    pub(super) fn join_long_groups(
+        &self,
+        regions: &mut Vec<Region>,
+        groups: &[Vec<usize>],
+        halved: &mut Vec<usize>,
+        observed: Observed,
+        noise_mm: f64,
+    ) {
+        let margin = SUPPORT_SIGMAS * SUPPORT_SIGMAS * noise_mm * noise_mm;
+        for group in groups {
+            let members: Vec<usize> = (0..regions.len())
+                .filter(|&m| {
+                    regions[m]
+                        .cells
+                        .first()
+                        .is_some_and(|c| group.binary_search(&c.0).is_ok())
+                })
+                .collect();
+            if members.len() < 2 {
+                continue;
+            }
+            let union = self.region(members.iter().flat_map(|&m| regions[m].cells.iter().copied()).collect());
+            if self
+                .pair_against_line(&union, observed)
+                .is_some_and(|pair| pair.gain_mm2 < -margin)
+            {
+                halved.retain(|j| !union.cells.iter().any(|c| c.0 == *j));
+                regions[members[0]] = union;
+                for &m in members[1..].iter().rev() {
+                    regions.remove(m);
+                }
+            }
+        }
+        regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
+    }
+
     /// Whether the pressure midway between two regions' peaks is more than two round presses there can leave. A
     /// round press (a pressure falling away from its centre alike in every direction) leaves at the midpoint, half
     /// the peaks' distance from its centre, what it leaves at that distance across the line through the peaks; so

@@ -109,9 +109,20 @@ impl InverseModel {
                 tractions,
             });
         }
-        let Some(solved) = solved else {
+        let Some(mut solved) = solved else {
             return empty;
         };
+        self.join_long_groups(
+            &mut solved.regions,
+            &solved.groups,
+            &mut halved,
+            Observed {
+                d,
+                valid,
+                tractions: &solved.tractions,
+            },
+            noise_mm,
+        );
         self.stage2_of(d, valid, seed, solved, &halved, noise_mm)
     }
 
@@ -188,10 +199,10 @@ impl InverseModel {
     /// solve's region holds both halves, bridged by the blur. The blur bridges contacts the cell map lists apart
     /// too: when the listed contacts it bridges are two presses by `split_pair`'s rule ([`Self::two_presses`],
     /// their cells taken as one), the others' cells are not the strongest's shape (two fingertips are not an
-    /// edge along the pair); when a line explains them as well, they are a long contact's parts (the cell map
-    /// cuts some 20 mm edges into two or three, and `join_cut_lines` joins most but not all) and the direction is
-    /// theirs. `observed`: the frame and stage 2's tractions; `solved`: stage 2's last pass; `halved`: the cells of
-    /// the contacts split in two.
+    /// edge along the pair); when a line explains them as well, they are a long contact's parts (the cell map cuts
+    /// some 20 mm edges into two or three; `join_cut_lines` and `join_long_groups` join those within one loaded
+    /// group) and the direction is theirs. `observed`: the frame and stage 2's tractions; `solved`: stage 2's last
+    /// pass; `halved`: the cells of the contacts split in two.
     fn edge_region(
         &self,
         observed: Observed,
