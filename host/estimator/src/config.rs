@@ -283,11 +283,12 @@ pub struct ElasticConfig {
     /// extra pressure, most under flat punches far from the foot (host/estimator/tests/border_force.rs,
     /// docs/benchmarks/validation-full.md). With it, inverse only: the full validation set's force over the pad 0.306
     /// -> 0.229 N (camera moved 0.302 -> 0.236), the quick set's 0.252 -> 0.144 N, localisation, edge direction and
-    /// torque better on the full set. Off by default while two checks disagree: a 30 mm edge at 5 N on the validation
-    /// sensor is listed as three contacts (host/estimator/tests/light_edges.rs; the full set's edges as one contact
-    /// 23 -> 22 of 24, the quick set's edge direction 1.71 -> 2.01 deg and edges' floor 0.3 -> 0.5 N), and on the
-    /// simulated real sensor, whose camera sees the pattern directly (no parallax at all), a press one cell from the
-    /// border reads 4.71 N for 6 N against 4.80 (host/estimator/tests/hard_cases.rs holds 4.80-7.20).
+    /// torque better on the full set. Off by default while one check disagrees: on the simulated real sensor, whose
+    /// camera sees the pattern directly (a half-space pad, no parallax at all), a press one cell from the border
+    /// reads 4.71 N for 6 N against 4.80 (host/estimator/tests/hard_cases.rs holds 4.80-7.20; 4.80 with the option
+    /// off, 4.81 with no parallax); and the quick set's edge direction reads 2.01 deg (1.71 off) and its edges' floor
+    /// 0.5 N (0.3 off). A 30 mm edge it listed as two to four contacts, depending on where it crossed the cell rows,
+    /// is one contact since `join_long_groups` (host/estimator/tests/light_edges.rs, with the option off and on).
     pub normal_from_stack: bool,
     /// The reference's tangential force (and torque about the normal) over the model's, after the modulus: the
     /// force vector's fx, fy and the torques are multiplied by it. One equivalent material cannot match a skin over
