@@ -403,7 +403,9 @@ impl Window {
 /// their memberships are first looked up into a buffer (pixel-major, a row per lane, zeros past a row's end, which
 /// add nothing), then added lane by lane. Each row's own order is kept, and with it every bit of the result. On a
 /// processor with AVX2 (checked at run time: the build targets any x86-64) the lookups are vector gathers, one
-/// pixel of every lane at a time, summed as they come (see `gathered`): the same additions in the same order.
+/// pixel of every lane at a time, summed as they come (see `gathered`): the same additions in the same order. With
+/// AVX-512 VBMI as well, each row's pixels are loaded eight at a time and taken apart with a byte permutation rather
+/// than gathered (see `permuted`): again the same additions in the same order.
 pub fn centroid(
     px: &Pixels,
     centre: Point2,
@@ -422,6 +424,32 @@ enum Lookup {
     /// Vector gathers (x86-64 with AVX2 only: see [`Lookup::detect`]).
     #[cfg(target_arch = "x86_64")]
     Gathered,
+    /// Each row's pixels loaded eight at a time and taken apart by a byte permutation, then transposed into the
+    /// lanes (x86-64 with AVX-512 VBMI only: see [`Lookup::detect`]); `Gathered` for strides above
+    /// [`PERMUTED_MAX_STRIDE`].
+    #[cfg(target_arch = "x86_64")]
+    Permuted,
+}
+
+/// The largest stride whose eight pixels' words (the byte before each pixel and its R, G, B) fit in the 64 bytes
+/// one AVX-512 load reads: 7 * 3 * stride + 4 bytes.
+#[cfg(target_arch = "x86_64")]
+const PERMUTED_MAX_STRIDE: usize = 2;
+
+/// Per stride up to [`PERMUTED_MAX_STRIDE`], the byte permutation that turns 64 bytes, from the byte before the
+/// first of eight pixels on, into the pixels' words: word j is bytes `j * 3 * stride ..= j * 3 * stride + 3`.
+#[cfg(target_arch = "x86_64")]
+const WORD_BYTES: [[u8; 64]; PERMUTED_MAX_STRIDE] = [word_bytes(3), word_bytes(6)];
+
+#[cfg(target_arch = "x86_64")]
+const fn word_bytes(pixel_bytes: usize) -> [u8; 64] {
+    let mut permutation = [0u8; 64];
+    let mut i = 0;
+    while i < 32 {
+        permutation[i] = ((i / 4) * pixel_bytes + i % 4) as u8;
+        i += 1;
+    }
+    permutation
 }
 
 impl Lookup {
@@ -429,8 +457,14 @@ impl Lookup {
     #[inline]
     fn detect() -> Self {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            return Self::Gathered;
+        {
+            use std::arch::is_x86_feature_detected as has;
+            if has!("avx2") && has!("avx512f") && has!("avx512bw") && has!("avx512vl") && has!("avx512vbmi") {
+                return Self::Permuted;
+            }
+            if has!("avx2") {
+                return Self::Gathered;
+            }
         }
         Self::Scalar
     }
@@ -545,9 +579,16 @@ impl WindowTotals {
     #[inline(always)]
     fn add_rows(&mut self, spans: &[RowSpan], raw: &[u8], stride: usize, membership: &MembershipTable, lookup: Lookup) {
         #[cfg(target_arch = "x86_64")]
-        if lookup == Lookup::Gathered {
-            // SAFETY: `Gathered` is chosen only where the processor has AVX2 (`Lookup::detect`), and only for a frame
-            // of at most i32::MAX bytes (`centroid_with`); the spans are rows of `raw` (`for_each_row`).
+        if lookup == Lookup::Permuted && stride <= PERMUTED_MAX_STRIDE {
+            // SAFETY: `Permuted` is chosen only where the processor has AVX2 and AVX-512 F, BW, VL and VBMI
+            // (`Lookup::detect`); the spans are rows of `raw` (`for_each_row`); the stride is checked above.
+            if unsafe { self.add_rows_permuted(spans, raw, stride, membership) } {
+                return;
+            }
+        } else if matches!(lookup, Lookup::Gathered | Lookup::Permuted) {
+            // SAFETY: `Gathered` and `Permuted` are chosen only where the processor has AVX2 (`Lookup::detect`), and
+            // only for a frame of at most i32::MAX bytes (`centroid_with`); the spans are rows of `raw`
+            // (`for_each_row`).
             if unsafe { self.add_rows_gathered(spans, raw, stride, membership) } {
                 return;
             }
@@ -699,26 +740,15 @@ impl WindowTotals {
         let mut x = unsafe { _mm256_loadu_ps(x0.as_ptr()) };
         let step_bytes = _mm256_set1_epi32(pixel_bytes as i32);
         let step = _mm256_set1_ps(stride as f32);
-        let byte = _mm256_set1_epi32(0xff);
-        let bin_zero = _mm256_set1_epi32(255);
-        let below_clipped = _mm256_set1_epi32(i32::from(CLIPPED_LEVEL) - 1);
-        let last_bin = _mm256_set1_epi32(super::yellowness::YELLOWNESS_BINS as i32 - 1);
         let (mut w, mut wx) = (_mm256_setzero_ps(), _mm256_setzero_ps());
         let mut clipped = _mm256_setzero_si256();
         let table = membership.as_ptr();
         // One pixel of every lane: its membership and whether it is clipped white (all ones where it is).
         let look_up = |at: __m256i| {
             let words = unsafe { _mm256_i32gather_epi32::<1>(base.cast(), at) };
-            let r = _mm256_and_si256(_mm256_srli_epi32::<8>(words), byte);
-            let g = _mm256_and_si256(_mm256_srli_epi32::<16>(words), byte);
-            let b = _mm256_srli_epi32::<24>(words);
-            let low = _mm256_min_epi32(r, g);
-            // `yellow_bin`: a pixel whose red and green clip takes the last bin.
-            let low_clipped = _mm256_cmpgt_epi32(low, below_clipped);
-            let bin = _mm256_sub_epi32(_mm256_add_epi32(low, bin_zero), b);
-            let bin = _mm256_max_epi32(bin, _mm256_and_si256(low_clipped, last_bin));
+            let (bin, white) = unsafe { bins_of_words(words) };
             let m = unsafe { _mm256_i32gather_ps::<4>(table, bin) };
-            (m, _mm256_cmpgt_epi32(_mm256_min_epi32(low, b), below_clipped))
+            (m, white)
         };
         // While every lane still has pixels (most of a batch: its rows differ in length by a few pixels at most,
         // near a window's top and bottom), the offsets need no clamp and the sums no mask: the same additions of the
@@ -757,6 +787,192 @@ impl WindowTotals {
         self.clipped += clipped_lanes[..spans.len()].iter().map(|&c| c as usize).sum::<usize>();
         true
     }
+
+    /// [`Self::add_rows_gathered`] without the gathers from the frame, which were half its time on the 2048x1536
+    /// validation frames: each row's next eight pixels are one 64-byte load and one byte permutation into the same
+    /// words the gathers read (the byte before each pixel, R, G, B), the eight pixels' memberships are looked up along
+    /// the row, and eight rows' memberships are transposed so that each row is again one lane. The lanes then add them
+    /// pixel by pixel as the gathered loop does, the same operations in the same order, so every bit is the same.
+    /// Pixels past a row's end weigh zero and count as not clipped, as there. Returns false, having added nothing,
+    /// when some row starts at the frame's first byte (there is no byte before it).
+    ///
+    /// # Safety
+    /// The processor has AVX2 and AVX-512 F, BW, VL and VBMI; every span's pixels lie in `raw`; `stride` is at most
+    /// [`PERMUTED_MAX_STRIDE`].
+    #[target_feature(enable = "avx2,avx512f,avx512bw,avx512vl,avx512vbmi")]
+    unsafe fn add_rows_permuted(
+        &mut self,
+        spans: &[RowSpan],
+        raw: &[u8],
+        stride: usize,
+        membership: &MembershipTable,
+    ) -> bool {
+        use std::arch::x86_64::*;
+        let Some(first_span) = spans.first() else {
+            return true;
+        };
+        if spans
+            .iter()
+            .any(|span| span.pixels.as_ptr() == raw.as_ptr() || span.count == 0)
+        {
+            return false;
+        }
+        let pixel_bytes = 3 * stride;
+        let words_of = unsafe { _mm512_loadu_si512(WORD_BYTES[stride - 1].as_ptr().cast()) };
+        // Per lane: the byte before its row's first pixel (the first row's for lanes without a row, which read
+        // nothing: count 0), its pixel count and its first x.
+        let mut before_first = [first_span.pixels.as_ptr().wrapping_sub(1); ROWS_AT_ONCE];
+        let mut count = [0usize; ROWS_AT_ONCE];
+        let mut x0 = [0f32; ROWS_AT_ONCE];
+        for (k, span) in spans.iter().enumerate() {
+            before_first[k] = span.pixels.as_ptr().wrapping_sub(1);
+            count[k] = span.count;
+            x0[k] = span.x0 as f32;
+        }
+        touch_rows(spans);
+        let longest = spans.iter().map(|s| s.count).max().unwrap_or(0);
+        let mut x = unsafe { _mm256_loadu_ps(x0.as_ptr()) };
+        let step = _mm256_set1_ps(stride as f32);
+        let (mut w, mut wx) = (_mm256_setzero_ps(), _mm256_setzero_ps());
+        let mut clipped = _mm256_setzero_si256();
+        let table = membership.as_ptr();
+        // Where every row has eight more pixels and a full 64-byte load from each stays inside the frame (all but a
+        // window's last block of rows near the frame's bottom-right corner), the loads need no mask and the lanes none
+        // either: the bytes past the eight pixels' words are other pixels of the frame, which the permutation drops.
+        let shortest = if spans.len() == ROWS_AT_ONCE {
+            spans.iter().map(|s| s.count).min().unwrap_or(0)
+        } else {
+            0
+        };
+        let frame_end = raw.as_ptr_range().end as usize;
+        let last_load_end = before_first.iter().map(|&p| p as usize).max().unwrap_or(0) + shortest * pixel_bytes + 64;
+        let unmasked_blocks = if last_load_end <= frame_end {
+            shortest / ROWS_AT_ONCE
+        } else {
+            0
+        };
+        let mut done = 0;
+        for _ in 0..unmasked_blocks {
+            // SAFETY: each load's 64 bytes lie in `raw` (checked above: `done` + 8 pixels is at most `shortest`); every
+            // table index is in 0..=510 (`bins_of_words`).
+            let along_rows: [__m256; ROWS_AT_ONCE] = std::array::from_fn(|k| unsafe {
+                let bytes = _mm512_loadu_si512(before_first[k].add(done * pixel_bytes).cast());
+                let words = _mm512_castsi512_si256(_mm512_permutexvar_epi8(words_of, bytes));
+                let (bin, white) = bins_of_words(words);
+                clipped = _mm256_sub_epi32(clipped, white);
+                _mm256_i32gather_ps::<4>(table, bin)
+            });
+            for m in transposed(along_rows) {
+                w = _mm256_add_ps(w, m);
+                wx = _mm256_add_ps(wx, _mm256_mul_ps(m, x));
+                x = _mm256_add_ps(x, step);
+            }
+            done += ROWS_AT_ONCE;
+        }
+        // The rest: each row's remaining pixels, up to eight, and zeros past its end.
+        while done < longest {
+            let along_rows: [__m256; ROWS_AT_ONCE] = std::array::from_fn(|k| {
+                let live = count[k].saturating_sub(done).min(ROWS_AT_ONCE);
+                if live == 0 {
+                    return _mm256_setzero_ps();
+                }
+                let at = before_first[k].wrapping_add(done * pixel_bytes);
+                // A load with a byte mask costs more than a plain one, so it reads only where 64 bytes would pass the
+                // frame's end, and then just the live pixels' words: the byte before the first up to the last one's
+                // blue (at most 7 * 6 + 4 bytes).
+                let live_bytes = (live - 1) * pixel_bytes + 4;
+                // SAFETY: the plain load's 64 bytes lie in `raw`; the masked one reads only the bytes of its mask, which
+                // lie in this row's span or are the byte before its first pixel (which exists: no row starts at 0).
+                // Every table index is in 0..=510 (`bins_of_words`), the table's range.
+                let (m, white) = unsafe {
+                    let bytes = if at as usize + 64 <= frame_end {
+                        _mm512_loadu_si512(at.cast())
+                    } else {
+                        _mm512_maskz_loadu_epi8((1u64 << live_bytes) - 1, at.cast())
+                    };
+                    let words = _mm512_castsi512_si256(_mm512_permutexvar_epi8(words_of, bytes));
+                    let (bin, white) = bins_of_words(words);
+                    (_mm256_i32gather_ps::<4>(table, bin), white)
+                };
+                let live_mask = ((1u32 << live) - 1) as __mmask8;
+                clipped = _mm256_sub_epi32(clipped, _mm256_maskz_mov_epi32(live_mask, white));
+                _mm256_maskz_mov_ps(live_mask, m)
+            });
+            let pixels = (longest - done).min(ROWS_AT_ONCE);
+            for m in &transposed(along_rows)[..pixels] {
+                w = _mm256_add_ps(w, *m);
+                wx = _mm256_add_ps(wx, _mm256_mul_ps(*m, x));
+                x = _mm256_add_ps(x, step);
+            }
+            done += pixels;
+        }
+        let (mut w_lanes, mut wx_lanes, mut clipped_lanes) =
+            ([0f32; ROWS_AT_ONCE], [0f32; ROWS_AT_ONCE], [0i32; ROWS_AT_ONCE]);
+        unsafe {
+            _mm256_storeu_ps(w_lanes.as_mut_ptr(), w);
+            _mm256_storeu_ps(wx_lanes.as_mut_ptr(), wx);
+            _mm256_storeu_si256(clipped_lanes.as_mut_ptr().cast(), clipped);
+        }
+        self.add_lanes(spans, &w_lanes, &wx_lanes);
+        // Here a lane of `clipped` counts one pixel of the eight along every row, not one row.
+        self.clipped += clipped_lanes.iter().map(|&c| c as usize).sum::<usize>();
+        true
+    }
+}
+
+/// Eight pixels' membership table indices ([`yellow_bin`]) and whether each is clipped white (all ones where it is),
+/// from their 32-bit words: the byte before the pixel, then its R, G, B.
+///
+/// # Safety
+/// The processor has AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn bins_of_words(words: std::arch::x86_64::__m256i) -> (std::arch::x86_64::__m256i, std::arch::x86_64::__m256i) {
+    use std::arch::x86_64::*;
+    let byte = _mm256_set1_epi32(0xff);
+    let below_clipped = _mm256_set1_epi32(i32::from(CLIPPED_LEVEL) - 1);
+    let r = _mm256_and_si256(_mm256_srli_epi32::<8>(words), byte);
+    let g = _mm256_and_si256(_mm256_srli_epi32::<16>(words), byte);
+    let b = _mm256_srli_epi32::<24>(words);
+    let low = _mm256_min_epi32(r, g);
+    // `yellow_bin`: a pixel whose red and green clip takes the last bin.
+    let low_clipped = _mm256_cmpgt_epi32(low, below_clipped);
+    let bin = _mm256_sub_epi32(_mm256_add_epi32(low, _mm256_set1_epi32(255)), b);
+    let last_bin = _mm256_set1_epi32(super::yellowness::YELLOWNESS_BINS as i32 - 1);
+    let bin = _mm256_max_epi32(bin, _mm256_and_si256(low_clipped, last_bin));
+    (bin, _mm256_cmpgt_epi32(_mm256_min_epi32(low, b), below_clipped))
+}
+
+/// The 8 x 8 transpose of `rows`: lane k of the result's vector i is lane i of `rows[k]`.
+///
+/// # Safety
+/// The processor has AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn transposed(rows: [std::arch::x86_64::__m256; 8]) -> [std::arch::x86_64::__m256; 8] {
+    use std::arch::x86_64::*;
+    let pairs = |a, b| (_mm256_unpacklo_ps(a, b), _mm256_unpackhi_ps(a, b));
+    let (t0, t1) = pairs(rows[0], rows[1]);
+    let (t2, t3) = pairs(rows[2], rows[3]);
+    let (t4, t5) = pairs(rows[4], rows[5]);
+    let (t6, t7) = pairs(rows[6], rows[7]);
+    // Each half of s_i holds pixel i (low half) and pixel i + 4 (high half) of four rows.
+    let (s0, s1) = (_mm256_shuffle_ps::<0x44>(t0, t2), _mm256_shuffle_ps::<0xEE>(t0, t2));
+    let (s2, s3) = (_mm256_shuffle_ps::<0x44>(t1, t3), _mm256_shuffle_ps::<0xEE>(t1, t3));
+    let (s4, s5) = (_mm256_shuffle_ps::<0x44>(t4, t6), _mm256_shuffle_ps::<0xEE>(t4, t6));
+    let (s6, s7) = (_mm256_shuffle_ps::<0x44>(t5, t7), _mm256_shuffle_ps::<0xEE>(t5, t7));
+    [
+        _mm256_permute2f128_ps::<0x20>(s0, s4),
+        _mm256_permute2f128_ps::<0x20>(s1, s5),
+        _mm256_permute2f128_ps::<0x20>(s2, s6),
+        _mm256_permute2f128_ps::<0x20>(s3, s7),
+        _mm256_permute2f128_ps::<0x31>(s0, s4),
+        _mm256_permute2f128_ps::<0x31>(s1, s5),
+        _mm256_permute2f128_ps::<0x31>(s2, s6),
+        _mm256_permute2f128_ps::<0x31>(s3, s7),
+    ]
 }
 
 /// Mean membership over the window of half-size `half` (cell units) around `centre`; 0 for an empty window. A
@@ -814,15 +1030,21 @@ fn window_sum<T: Default + std::ops::AddAssign>(
 mod tests {
     use super::*;
 
-    /// The gathered lookups (AVX2) give every bit the plain loop gives: windows of every stride the tracker uses and
-    /// more, clipped by every border of the frame (the top-left corner's first byte included, where they fall back to
-    /// the plain loop), over a frame of noise with clipped pixels, and a ramp of memberships.
+    /// The gathered lookups (AVX2), and the permuted loads (AVX-512 VBMI) where this processor has them, give every bit
+    /// the plain loop gives: windows of every stride the tracker uses and more, clipped by every border of the frame
+    /// (the top-left corner's first byte included, where they fall back to the plain loop; the bottom-right one, where
+    /// the permuted loads' masks keep them inside the frame), over a frame of noise with clipped pixels, and a ramp of
+    /// memberships.
     #[test]
     #[cfg(target_arch = "x86_64")]
     fn gathered_lookups_are_the_plain_loops_bit_for_bit() {
         if !std::arch::is_x86_feature_detected!("avx2") {
             eprintln!("no AVX2 here: the plain loop is the only one this processor runs");
             return;
+        }
+        let permutes = Lookup::detect() == Lookup::Permuted;
+        if !permutes {
+            eprintln!("no AVX-512 VBMI here: the permuted loads are not compared");
         }
         let (w, h) = (97usize, 61usize);
         let mut state = 0x2545_f491_4f6c_dd1du64;
@@ -866,6 +1088,8 @@ mod tests {
                         let window = Window::new(*cell, half);
                         let plain = centroid_with(&px, centre, &window, stride, &membership, Lookup::Scalar);
                         let gathered = centroid_with(&px, centre, &window, stride, &membership, Lookup::Gathered);
+                        let permuted = permutes
+                            .then(|| centroid_with(&px, centre, &window, stride, &membership, Lookup::Permuted));
                         let bits = |c: Option<WindowCentroid>| {
                             c.map(|c| {
                                 [
@@ -881,6 +1105,13 @@ mod tests {
                             bits(gathered),
                             "stride {stride} centre {centre:?} half {half}"
                         );
+                        if let Some(permuted) = permuted {
+                            assert_eq!(
+                                bits(plain),
+                                bits(permuted),
+                                "permuted: stride {stride} centre {centre:?} half {half}"
+                            );
+                        }
                         compared += usize::from(plain.is_some());
                     }
                 }
