@@ -16,7 +16,9 @@
 //!   in the cache, as in `dump`), and prints the per-frame CPU ms's median and p99 per pass: two builds run one after
 //!   the other this way give a speed ratio on a busy machine. With `cold` it writes 64 MB between two frames, so that
 //!   each estimate starts with none of its own data cached, as after a frame's decoding in the daemon, or after the
-//!   other modes and the renderer in the validation bench.
+//!   other modes and the renderer in the validation bench. With `after-fast` it writes the 64 MB and then runs fast mode
+//!   on the frame before timing MODE on it, untimed, as the validation bench does when it runs fast and inverse:
+//!   the frame's pattern is then in the caches and the model's matrices are not.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -170,8 +172,20 @@ fn dump(out: &str, cache: &std::path::Path, profile: Profile) -> Result<(), Erro
     Ok(())
 }
 
-fn time(mode: Mode, cache: &std::path::Path, passes: usize, profile: Profile, cold: bool) -> Result<(), Error> {
-    let mut evictor = if cold { vec![0u8; EVICTION_BYTES] } else { Vec::new() };
+/// What `time` does between two frames (see the module's notes).
+#[derive(Clone, Copy, PartialEq)]
+enum Between {
+    Nothing,
+    Evict,
+    EvictThenFast,
+}
+
+fn time(mode: Mode, cache: &std::path::Path, passes: usize, profile: Profile, between: Between) -> Result<(), Error> {
+    let mut evictor = if between == Between::Nothing {
+        Vec::new()
+    } else {
+        vec![0u8; EVICTION_BYTES]
+    };
     let set = ValidationSet::new(profile, 7);
     let size = set.sizes()[0];
     let renderer = ValidationRenderer::new(size)?;
@@ -182,6 +196,10 @@ fn time(mode: Mode, cache: &std::path::Path, passes: usize, profile: Profile, co
     }
     for pass in 0..passes {
         let mut estimator = Estimator::new(SensorConfig::default(), mode, &reference)?;
+        let mut fast = match between {
+            Between::EvictThenFast => Some(Estimator::new(SensorConfig::default(), Mode::Fast, &reference)?),
+            _ => None,
+        };
         let mut cpu_ms = Vec::with_capacity(cases.len());
         for batch in cases.chunks(32) {
             let frames = batch
@@ -190,6 +208,9 @@ fn time(mode: Mode, cache: &std::path::Path, passes: usize, profile: Profile, co
                 .collect::<Result<Vec<_>, Error>>()?;
             for frame in &frames {
                 evict_caches(&mut evictor);
+                if let Some(fast) = fast.as_mut() {
+                    std::hint::black_box(fast.estimate(frame).ok());
+                }
                 let started = thread_cpu_s();
                 let reading = estimator.estimate(frame);
                 cpu_ms.push((thread_cpu_s() - started) * 1e3);
@@ -251,14 +272,15 @@ fn main() -> Result<(), Error> {
             args[3].parse()?,
             profile_arg(args.get(4))?,
             match args.get(5).map(String::as_str) {
-                None => false,
-                Some("cold") => true,
-                Some(other) => return Err(format!("unknown option {other} (cold)").into()),
+                None => Between::Nothing,
+                Some("cold") => Between::Evict,
+                Some("after-fast") => Between::EvictThenFast,
+                Some(other) => return Err(format!("unknown option {other} (cold, after-fast)").into()),
             },
         ),
         _ => Err(
             "usage: estimate_profile run MODE WxH REPEATS [DECODE_SCALE] | dump OUT CACHE_DIR [quick|full] \
-             | time MODE CACHE_DIR PASSES [quick|full] [cold]"
+             | time MODE CACHE_DIR PASSES [quick|full] [cold|after-fast]"
                 .into(),
         ),
     }
