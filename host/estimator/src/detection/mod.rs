@@ -23,7 +23,7 @@ use crate::error::EstimateError;
 use blobs::find_square_blobs;
 use indexing::index_lattice;
 use window::{add_to_histogram, centroid, mean_brightness, mean_membership, CellFrame, Pixels, Window};
-use yellowness::{otsu, Histogram, MembershipTable, YellownessMap};
+use yellowness::{otsu, Histogram, Membership, YellownessMap};
 
 /// Every square's sub-pixel centroid (raw px) and area (px^2), in the pad's square order; `None` where the square
 /// could not be measured.
@@ -663,7 +663,7 @@ impl FastTracker {
                 reason: "no yellow/red contrast where the pattern should be".into(),
             });
         };
-        let membership = split.ramp().table();
+        let membership = Membership::from(split.ramp());
         let check_area = check_area.is_some();
         let outcomes: Vec<Option<SquareOutcome>> = self
             .squares
@@ -717,7 +717,7 @@ impl FastTracker {
     /// lands within that distance and on no square already found (within [`TAKEN_CELLS`]). Runs only when some
     /// square was lost (a damaged pad loses squares too, but its neighbours agree with each other: nothing is
     /// dropped there, and each lost square costs at most [`NEIGHBOUR_ROUNDS`] more windows).
-    fn settle_large_moves(&self, px: &Pixels, membership: &MembershipTable, lost: &[bool], result: &mut Measurements) {
+    fn settle_large_moves(&self, px: &Pixels, membership: &Membership, lost: &[bool], result: &mut Measurements) {
         let mut search: Vec<bool> = lost.iter().zip(result.iter()).map(|(&l, m)| l && m.is_none()).collect();
         let snapshot = result.clone();
         for slot in 0..result.len() {
@@ -804,7 +804,7 @@ impl FastTracker {
         px: &Pixels,
         model: &SquareModel,
         start: Point2,
-        membership: &MembershipTable,
+        membership: &Membership,
         check_area: bool,
     ) -> SquareOutcome {
         self.measure_square_within(px, model, start, membership, check_area, WINDOW_HALF)
@@ -816,7 +816,7 @@ impl FastTracker {
         px: &Pixels,
         model: &SquareModel,
         start: Point2,
-        membership: &MembershipTable,
+        membership: &Membership,
         check_area: bool,
         reach: f64,
     ) -> SquareOutcome {
@@ -852,7 +852,9 @@ impl FastTracker {
         if offset[0].abs() > reach || offset[1].abs() > reach {
             return SquareOutcome::Lost;
         }
-        if mean_membership(px, found.at, model.cell(), CENTRE_HALF, self.stride, membership) < MIN_CENTRE_MEMBERSHIP {
+        if mean_membership(px, found.at, model.cell(), CENTRE_HALF, self.stride, &membership.table)
+            < MIN_CENTRE_MEMBERSHIP
+        {
             return SquareOutcome::Lost;
         }
         if check_area && model.reference_area > 0.0 {

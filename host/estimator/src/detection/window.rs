@@ -4,7 +4,7 @@
 
 use nusense_geometry::Point2;
 
-use super::yellowness::{Histogram, MembershipTable};
+use super::yellowness::{Histogram, Membership, MembershipTable};
 
 /// The local cell of a square in raw px: one column step and one row step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -411,7 +411,7 @@ pub fn centroid(
     centre: Point2,
     window: &Window,
     stride: usize,
-    membership: &MembershipTable,
+    membership: &Membership,
 ) -> Option<WindowCentroid> {
     centroid_with(px, centre, window, stride, membership, Lookup::detect())
 }
@@ -476,7 +476,7 @@ fn centroid_with(
     centre: Point2,
     window: &Window,
     stride: usize,
-    membership: &MembershipTable,
+    membership: &Membership,
     lookup: Lookup,
 ) -> Option<WindowCentroid> {
     // The gathers address the frame with 32-bit offsets.
@@ -577,11 +577,14 @@ struct WindowTotals {
 impl WindowTotals {
     /// Sums up to [`ROWS_AT_ONCE`] rows together and adds them in order. `raw`: the frame the spans are rows of.
     #[inline(always)]
-    fn add_rows(&mut self, spans: &[RowSpan], raw: &[u8], stride: usize, membership: &MembershipTable, lookup: Lookup) {
+    fn add_rows(&mut self, spans: &[RowSpan], raw: &[u8], stride: usize, membership: &Membership, lookup: Lookup) {
         #[cfg(target_arch = "x86_64")]
-        if lookup == Lookup::Permuted && stride <= PERMUTED_MAX_STRIDE {
+        let ramp_is_finite = membership.ramp.start.is_finite() && membership.ramp.inv_width.is_finite();
+        #[cfg(target_arch = "x86_64")]
+        if lookup == Lookup::Permuted && stride <= PERMUTED_MAX_STRIDE && ramp_is_finite {
             // SAFETY: `Permuted` is chosen only where the processor has AVX2 and AVX-512 F, BW, VL and VBMI
-            // (`Lookup::detect`); the spans are rows of `raw` (`for_each_row`); the stride is checked above.
+            // (`Lookup::detect`); the spans are rows of `raw` (`for_each_row`); the stride and the ramp are checked
+            // above.
             if unsafe { self.add_rows_permuted(spans, raw, stride, membership) } {
                 return;
             }
@@ -589,7 +592,7 @@ impl WindowTotals {
             // SAFETY: `Gathered` and `Permuted` are chosen only where the processor has AVX2 (`Lookup::detect`), and
             // only for a frame of at most i32::MAX bytes (`centroid_with`); the spans are rows of `raw`
             // (`for_each_row`).
-            if unsafe { self.add_rows_gathered(spans, raw, stride, membership) } {
+            if unsafe { self.add_rows_gathered(spans, raw, stride, &membership.table) } {
                 return;
             }
         }
@@ -597,9 +600,9 @@ impl WindowTotals {
         let _ = (raw, lookup);
         // The common strides get their own copies of the loops, with the stride a constant.
         match stride {
-            1 => self.add_rows_at(spans, 1, membership),
-            2 => self.add_rows_at(spans, 2, membership),
-            _ => self.add_rows_at(spans, stride, membership),
+            1 => self.add_rows_at(spans, 1, &membership.table),
+            2 => self.add_rows_at(spans, 2, &membership.table),
+            _ => self.add_rows_at(spans, stride, &membership.table),
         }
     }
 
@@ -793,19 +796,21 @@ impl WindowTotals {
     /// words the gathers read (the byte before each pixel, R, G, B), the eight pixels' memberships are looked up along
     /// the row, and eight rows' memberships are transposed so that each row is again one lane. The lanes then add them
     /// pixel by pixel as the gathered loop does, the same operations in the same order, so every bit is the same.
-    /// Pixels past a row's end weigh zero and count as not clipped, as there. Returns false, having added nothing,
-    /// when some row starts at the frame's first byte (there is no byte before it).
+    /// Pixels past a row's end weigh zero and count as not clipped, as there. The memberships are computed from the
+    /// ramp rather than looked up (`ramp_memberships`: the table's very entries; a gather from the table was then
+    /// the loop's slowest step). Returns false, having added nothing, when some row starts at the frame's first byte
+    /// (there is no byte before it).
     ///
     /// # Safety
     /// The processor has AVX2 and AVX-512 F, BW, VL and VBMI; every span's pixels lie in `raw`; `stride` is at most
-    /// [`PERMUTED_MAX_STRIDE`].
+    /// [`PERMUTED_MAX_STRIDE`]; the ramp's start and slope are finite.
     #[target_feature(enable = "avx2,avx512f,avx512bw,avx512vl,avx512vbmi")]
     unsafe fn add_rows_permuted(
         &mut self,
         spans: &[RowSpan],
         raw: &[u8],
         stride: usize,
-        membership: &MembershipTable,
+        membership: &Membership,
     ) -> bool {
         use std::arch::x86_64::*;
         let Some(first_span) = spans.first() else {
@@ -835,7 +840,10 @@ impl WindowTotals {
         let step = _mm256_set1_ps(stride as f32);
         let (mut w, mut wx) = (_mm256_setzero_ps(), _mm256_setzero_ps());
         let mut clipped = _mm256_setzero_si256();
-        let table = membership.as_ptr();
+        let (start, inv_width) = (
+            _mm512_set1_pd(membership.ramp.start),
+            _mm512_set1_pd(membership.ramp.inv_width),
+        );
         // Where every row has eight more pixels and a full 64-byte load from each stays inside the frame (all but a
         // window's last block of rows near the frame's bottom-right corner), the loads need no mask and the lanes none
         // either: the bytes past the eight pixels' words are other pixels of the frame, which the permutation drops.
@@ -853,14 +861,13 @@ impl WindowTotals {
         };
         let mut done = 0;
         for _ in 0..unmasked_blocks {
-            // SAFETY: each load's 64 bytes lie in `raw` (checked above: `done` + 8 pixels is at most `shortest`); every
-            // table index is in 0..=510 (`bins_of_words`).
+            // SAFETY: each load's 64 bytes lie in `raw` (checked above: `done` + 8 pixels is at most `shortest`).
             let along_rows: [__m256; ROWS_AT_ONCE] = std::array::from_fn(|k| unsafe {
                 let bytes = _mm512_loadu_si512(before_first[k].add(done * pixel_bytes).cast());
                 let words = _mm512_castsi512_si256(_mm512_permutexvar_epi8(words_of, bytes));
                 let (bin, white) = bins_of_words(words);
                 clipped = _mm256_sub_epi32(clipped, white);
-                _mm256_i32gather_ps::<4>(table, bin)
+                ramp_memberships(bin, start, inv_width)
             });
             for m in transposed(along_rows) {
                 w = _mm256_add_ps(w, m);
@@ -883,7 +890,6 @@ impl WindowTotals {
                 let live_bytes = (live - 1) * pixel_bytes + 4;
                 // SAFETY: the plain load's 64 bytes lie in `raw`; the masked one reads only the bytes of its mask, which
                 // lie in this row's span or are the byte before its first pixel (which exists: no row starts at 0).
-                // Every table index is in 0..=510 (`bins_of_words`), the table's range.
                 let (m, white) = unsafe {
                     let bytes = if at as usize + 64 <= frame_end {
                         _mm512_loadu_si512(at.cast())
@@ -892,7 +898,7 @@ impl WindowTotals {
                     };
                     let words = _mm512_castsi512_si256(_mm512_permutexvar_epi8(words_of, bytes));
                     let (bin, white) = bins_of_words(words);
-                    (_mm256_i32gather_ps::<4>(table, bin), white)
+                    (ramp_memberships(bin, start, inv_width), white)
                 };
                 let live_mask = ((1u32 << live) - 1) as __mmask8;
                 clipped = _mm256_sub_epi32(clipped, _mm256_maskz_mov_epi32(live_mask, white));
@@ -942,6 +948,29 @@ unsafe fn bins_of_words(words: std::arch::x86_64::__m256i) -> (std::arch::x86_64
     let last_bin = _mm256_set1_epi32(super::yellowness::YELLOWNESS_BINS as i32 - 1);
     let bin = _mm256_max_epi32(bin, _mm256_and_si256(low_clipped, last_bin));
     (bin, _mm256_cmpgt_epi32(_mm256_min_epi32(low, b), below_clipped))
+}
+
+/// [`Ramp::membership`](super::yellowness::Ramp::membership) of eight pixels' table indices (`bin` = yellowness +
+/// 255), rounded to f32: the membership table's entries, by the same operations (the index's yellowness is exact in
+/// f64; clamping a number that is not NaN to 0..=1 is a max and a min; the rounding to f32 is to nearest).
+///
+/// # Safety
+/// The processor has AVX2 and AVX-512 F; `start` and `inv_width` are finite (so nothing is NaN).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f")]
+#[inline]
+unsafe fn ramp_memberships(
+    bin: std::arch::x86_64::__m256i,
+    start: std::arch::x86_64::__m512d,
+    inv_width: std::arch::x86_64::__m512d,
+) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    let yellowness = _mm512_cvtepi32_pd(_mm256_sub_epi32(bin, _mm256_set1_epi32(255)));
+    let m = _mm512_mul_pd(_mm512_sub_pd(yellowness, start), inv_width);
+    _mm512_cvtpd_ps(_mm512_min_pd(
+        _mm512_max_pd(m, _mm512_setzero_pd()),
+        _mm512_set1_pd(1.0),
+    ))
 }
 
 /// The 8 x 8 transpose of `rows`: lane k of the result's vector i is lane i of `rows[k]`.
@@ -1028,6 +1057,7 @@ fn window_sum<T: Default + std::ops::AddAssign>(
 
 #[cfg(test)]
 mod tests {
+    use super::super::yellowness::{Ramp, YELLOWNESS_BINS};
     use super::*;
 
     /// The gathered lookups (AVX2), and the permuted loads (AVX-512 VBMI) where this processor has them, give every bit
@@ -1066,8 +1096,10 @@ mod tests {
             width: w,
             height: h,
         };
-        let membership: MembershipTable =
-            std::array::from_fn(|bin| ((bin as f64 - 255.0 - 13.7) / 97.3).clamp(0.0, 1.0) as f32);
+        let membership = Membership::from(Ramp {
+            start: 13.7,
+            inv_width: 1.0 / 97.3,
+        });
         let cells = [
             CellFrame::new([21.0, 0.0], [0.0, 19.0]).unwrap(),
             CellFrame::new([17.3, 4.1], [-3.7, 16.2]).unwrap(),
@@ -1118,6 +1150,42 @@ mod tests {
             }
         }
         assert!(compared > 100, "{compared} windows held yellow");
+    }
+
+    /// The memberships the permuted loop computes are the table's entries, bit for bit, over every index and ramps of
+    /// every kind the frames give (a threshold on either side of zero, contrasts from the smallest Otsu accepts on).
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn computed_memberships_are_the_tables() {
+        use std::arch::x86_64::*;
+        if Lookup::detect() != Lookup::Permuted {
+            eprintln!("no AVX-512 VBMI here: the computed memberships are not used");
+            return;
+        }
+        for (threshold, contrast) in [(0.5, 8.0), (37.5, 91.3), (-12.5, 240.0), (101.5, 17.77), (254.5, 510.0)] {
+            let half_width = f64::max(0.25 * contrast, 1.0);
+            let ramp = Ramp {
+                start: threshold - half_width,
+                inv_width: 1.0 / (2.0 * half_width),
+            };
+            let table = ramp.table();
+            for first in (0..YELLOWNESS_BINS as i32).step_by(8) {
+                let bins: [i32; 8] = std::array::from_fn(|k| (first + k as i32).min(YELLOWNESS_BINS as i32 - 1));
+                let mut computed = [0f32; 8];
+                // SAFETY: the processor has AVX-512 (checked above); the ramp is finite.
+                unsafe {
+                    let m = ramp_memberships(
+                        _mm256_loadu_si256(bins.as_ptr().cast()),
+                        _mm512_set1_pd(ramp.start),
+                        _mm512_set1_pd(ramp.inv_width),
+                    );
+                    _mm256_storeu_ps(computed.as_mut_ptr(), m);
+                }
+                for (bin, m) in bins.iter().zip(computed) {
+                    assert_eq!(m.to_bits(), table[*bin as usize].to_bits(), "bin {bin} ramp {ramp:?}");
+                }
+            }
+        }
     }
 
     /// A window's tabulated rows give the pixels its rows compute around a whole-pixel centre, past the table's ends
@@ -1215,15 +1283,17 @@ mod tests {
             height: h,
         };
         let cell = CellFrame::new([30.0, 0.0], [0.0, 30.0]).unwrap();
-        let membership: MembershipTable =
-            std::array::from_fn(|bin| ((bin as f32 - 255.0 + 20.0) / 140.0).clamp(0.0, 1.0));
+        let membership = Membership::from(Ramp {
+            start: -20.0,
+            inv_width: 1.0 / 140.0,
+        });
         let found = centroid(&px, [48.0, 43.0], &Window::new(cell, 0.55), 1, &membership).unwrap();
         let (c, area) = (found.at, found.area);
         assert!((c[0] - 50.5).abs() < 0.05 && (c[1] - 40.5).abs() < 0.05, "{c:?}");
         assert!(area > 300.0 && area < 500.0, "{area}");
         assert_eq!(found.clipped_fraction, 0.0);
-        assert!(mean_membership(&px, c, &cell, 0.15, 1, &membership) > 0.9);
+        assert!(mean_membership(&px, c, &cell, 0.15, 1, &membership.table) > 0.9);
         // Beside the square (here: on the red) is not on yellow.
-        assert!(mean_membership(&px, [75.0, 40.0], &cell, 0.15, 1, &membership) < 0.1);
+        assert!(mean_membership(&px, [75.0, 40.0], &cell, 0.15, 1, &membership.table) < 0.1);
     }
 }

@@ -74,7 +74,30 @@ pub struct Ramp {
 impl Ramp {
     /// Lookup table of the membership for every yellowness value (bin = value + 255).
     pub fn table(&self) -> MembershipTable {
-        std::array::from_fn(|bin| ((bin as f64 - 255.0 - self.start) * self.inv_width).clamp(0.0, 1.0) as f32)
+        std::array::from_fn(|bin| self.membership(bin as f64 - 255.0) as f32)
+    }
+
+    /// The membership of a yellowness value, in f64 (the table holds it rounded to f32).
+    #[inline(always)]
+    pub fn membership(&self, yellowness: f64) -> f64 {
+        ((yellowness - self.start) * self.inv_width).clamp(0.0, 1.0)
+    }
+}
+
+/// A ramp's membership table with the ramp it comes from, so that a vector loop may compute an entry (in f64, then
+/// rounded to f32, as the table's were) rather than look it up.
+#[derive(Clone, Debug)]
+pub struct Membership {
+    pub table: MembershipTable,
+    pub ramp: Ramp,
+}
+
+impl From<Ramp> for Membership {
+    fn from(ramp: Ramp) -> Self {
+        Self {
+            table: ramp.table(),
+            ramp,
+        }
     }
 }
 
