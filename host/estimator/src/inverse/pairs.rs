@@ -5,6 +5,7 @@ use nusense_geometry::Point2;
 
 use super::lines::{pattern_search, shape_correlation};
 use super::moments::ROUND_EXTENT_PITCHES;
+use super::regions::group_of;
 use super::{InverseModel, Observed, Region, Stage1, Traction, SUPPORT_SIGMAS};
 
 /// [`InverseModel::pair_against_line`]'s pattern search for the two points stops once its halved steps are all
@@ -17,6 +18,14 @@ struct PairAgainstLine {
     points: [Point2; 2],
     /// The pair's explained sum of squares less the line's (see [`InverseModel::fit_line_to`]), mm^2.
     gain_mm2: f64,
+}
+
+/// Puts `union` in the place of the first of `members` (ascending indices into `regions`) and removes the others.
+fn merge_into_first(regions: &mut Vec<Region>, members: &[usize], union: Region) {
+    regions[members[0]] = union;
+    for &m in members[1..].iter().rev() {
+        regions.remove(m);
+    }
 }
 
 impl InverseModel {
@@ -173,11 +182,7 @@ impl InverseModel {
         noise_mm: f64,
         min_force_n: f64,
     ) {
-        let group_of = |r: &Region| {
-            r.cells
-                .first()
-                .and_then(|c| groups.iter().position(|g| g.binary_search(&c.0).is_ok()))
-        };
+        let group_of = |r: &Region| group_of(r, groups);
         let margin = SUPPORT_SIGMAS * SUPPORT_SIGMAS * noise_mm * noise_mm;
         loop {
             let mut joined = None;
@@ -229,11 +234,7 @@ impl InverseModel {
             let Some((members, union)) = joined else {
                 return;
             };
-            // `members` ascends: the first takes the union, the rest are removed from the last.
-            regions[members[0]] = union;
-            for &m in members[1..].iter().rev() {
-                regions.remove(m);
-            }
+            merge_into_first(regions, &members, union);
         }
     }
 
@@ -259,14 +260,9 @@ impl InverseModel {
         noise_mm: f64,
     ) {
         let margin = SUPPORT_SIGMAS * SUPPORT_SIGMAS * noise_mm * noise_mm;
-        for group in groups {
+        for g in 0..groups.len() {
             let members: Vec<usize> = (0..regions.len())
-                .filter(|&m| {
-                    regions[m]
-                        .cells
-                        .first()
-                        .is_some_and(|c| group.binary_search(&c.0).is_ok())
-                })
+                .filter(|&m| group_of(&regions[m], groups) == Some(g))
                 .collect();
             if members.len() < 2 {
                 continue;
@@ -277,10 +273,7 @@ impl InverseModel {
                 .is_some_and(|pair| pair.gain_mm2 < -margin)
             {
                 halved.retain(|j| !union.cells.iter().any(|c| c.0 == *j));
-                regions[members[0]] = union;
-                for &m in members[1..].iter().rev() {
-                    regions.remove(m);
-                }
+                merge_into_first(regions, &members, union);
             }
         }
         regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));

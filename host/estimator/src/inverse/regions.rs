@@ -12,6 +12,12 @@ use crate::linalg::{gram, tr_mul_vec, UpdatedCholesky};
 /// fraction of its peak (otherwise it is a bump of the same contact).
 const SADDLE_FRACTION: f64 = 0.6;
 
+/// The loaded group (of `groups`, each ascending) a region of stage 2 lies in: the one that holds its first cell.
+pub(super) fn group_of(region: &Region, groups: &[Vec<usize>]) -> Option<usize> {
+    let first = region.cells.first()?.0;
+    groups.iter().position(|g| g.binary_search(&first).is_ok())
+}
+
 impl InverseModel {
     /// The layered model's contact centres: each region's pressure solved again on its cells' quarters (pressure >= 0
     /// on each, the region's shear as stage 2's without its twist, the motion free, the same prior per unit area as
@@ -113,16 +119,10 @@ impl InverseModel {
         join_fragments: bool,
     ) -> Vec<Region> {
         let mut pending: Vec<(&[usize], Vec<Traction>)> = Vec::new();
-        let group_of = |region: &Region| {
-            let first = region.cells.first().map(|c| c.0);
-            groups
-                .iter()
-                .position(|g| first.is_some_and(|j| g.binary_search(&j).is_ok()))
-        };
         let clears = |r: &Region| r.force_vector_n[2] >= min_force_n * r.floor_scale;
         let mut kept: Vec<Region> = Vec::new();
         for (g, group) in groups.iter().enumerate() {
-            let members: Vec<&Region> = regions.iter().filter(|r| group_of(r) == Some(g)).collect();
+            let members: Vec<&Region> = regions.iter().filter(|r| group_of(r, groups) == Some(g)).collect();
             if members.iter().any(|r| clears(r)) {
                 // Each fragment that does not clear the floor joins the contact it touches (repeatedly: through
                 // other such fragments); one that touches none is none.
