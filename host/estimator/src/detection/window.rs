@@ -779,15 +779,7 @@ impl WindowTotals {
             x = _mm256_add_ps(x, step);
             offset = _mm256_add_epi32(offset, step_bytes);
         }
-        let (mut w_lanes, mut wx_lanes, mut clipped_lanes) =
-            ([0f32; ROWS_AT_ONCE], [0f32; ROWS_AT_ONCE], [0i32; ROWS_AT_ONCE]);
-        unsafe {
-            _mm256_storeu_ps(w_lanes.as_mut_ptr(), w);
-            _mm256_storeu_ps(wx_lanes.as_mut_ptr(), wx);
-            _mm256_storeu_si256(clipped_lanes.as_mut_ptr().cast(), clipped);
-        }
-        self.add_lanes(spans, &w_lanes, &wx_lanes);
-        self.clipped += clipped_lanes[..spans.len()].iter().map(|&c| c as usize).sum::<usize>();
+        unsafe { self.add_lane_vectors(spans, w, wx, clipped, spans.len()) };
         true
     }
 
@@ -912,17 +904,38 @@ impl WindowTotals {
             }
             done += pixels;
         }
-        let (mut w_lanes, mut wx_lanes, mut clipped_lanes) =
+        // Here a lane of `clipped` counts one pixel of the eight along every row, not one row: all eight count.
+        unsafe { self.add_lane_vectors(spans, w, wx, clipped, ROWS_AT_ONCE) };
+        true
+    }
+
+    /// The vector loops' sums into the window's: `w` and `wx` one row per lane (see [`Self::add_lanes`]), and the
+    /// first `clipped_lanes` lanes of `clipped`, counts of clipped pixels.
+    ///
+    /// # Safety
+    /// The processor has AVX.
+    #[target_feature(enable = "avx")]
+    unsafe fn add_lane_vectors(
+        &mut self,
+        spans: &[RowSpan],
+        w: std::arch::x86_64::__m256,
+        wx: std::arch::x86_64::__m256,
+        clipped: std::arch::x86_64::__m256i,
+        clipped_lanes: usize,
+    ) {
+        use std::arch::x86_64::*;
+        let (mut w_lanes, mut wx_lanes, mut clipped_counts) =
             ([0f32; ROWS_AT_ONCE], [0f32; ROWS_AT_ONCE], [0i32; ROWS_AT_ONCE]);
         unsafe {
             _mm256_storeu_ps(w_lanes.as_mut_ptr(), w);
             _mm256_storeu_ps(wx_lanes.as_mut_ptr(), wx);
-            _mm256_storeu_si256(clipped_lanes.as_mut_ptr().cast(), clipped);
+            _mm256_storeu_si256(clipped_counts.as_mut_ptr().cast(), clipped);
         }
         self.add_lanes(spans, &w_lanes, &wx_lanes);
-        // Here a lane of `clipped` counts one pixel of the eight along every row, not one row.
-        self.clipped += clipped_lanes.iter().map(|&c| c as usize).sum::<usize>();
-        true
+        self.clipped += clipped_counts[..clipped_lanes]
+            .iter()
+            .map(|&c| c as usize)
+            .sum::<usize>();
     }
 }
 
