@@ -19,10 +19,32 @@ fn render(renderer: &Renderer, scene: &Scene, seed: u64) -> RgbImage {
 /// The validation sensor at 1024x768 and the inverse estimator on its rest frame.
 fn validation_sensor() -> (Renderer, Estimator) {
     let renderer = Renderer::new(SensorModel::validation(1024, 768)).expect("the validation sensor model is valid");
-    let reference = render(&renderer, &Scene::rest(), 1);
-    let estimator =
-        Estimator::new(SensorConfig::default(), Mode::Inverse, &reference).expect("the rest frame shows the pattern");
+    let estimator = inverse_on(&renderer, SensorConfig::default());
     (renderer, estimator)
+}
+
+/// The inverse estimator with `config` on `renderer`'s rest frame.
+fn inverse_on(renderer: &Renderer, config: SensorConfig) -> Estimator {
+    let reference = render(renderer, &Scene::rest(), 1);
+    Estimator::new(config, Mode::Inverse, &reference).expect("the rest frame shows the pattern")
+}
+
+/// `reading` is the edge through `at` at `angle` (deg): one contact, centred within 1.65 mm of the edge's centre,
+/// along the edge within 3 deg.
+fn assert_one_contact_along_the_edge(reading: &Reading, at: [f64; 2], angle: f64, label: &str) {
+    let contacts = reading.contacts();
+    assert_eq!(contacts.len(), 1, "{label}: {contacts:?}");
+    let centre = contacts[0].centre_mm;
+    let off = (centre[0] - at[0]).hypot(centre[1] - at[1]);
+    assert!(
+        off < 1.65,
+        "{label}: read at {centre:?}, {off:.2} mm from the edge's centre"
+    );
+    let direction = reading
+        .edge_angle_deg()
+        .unwrap_or_else(|| panic!("{label}: no direction"));
+    let error = (direction - angle + 90.0).rem_euclid(180.0) - 90.0;
+    assert!(error.abs() < 3.0, "{label}: direction {direction:.1} deg");
 }
 
 fn read(estimator: &mut Estimator, frame: &RgbImage) -> Reading {
@@ -67,25 +89,13 @@ fn a_light_long_edge_is_one_contact_carrying_the_whole_edge() {
                 seed + 1,
             ),
         );
-        let contacts = light.contacts();
         let label = format!("{length} mm edge at {angle} deg, {at:?} mm, {force} N");
-        assert_eq!(contacts.len(), 1, "{label}: {contacts:?}");
+        assert_one_contact_along_the_edge(&light, at, angle, &label);
         let ratio = light.force_n() / (per_newton * force);
         assert!(
             (0.8..1.2).contains(&ratio),
             "{label}: {ratio:.2} of the heavy edge's force per newton"
         );
-        let centre = contacts[0].centre_mm;
-        let off = (centre[0] - at[0]).hypot(centre[1] - at[1]);
-        assert!(
-            off < 1.65,
-            "{label}: read at {centre:?}, {off:.2} mm from the edge's centre"
-        );
-        let direction = light
-            .edge_angle_deg()
-            .unwrap_or_else(|| panic!("{label}: no direction"));
-        let error = (direction - angle + 90.0).rem_euclid(180.0) - 90.0;
-        assert!(error.abs() < 3.0, "{label}: direction {direction:.1} deg");
     }
 }
 
@@ -123,13 +133,11 @@ fn a_long_edge_does_not_raise_the_noise_its_contact_is_tested_at() {
 #[test]
 fn a_long_edge_is_one_contact_wherever_it_crosses_the_cell_rows() {
     let renderer = Renderer::new(SensorModel::validation(1024, 768)).expect("the validation sensor model is valid");
-    let reference = render(&renderer, &Scene::rest(), 1);
     let pitch_mm = 40.0 / 12.0;
     for normal_from_stack in [false, true] {
         let mut config = SensorConfig::default();
         config.elastic.normal_from_stack = normal_from_stack;
-        let mut estimator =
-            Estimator::new(config, Mode::Inverse, &reference).expect("the rest frame shows the pattern");
+        let mut estimator = inverse_on(&renderer, config);
         for (angle, centre) in [(0.0_f64, [8.0, 2.5]), (90.0, [3.0, 0.0])] {
             for k in 0_u32..6 {
                 let across = f64::from(k) * pitch_mm / 3.0;
@@ -140,19 +148,7 @@ fn a_long_edge_is_one_contact_wherever_it_crosses_the_cell_rows() {
                 let scene = Scene::with_contact(Contact::edge(30.0, 1.0, angle, at, HEAVY_N));
                 let reading = read(&mut estimator, &render(&renderer, &scene, 30 + 2 * u64::from(k)));
                 let label = format!("normal_from_stack {normal_from_stack}, 30 mm at {angle} deg through {at:?} mm");
-                let contacts = reading.contacts();
-                assert_eq!(contacts.len(), 1, "{label}: {contacts:?}");
-                let centre_mm = contacts[0].centre_mm;
-                let off = (centre_mm[0] - at[0]).hypot(centre_mm[1] - at[1]);
-                assert!(
-                    off < 1.65,
-                    "{label}: read at {centre_mm:?}, {off:.2} mm from the edge's centre"
-                );
-                let direction = reading
-                    .edge_angle_deg()
-                    .unwrap_or_else(|| panic!("{label}: no direction"));
-                let error = (direction - angle + 90.0).rem_euclid(180.0) - 90.0;
-                assert!(error.abs() < 3.0, "{label}: direction {direction:.1} deg");
+                assert_one_contact_along_the_edge(&reading, at, angle, &label);
             }
         }
     }
