@@ -200,6 +200,41 @@ fn two_presses_ten_mm_apart_in_any_direction_and_force_ratio_are_two_contacts() 
     ]);
 }
 
+/// Unequal pairs at the validation set's forces (2-6 N), 10 mm apart at seven places and directions: the weaker press a
+/// third to two fifths of the stronger. The blur makes most of them one peak in the cell map, whose core above 30 % of
+/// its peak is round (the weaker press peaks near that level and so hardly counts there), so the pair was never tested
+/// against a line and was read as one contact between the two: 11 of these 19 pairs in a sweep at other noise seeds,
+/// against none now. Their core above 10 % of the peak is elongated (`InverseModel::elongation`). Two pairs of the
+/// sweep these come from (the same places, 6 and 2 N, 6 and 2.4 N, 5 and 2 N) are left out, as they fail for other
+/// reasons: 2 N beside 6 N about [6, -4] along 80 deg, still one contact (with 1.8 N there, the best line sat on the
+/// stronger press and the pair fit's points ended 3.8 mm apart, explaining less than the line), and 2.4 N beside 6 N
+/// about [2, 8] along 125 deg, which the cell map lists apart but whose weaker reads 28 % light (its own region's share
+/// of the pressure).
+#[test]
+fn unequal_presses_ten_mm_apart_are_two_contacts() {
+    assert_two_contacts_listed(&[
+        ([-12.0, 2.0], 35.0, 6.0, 2.0),
+        ([-12.0, 2.0], 35.0, 2.4, 6.0),
+        ([-12.0, 2.0], 35.0, 5.0, 2.0),
+        ([6.0, -4.0], 80.0, 6.0, 2.4),
+        ([6.0, -4.0], 80.0, 2.0, 5.0),
+        ([2.0, 8.0], 125.0, 6.0, 2.0),
+        ([2.0, 8.0], 125.0, 5.0, 2.0),
+        ([-6.0, -7.0], 160.0, 2.0, 6.0),
+        ([-6.0, -7.0], 160.0, 6.0, 2.4),
+        ([-6.0, -7.0], 160.0, 2.0, 5.0),
+        ([12.0, 5.0], 10.0, 6.0, 2.0),
+        ([12.0, 5.0], 10.0, 2.4, 6.0),
+        ([12.0, 5.0], 10.0, 5.0, 2.0),
+        ([-15.0, -6.0], 55.0, 2.0, 6.0),
+        ([-15.0, -6.0], 55.0, 6.0, 2.4),
+        ([-15.0, -6.0], 55.0, 2.0, 5.0),
+        ([0.0, 0.0], 145.0, 6.0, 2.0),
+        ([0.0, 0.0], 145.0, 2.4, 6.0),
+        ([0.0, 0.0], 145.0, 5.0, 2.0),
+    ]);
+}
+
 /// A 20 mm edge 15 deg off the grid's rows, at the centre: its cell map peaks three columns and one row apart, and the
 /// pressure midway between them was read at the nearest cell, a low one of the map's checkerboard noise, so the edge
 /// was listed as two contacts 10 mm apart (in 35 of 80 such presses of a sweep at 15 and 165 deg, against 0-4 of 40
