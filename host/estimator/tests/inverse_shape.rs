@@ -212,27 +212,78 @@ fn two_presses_ten_mm_apart_in_any_direction_and_force_ratio_are_two_contacts() 
 /// of the pressure).
 #[test]
 fn unequal_presses_ten_mm_apart_are_two_contacts() {
-    assert_two_contacts_listed(&[
-        ([-12.0, 2.0], 35.0, 6.0, 2.0),
-        ([-12.0, 2.0], 35.0, 2.4, 6.0),
-        ([-12.0, 2.0], 35.0, 5.0, 2.0),
-        ([6.0, -4.0], 80.0, 6.0, 2.4),
-        ([6.0, -4.0], 80.0, 2.0, 5.0),
-        ([2.0, 8.0], 125.0, 6.0, 2.0),
-        ([2.0, 8.0], 125.0, 5.0, 2.0),
-        ([-6.0, -7.0], 160.0, 2.0, 6.0),
-        ([-6.0, -7.0], 160.0, 6.0, 2.4),
-        ([-6.0, -7.0], 160.0, 2.0, 5.0),
-        ([12.0, 5.0], 10.0, 6.0, 2.0),
-        ([12.0, 5.0], 10.0, 2.4, 6.0),
-        ([12.0, 5.0], 10.0, 5.0, 2.0),
-        ([-15.0, -6.0], 55.0, 2.0, 6.0),
-        ([-15.0, -6.0], 55.0, 6.0, 2.4),
-        ([-15.0, -6.0], 55.0, 2.0, 5.0),
-        ([0.0, 0.0], 145.0, 6.0, 2.0),
-        ([0.0, 0.0], 145.0, 2.4, 6.0),
-        ([0.0, 0.0], 145.0, 5.0, 2.0),
-    ]);
+    assert_two_contacts_listed(&UNEQUAL_PAIRS);
+}
+
+/// [`UNEQUAL_PAIRS`] (mid, direction, forces): see `unequal_presses_ten_mm_apart_are_two_contacts`.
+const UNEQUAL_PAIRS: [([f64; 2], f64, f64, f64); 19] = [
+    ([-12.0, 2.0], 35.0, 6.0, 2.0),
+    ([-12.0, 2.0], 35.0, 2.4, 6.0),
+    ([-12.0, 2.0], 35.0, 5.0, 2.0),
+    ([6.0, -4.0], 80.0, 6.0, 2.4),
+    ([6.0, -4.0], 80.0, 2.0, 5.0),
+    ([2.0, 8.0], 125.0, 6.0, 2.0),
+    ([2.0, 8.0], 125.0, 5.0, 2.0),
+    ([-6.0, -7.0], 160.0, 2.0, 6.0),
+    ([-6.0, -7.0], 160.0, 6.0, 2.4),
+    ([-6.0, -7.0], 160.0, 2.0, 5.0),
+    ([12.0, 5.0], 10.0, 6.0, 2.0),
+    ([12.0, 5.0], 10.0, 2.4, 6.0),
+    ([12.0, 5.0], 10.0, 5.0, 2.0),
+    ([-15.0, -6.0], 55.0, 2.0, 6.0),
+    ([-15.0, -6.0], 55.0, 6.0, 2.4),
+    ([-15.0, -6.0], 55.0, 2.0, 5.0),
+    ([0.0, 0.0], 145.0, 6.0, 2.0),
+    ([0.0, 0.0], 145.0, 2.4, 6.0),
+    ([0.0, 0.0], 145.0, 5.0, 2.0),
+];
+
+/// A contact split in two shares its force as the two presses do: each half takes its load's share in the pair's
+/// least-squares fit (`InverseModel::split_pair`). Cut at the bisector of the two points instead, the cell map gives
+/// the weaker press the stronger's blurred tail on its side: here the weaker's share of the pair's force was 0.033 off
+/// its true share (RMS; up to 0.063, 2 N beside 5 N read as 2.3 N), against 0.018 (up to 0.032) from the fit; at other
+/// noise seeds 0.033 against 0.015.
+#[test]
+fn unequal_presses_ten_mm_apart_share_their_force_as_pressed() {
+    let mut bench = Bench::new();
+    let mut errors = Vec::new();
+    for (k, &(mid, direction, fa, fb)) in UNEQUAL_PAIRS.iter().enumerate() {
+        let name = format!("{fa} N and {fb} N about {mid:?} at {direction} deg");
+        let (c, s) = (
+            f64::cos(f64::to_radians(direction)),
+            f64::sin(f64::to_radians(direction)),
+        );
+        let centres = [
+            [mid[0] - 5.0 * c, mid[1] - 5.0 * s],
+            [mid[0] + 5.0 * c, mid[1] + 5.0 * s],
+        ];
+        let scene = Scene {
+            contacts: vec![
+                Contact::sphere(4.0, centres[0], fa),
+                Contact::sphere(4.0, centres[1], fb),
+            ],
+            ..Scene::default()
+        };
+        let (reading, _) = bench.read(&name, CaseKind::TwoContacts, scene, 310 + k as u64);
+        let listed: Vec<([f64; 2], f64)> = reading.contacts().iter().map(|c| (c.centre_mm, c.force_n)).collect();
+        assert_eq!(listed.len(), 2, "{name}: listed {listed:.2?}");
+        let nearest = |at: [f64; 2]| {
+            listed
+                .iter()
+                .min_by(|a, b| {
+                    let da = (a.0[0] - at[0]).hypot(a.0[1] - at[1]);
+                    let db = (b.0[0] - at[0]).hypot(b.0[1] - at[1]);
+                    da.total_cmp(&db)
+                })
+                .map(|l| l.1)
+                .unwrap()
+        };
+        let (read_a, read_b) = (nearest(centres[0]), nearest(centres[1]));
+        let weaker_read = if fa < fb { read_a } else { read_b };
+        errors.push(weaker_read / (read_a + read_b) - fa.min(fb) / (fa + fb));
+    }
+    let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
+    assert!(rms <= 0.02, "the weaker's share is {rms:.3} off (RMS): {errors:.3?}");
 }
 
 /// A 20 mm edge 15 deg off the grid's rows, at the centre: its cell map peaks three columns and one row apart, and the

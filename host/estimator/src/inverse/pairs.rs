@@ -13,11 +13,14 @@ use super::{InverseModel, Observed, Region, Stage1, Traction, SUPPORT_SIGMAS};
 const PAIR_FIT_TOLERANCE_MM: f64 = 0.05;
 
 /// Two round loads against a line load, as [`InverseModel::pair_against_line`] finds them.
-struct PairAgainstLine {
+pub(super) struct PairAgainstLine {
     /// The two points, mm.
     points: [Point2; 2],
     /// The pair's explained sum of squares less the line's (see [`InverseModel::fit_line_to`]), mm^2.
     gain_mm2: f64,
+    /// The two loads' least-squares amplitudes at `points` (model newtons), when both are positive (else the pair is
+    /// one load at best).
+    amplitudes: Option<[f64; 2]>,
 }
 
 /// Puts `union` in the place of the first of `members` (ascending indices into `regions`) and removes the others.
@@ -61,7 +64,8 @@ impl InverseModel {
             energy: 0.0,
         });
         let mut dense = Vec::new();
-        let mut score = |p: &[f64; 4]| -> f64 {
+        // The explained sum of squares and, when both are positive, the two amplitudes.
+        let mut fit = |p: &[f64; 4]| -> (f64, Option<[f64; 2]>) {
             for (point, at) in points.iter_mut().zip([[p[0], p[1]], [p[2], p[3]]]) {
                 if point.at != Some(at) {
                     self.line_shape(at, 0.0, 0.0, line.spread_mm, &mut dense, &mut point.shape);
@@ -80,10 +84,10 @@ impl InverseModel {
             let det = g11 * g22 - g12 * g12;
             let (a1, a2) = ((g22 * c1 - g12 * c2) / det, (g11 * c2 - g12 * c1) / det);
             if det > 0.0 && a1 > 0.0 && a2 > 0.0 {
-                a1 * c1 + a2 * c2
+                (a1 * c1 + a2 * c2, Some([a1, a2]))
             } else {
                 let alone = |c: f64, g: f64| if c > 0.0 && g > 0.0 { c * c / g } else { 0.0 };
-                alone(c1, g11).max(alone(c2, g22))
+                (alone(c1, g11).max(alone(c2, g22)), None)
             }
         };
         let start = [
@@ -97,19 +101,21 @@ impl InverseModel {
             [0.25 * pitch; 4],
             |steps| steps.iter().all(|&s| s < PAIR_FIT_TOLERANCE_MM),
             |_| {},
-            &mut score,
+            &mut |p| fit(p).0,
         );
         Some(PairAgainstLine {
             points: [[p[0], p[1]], [p[2], p[3]]],
             gain_mm2: pair_score - line_score,
+            amplitudes: fit(&p).1,
         })
     }
 
     /// Two presses side by side read as one elongated contact when the cover's blur fills the dip between them (on
     /// the validation set, pairs 10 mm apart along oblique directions, which the cell map shows as one peak): a
-    /// contact is split in two when [`Self::two_presses`] says so, its two points lie at least
+    /// contact is split in two when [`Self::two_presses`] says so (both loads positive), its two points lie at least
     /// [`ROUND_EXTENT_PITCHES`] apart (closer, the map shows one round contact either way), and each half of its
-    /// cells (split at the points' bisector) clears the floor where it is.
+    /// cells (split at the points' bisector, carrying its load's share of the contact's force) clears the floor where
+    /// it is.
     pub(super) fn split_pair(
         &self,
         region: &Region,
@@ -117,7 +123,9 @@ impl InverseModel {
         noise_mm: f64,
         min_force_n: f64,
     ) -> Option<[Region; 2]> {
-        let [a, b] = self.two_presses(region, observed, noise_mm)?;
+        let pair = self.two_presses(region, observed, noise_mm)?;
+        let [a, b] = pair.points;
+        let amplitudes = pair.amplitudes?;
         let axis = [b[0] - a[0], b[1] - a[1]];
         let pitch = self.pad.pitch_x_mm().max(self.pad.pitch_y_mm());
         if axis[0].hypot(axis[1]) < ROUND_EXTENT_PITCHES * pitch {
@@ -131,19 +139,30 @@ impl InverseModel {
         if near_a.is_empty() || near_b.is_empty() {
             return None;
         }
-        let halves = [self.region(near_a), self.region(near_b)];
+        // Each half carries the share of the contact's force its load has in the pair's fit: the cells on one side of
+        // the bisector also hold the other press's blurred tail, which the fit gives back to it.
+        let total_n = region.force_vector_n[2];
+        let own_n = |cells: &[Traction]| cells.iter().map(|c| c.1[2]).sum::<f64>();
+        if !(own_n(&near_a) > 0.0 && own_n(&near_b) > 0.0) {
+            return None;
+        }
+        let halves = [(near_a, amplitudes[0]), (near_b, amplitudes[1])].map(|(cells, amplitude)| {
+            let factor = total_n * amplitude / (amplitudes[0] + amplitudes[1]) / own_n(&cells);
+            self.region(cells.into_iter().map(|(j, f)| (j, f.map(|t| t * factor))).collect())
+        });
         halves
             .iter()
             .all(|h| h.force_vector_n[2] >= min_force_n * h.floor_scale)
             .then_some(halves)
     }
 
-    /// Where the two presses are, when an elongated region is two of them rather than one long contact: two round
-    /// loads explain its displacements better than the best straight line load by more than [`SUPPORT_SIGMAS`]^2
-    /// times the noise at `noise_mm` (the 3 sigma rule of the dips' test; see [`Self::pair_against_line`]).
-    pub(super) fn two_presses(&self, region: &Region, observed: Observed, noise_mm: f64) -> Option<[Point2; 2]> {
+    /// The two presses (where they are and their loads), when an elongated region is two of them rather than one long
+    /// contact: two round loads explain its displacements better than the best straight line load by more than
+    /// [`SUPPORT_SIGMAS`]^2 times the noise at `noise_mm` (the 3 sigma rule of the dips' test; see
+    /// [`Self::pair_against_line`]).
+    pub(super) fn two_presses(&self, region: &Region, observed: Observed, noise_mm: f64) -> Option<PairAgainstLine> {
         let pair = self.pair_against_line(region, observed)?;
-        (pair.gain_mm2 > SUPPORT_SIGMAS * SUPPORT_SIGMAS * noise_mm * noise_mm).then_some(pair.points)
+        (pair.gain_mm2 > SUPPORT_SIGMAS * SUPPORT_SIGMAS * noise_mm * noise_mm).then_some(pair)
     }
 
     /// Whether the loads stage 1 finds at `noise_mm` (its loaded cells and their ring, every group taken as one
