@@ -240,7 +240,7 @@ impl InverseModel {
                                     && !r.cells.iter().any(|c| halved.contains(&c.0)))
                         })
                         .collect();
-                    let union = self.region(members.iter().flat_map(|&m| regions[m].cells.iter().copied()).collect());
+                    let union = self.union_of(regions, &members, observed.tractions);
                     if self
                         .pair_against_line(&union, observed)
                         .is_some_and(|pair| pair.gain_mm2 < -margin)
@@ -286,7 +286,7 @@ impl InverseModel {
             if members.len() < 2 {
                 continue;
             }
-            let union = self.region(members.iter().flat_map(|&m| regions[m].cells.iter().copied()).collect());
+            let union = self.union_of(regions, &members, observed.tractions);
             if self
                 .pair_against_line(&union, observed)
                 .is_some_and(|pair| pair.gain_mm2 < -margin)
@@ -296,6 +296,19 @@ impl InverseModel {
             }
         }
         regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
+    }
+
+    /// One region of the cells of `members` (indices into `regions`) with stage 2's `tractions` on them: the halves of
+    /// a contact [`Self::split_pair`] split carry their loads' shares of its force, and joined again they are the
+    /// contact the map shows.
+    fn union_of(&self, regions: &[Region], members: &[usize], tractions: &[f64]) -> Region {
+        self.region(
+            members
+                .iter()
+                .flat_map(|&m| regions[m].cells.iter())
+                .map(|&(j, _)| (j, [tractions[3 * j], tractions[3 * j + 1], tractions[3 * j + 2]]))
+                .collect(),
+        )
     }
 
     /// Whether the pressure midway between two regions' peaks is more than two round presses there can leave. A
