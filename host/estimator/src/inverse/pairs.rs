@@ -287,15 +287,45 @@ impl InverseModel {
                 continue;
             }
             let union = self.union_of(regions, &members, observed.tractions);
+            let centres: Vec<Point2> = members.iter().map(|&m| regions[m].centre_mm).collect();
             if self
                 .pair_against_line(&union, observed)
                 .is_some_and(|pair| pair.gain_mm2 < -margin)
+                && (members.len() < 3
+                    || self
+                        .loads_against_line(&union, &centres, observed)
+                        .is_some_and(|gain| gain < -margin))
             {
                 halved.retain(|j| !union.cells.iter().any(|c| c.0 == *j));
                 merge_into_first(regions, &members, union);
             }
         }
         regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
+    }
+
+    /// How much more of `union`'s displacements round loads at `centres` explain than the best straight line load
+    /// (see [`Self::pair_against_line`]): each load spread as the line's points are, their amplitudes by least
+    /// squares. `None` when `union` is not elongated or the loads' fit is singular.
+    fn loads_against_line(&self, union: &Region, centres: &[Point2], observed: Observed) -> Option<f64> {
+        let start = self.elongation(union)?;
+        let mut cells: Vec<usize> = union.cells.iter().map(|c| c.0).collect();
+        cells.sort_unstable();
+        let matched = self.matched_without(observed, &cells);
+        let (line, line_score) = self.fit_line_to(&matched, start);
+        let mut dense = Vec::new();
+        let shapes: Vec<Vec<(usize, f64)>> = centres
+            .iter()
+            .map(|&at| {
+                let mut shape = Vec::new();
+                self.line_shape(at, 0.0, 0.0, line.spread_mm, &mut dense, &mut shape);
+                shape
+            })
+            .collect();
+        let k = shapes.len();
+        let gram = nalgebra::DMatrix::from_fn(k, k, |i, j| self.matched_product(&shapes[i], &shapes[j]));
+        let correlations = nalgebra::DVector::from_fn(k, |i, _| shape_correlation(&shapes[i], &matched));
+        let amplitudes = gram.cholesky()?.solve(&correlations);
+        Some(amplitudes.dot(&correlations) - line_score)
     }
 
     /// One region of the cells of `members` (indices into `regions`) with stage 2's `tractions` on them: the halves of
