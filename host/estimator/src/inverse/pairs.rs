@@ -3,7 +3,7 @@
 
 use nusense_geometry::Point2;
 
-use super::lines::{pattern_search, shape_correlation};
+use super::lines::{pattern_search, shape_correlation, LineLoad};
 use super::moments::ROUND_EXTENT_PITCHES;
 use super::regions::group_of;
 use super::{InverseModel, Observed, Region, Stage1, Traction, SUPPORT_SIGMAS};
@@ -21,6 +21,14 @@ pub(super) struct PairAgainstLine {
     /// The two loads' least-squares amplitudes at `points` (model newtons), when both are positive (else the pair is
     /// one load at best).
     amplitudes: Option<[f64; 2]>,
+}
+
+/// A region's best straight line load, as [`InverseModel::best_line`] fits it: the matched filter's correlations it was
+/// fitted to, the line, and the sum of squares it explains (mm^2).
+struct BestLine {
+    matched: Vec<f64>,
+    line: LineLoad,
+    score: f64,
 }
 
 /// Puts `union` in the place of the first of `members` (ascending indices into `regions`) and removes the others.
@@ -41,11 +49,23 @@ impl InverseModel {
     /// 0.04-0.13 mm^2 more on all 15 and a 20 mm edge's line still 0.02-0.11 mm^2 more than a pair (the margin
     /// there is about 0.001 mm^2).
     fn pair_against_line(&self, region: &Region, observed: Observed) -> Option<PairAgainstLine> {
+        Some(self.pair_against(&self.best_line(region, observed)?))
+    }
+
+    /// The best straight line load of an elongated region (`None` when it is not elongated, see
+    /// [`Self::elongation`]), in the displacements less stage 2's other tractions (see [`Self::matched_without`]).
+    fn best_line(&self, region: &Region, observed: Observed) -> Option<BestLine> {
         let start = self.elongation(region)?;
         let mut cells: Vec<usize> = region.cells.iter().map(|c| c.0).collect();
         cells.sort_unstable();
         let matched = self.matched_without(observed, &cells);
-        let (line, line_score) = self.fit_line_to(&matched, start);
+        let (line, score) = self.fit_line_to(&matched, start);
+        Some(BestLine { matched, line, score })
+    }
+
+    /// [`Self::pair_against_line`] given the region's best line.
+    fn pair_against(&self, best: &BestLine) -> PairAgainstLine {
+        let (matched, line, line_score) = (&best.matched, best.line, best.score);
         let pitch = self.pad.pitch_x_mm().max(self.pad.pitch_y_mm());
         let (c, s) = (line.angle_deg.to_radians().cos(), line.angle_deg.to_radians().sin());
         let quarter = 0.25 * line.length_mm;
@@ -69,7 +89,7 @@ impl InverseModel {
             for (point, at) in points.iter_mut().zip([[p[0], p[1]], [p[2], p[3]]]) {
                 if point.at != Some(at) {
                     self.line_shape(at, 0.0, 0.0, line.spread_mm, &mut dense, &mut point.shape);
-                    point.correlation = shape_correlation(&point.shape, &matched);
+                    point.correlation = shape_correlation(&point.shape, matched);
                     point.energy = self.matched_product(&point.shape, &point.shape);
                     point.at = Some(at);
                 }
@@ -103,11 +123,11 @@ impl InverseModel {
             |_| {},
             &mut |p| fit(p).0,
         );
-        Some(PairAgainstLine {
+        PairAgainstLine {
             points: [[p[0], p[1]], [p[2], p[3]]],
             gain_mm2: pair_score - line_score,
             amplitudes: fit(&p).1,
-        })
+        }
     }
 
     /// Two presses side by side read as one elongated contact when the cover's blur fills the dip between them (on
@@ -287,14 +307,12 @@ impl InverseModel {
                 continue;
             }
             let union = self.union_of(regions, &members, observed.tractions);
+            let Some(best) = self.best_line(&union, observed) else {
+                continue;
+            };
             let centres: Vec<Point2> = members.iter().map(|&m| regions[m].centre_mm).collect();
-            if self
-                .pair_against_line(&union, observed)
-                .is_some_and(|pair| pair.gain_mm2 < -margin)
-                && (members.len() < 3
-                    || self
-                        .loads_against_line(&union, &centres, observed)
-                        .is_some_and(|gain| gain < -margin))
+            if self.pair_against(&best).gain_mm2 < -margin
+                && (members.len() < 3 || self.loads_against(&best, &centres).is_some_and(|gain| gain < -margin))
             {
                 halved.retain(|j| !union.cells.iter().any(|c| c.0 == *j));
                 merge_into_first(regions, &members, union);
@@ -303,15 +321,11 @@ impl InverseModel {
         regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
     }
 
-    /// How much more of `union`'s displacements round loads at `centres` explain than the best straight line load
-    /// (see [`Self::pair_against_line`]): each load spread as the line's points are, their amplitudes by least
-    /// squares. `None` when `union` is not elongated or the loads' fit is singular.
-    fn loads_against_line(&self, union: &Region, centres: &[Point2], observed: Observed) -> Option<f64> {
-        let start = self.elongation(union)?;
-        let mut cells: Vec<usize> = union.cells.iter().map(|c| c.0).collect();
-        cells.sort_unstable();
-        let matched = self.matched_without(observed, &cells);
-        let (line, line_score) = self.fit_line_to(&matched, start);
+    /// How much more of a region's displacements round loads at `centres` explain than its best straight line load
+    /// `best` (see [`Self::pair_against_line`]): each load spread as the line's points are, their amplitudes by least
+    /// squares. `None` when the loads' fit is singular.
+    fn loads_against(&self, best: &BestLine, centres: &[Point2]) -> Option<f64> {
+        let BestLine { matched, line, score } = best;
         let mut dense = Vec::new();
         let shapes: Vec<Vec<(usize, f64)>> = centres
             .iter()
@@ -323,9 +337,9 @@ impl InverseModel {
             .collect();
         let k = shapes.len();
         let gram = nalgebra::DMatrix::from_fn(k, k, |i, j| self.matched_product(&shapes[i], &shapes[j]));
-        let correlations = nalgebra::DVector::from_fn(k, |i, _| shape_correlation(&shapes[i], &matched));
+        let correlations = nalgebra::DVector::from_fn(k, |i, _| shape_correlation(&shapes[i], matched));
         let amplitudes = gram.cholesky()?.solve(&correlations);
-        Some(amplitudes.dot(&correlations) - line_score)
+        Some(amplitudes.dot(&correlations) - score)
     }
 
     /// One region of the cells of `members` (indices into `regions`) with stage 2's `tractions` on them: the halves of
