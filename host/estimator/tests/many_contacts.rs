@@ -1,5 +1,5 @@
-//! Three presses at once on the validation sensor (`nusense_sim::SensorModel::validation`, 1024x768): three contacts,
-//! each where its press is.
+//! Three and four presses at once on the validation sensor (`nusense_sim::SensorModel::validation`, 1024x768): as
+//! many contacts, each where its press is and with its force.
 
 use image::RgbImage;
 use nusense_estimator::{Estimator, Mode, SensorConfig};
@@ -14,14 +14,16 @@ fn render(renderer: &Renderer, scene: &Scene, seed: u64) -> RgbImage {
         .0
 }
 
-/// Three 5 mm spheres of `force` each at `presses` (mm), read by the inverse estimator on the validation sensor: `None`
-/// when they are listed as three contacts each within 1 mm of its press, else what was listed.
-fn three_presses_misread(
+/// 5 mm spheres of `force` each at `presses` (mm), read by the inverse estimator on the validation sensor: `None` when
+/// they are listed as as many contacts, each within 1 mm of its press and, at `scale` N of force per N the model
+/// reads, within 20 % of `force` (the issue's bound for two contacts), else what was listed (centres and forces).
+fn presses_misread(
     renderer: &Renderer,
     estimator: &mut Estimator,
-    presses: [[f64; 2]; 3],
+    presses: &[[f64; 2]],
     force: f64,
-) -> Option<Vec<[f64; 2]>> {
+    scale: f64,
+) -> Option<Vec<([f64; 2], f64)>> {
     let scene = Scene {
         contacts: presses.iter().map(|&at| Contact::sphere(5.0, at, force)).collect(),
         ..Scene::default()
@@ -29,11 +31,32 @@ fn three_presses_misread(
     let reading = estimator
         .estimate(&render(renderer, &scene, 950))
         .expect("the frame is measurable");
-    let listed: Vec<[f64; 2]> = reading.contacts().iter().map(|c| c.centre_mm).collect();
-    let each_found = presses
+    let listed: Vec<([f64; 2], f64)> = reading
+        .contacts()
         .iter()
-        .all(|p| listed.iter().any(|c| (c[0] - p[0]).hypot(c[1] - p[1]) < 1.0));
-    (listed.len() != 3 || !each_found).then_some(listed)
+        .map(|c| (c.centre_mm, c.force_n * scale))
+        .collect();
+    let each_found = presses.iter().all(|p| {
+        listed
+            .iter()
+            .any(|(c, f)| (c[0] - p[0]).hypot(c[1] - p[1]) < 1.0 && (f - force).abs() <= 0.2 * force)
+    });
+    (listed.len() != presses.len() || !each_found).then_some(listed)
+}
+
+/// N of force per N the model reads, from one 5 mm sphere of `force` at the pad's centre (seed 949), as a user
+/// calibrates.
+fn force_scale(renderer: &Renderer, estimator: &mut Estimator, force: f64) -> f64 {
+    let reading = estimator
+        .estimate(&render(
+            renderer,
+            &Scene::with_contact(Contact::sphere(5.0, [0.0, 0.0], force)),
+            949,
+        ))
+        .expect("the frame is measurable");
+    let read = reading.force_n();
+    assert!(read > 0.0, "a {force} N press at the centre is a contact");
+    force / read
 }
 
 fn validation_sensor() -> (Renderer, Estimator) {
@@ -52,37 +75,57 @@ fn validation_sensor() -> (Renderer, Estimator) {
 fn three_presses_in_a_row_are_not_joined_into_a_line() {
     let (renderer, mut estimator) = validation_sensor();
     for force in [2.0, 8.0] {
-        let misread = three_presses_misread(
+        let scale = force_scale(&renderer, &mut estimator, force);
+        let misread = presses_misread(
             &renderer,
             &mut estimator,
-            [[-12.0, -8.0], [0.0, 0.0], [12.0, 8.0]],
+            &[[-12.0, -8.0], [0.0, 0.0], [12.0, 8.0]],
             force,
+            scale,
         );
         assert!(misread.is_none(), "{force} N each: listed {misread:.1?}");
     }
 }
 
 /// Three 5 mm spheres of 2, 4 or 8 N each, 12-24 mm apart, in a row, along a diagonal and in a triangle: each listed
-/// as a contact within 1 mm of its press. Three presses move most of the corners, so their scatter about the motion,
-/// which the contact test takes for the noise, grows with the load (24-113 um, a rest frame's about 1.5 um): 8 of these
-/// 12 scenes read no contact at all (a triangle of three 8 N presses among them), one row reads as one contact, its
-/// line, and three scenes as their three presses (seed 950).
+/// as a contact within 1 mm of its press, and within 20 % of its force at the scale a lone press at the centre gives.
+/// Three presses move most of the corners, so their scatter about the motion, which the contact test takes for the
+/// noise, grows with the load (24-113 um, a rest frame's about 1.5 um): 8 of these 12 scenes read no contact at all
+/// (a triangle of three 8 N presses among them) until the test judged several compact loads at once, and the rows
+/// read as one contact between their presses until `join_cut_lines` asked round loads at the parts' centres too
+/// (seed 950).
 #[test]
-#[ignore = "known failure: 8 of 12 scenes of three presses read no contact (the test's noise is their own far \
-            field), one row one contact"]
 fn three_presses_at_once_are_three_contacts() {
     let (renderer, mut estimator) = validation_sensor();
     let mut failures = Vec::new();
     for force in [2.0, 4.0, 8.0] {
+        let scale = force_scale(&renderer, &mut estimator, force);
         for (arrangement, presses) in [
             ("a diagonal row", [[-12.0, -8.0], [0.0, 0.0], [12.0, 8.0]]),
             ("a row 12 mm apart", [[-12.0, 2.0], [0.0, 2.0], [12.0, 2.0]]),
             ("a row 16 mm apart", [[-16.0, 2.0], [0.0, 2.0], [16.0, 2.0]]),
             ("a triangle", [[-12.0, -8.0], [12.0, -8.0], [0.0, 9.0]]),
         ] {
-            if let Some(listed) = three_presses_misread(&renderer, &mut estimator, presses, force) {
-                failures.push(format!("{force} N each in {arrangement}: listed {listed:.1?}"));
+            if let Some(listed) = presses_misread(&renderer, &mut estimator, &presses, force, scale) {
+                failures.push(format!("{force} N each in {arrangement}: listed {listed:.2?}"));
             }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// Four 5 mm spheres of 2, 4 or 8 N each at the corners of a 20 x 16 mm rectangle (as four fingertips): four contacts,
+/// each within 1 mm and 20 % of its press. No contact at all was read at any of the three forces before the contact
+/// test judged four compact loads at once.
+#[test]
+fn four_presses_in_a_square_are_four_contacts() {
+    let (renderer, mut estimator) = validation_sensor();
+    let mut failures = Vec::new();
+    for force in [2.0, 4.0, 8.0] {
+        let scale = force_scale(&renderer, &mut estimator, force);
+        let presses = [[-10.0, -8.0], [10.0, -8.0], [-10.0, 8.0], [10.0, 8.0]];
+        if let Some(listed) = presses_misread(&renderer, &mut estimator, &presses, force, scale) {
+            failures.push(format!("{force} N each: listed {listed:.2?}"));
         }
     }
     assert!(failures.is_empty(), "{failures:#?}");
