@@ -33,9 +33,11 @@
 //! there scatter less than half as much; when none clears it and the test finds no contact, at the scatter about the
 //! motion and one compact load (which explains such a load's far field). A press pushed sideways moves even the far
 //! corners; when that compact load explains most of the scatter the test used, the test is taken at the scatter it
-//! leaves (a rest frame's errors, spread over the pad, it barely explains). The corners that a change of light alone
-//! moves (glare: found once per rest frame, see the estimator) are left out of the test. The detection floor in N
-//! follows from the same threshold: the force of a press at the pad's centre whose expected E equals it.
+//! leaves (a rest frame's errors, spread over the pad, it barely explains). Several presses at once move every corner
+//! and no one load explains their far fields: up to four compact loads at once do, judged at a stricter share (the
+//! frame picks their places). The corners that a change of light alone moves (glare: found once per rest frame, see
+//! the estimator) are left out of the test. The detection floor in N follows from the same threshold: the force of a
+//! press at the pad's centre whose expected E equals it.
 //!
 //! **Stage 2, only when the test says contact.** Friction acts only where something touches, and pressure only
 //! pushes: the tractions are re-estimated on the cells where stage 1 finds pressure above its own noise (and a ring
