@@ -24,8 +24,28 @@ fn presses_misread(
     force: f64,
     scale: f64,
 ) -> Option<Vec<([f64; 2], f64)>> {
+    pushed_presses_misread(renderer, estimator, presses, force, [0.0, 0.0], 1.0, scale)
+}
+
+/// [`presses_misread`] with each press pushed sideways by `push` (N, x and y), each contact within `within_mm` of its
+/// press.
+fn pushed_presses_misread(
+    renderer: &Renderer,
+    estimator: &mut Estimator,
+    presses: &[[f64; 2]],
+    force: f64,
+    push: [f64; 2],
+    within_mm: f64,
+    scale: f64,
+) -> Option<Vec<([f64; 2], f64)>> {
     let scene = Scene {
-        contacts: presses.iter().map(|&at| Contact::sphere(5.0, at, force)).collect(),
+        contacts: presses
+            .iter()
+            .map(|&at| Contact {
+                tangential_force_n: push,
+                ..Contact::sphere(5.0, at, force)
+            })
+            .collect(),
         ..Scene::default()
     };
     let reading = estimator
@@ -39,7 +59,7 @@ fn presses_misread(
     let each_found = presses.iter().all(|p| {
         listed
             .iter()
-            .any(|(c, f)| (c[0] - p[0]).hypot(c[1] - p[1]) < 1.0 && (f - force).abs() <= 0.2 * force)
+            .any(|(c, f)| (c[0] - p[0]).hypot(c[1] - p[1]) < within_mm && (f - force).abs() <= 0.2 * force)
     });
     (listed.len() != presses.len() || !each_found).then_some(listed)
 }
@@ -126,6 +146,29 @@ fn four_presses_in_a_square_are_four_contacts() {
         let presses = [[-10.0, -8.0], [10.0, -8.0], [-10.0, 8.0], [10.0, 8.0]];
         if let Some(listed) = presses_misread(&renderer, &mut estimator, &presses, force, scale) {
             failures.push(format!("{force} N each: listed {listed:.2?}"));
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// Three 5 mm spheres of 4 N each, in a row 12 mm apart and in a triangle, each pushed sideways by a quarter of its
+/// load the same way (as fingers that lift what they hold): three contacts, each within 1.5 mm (a pushed press's
+/// pressure reads behind its push, see `elastic.push_centre_shift_mm`) and 20 % of its press. The push moves every
+/// corner further: with pressure alone on the compact loads, both read no contact; each load carries its own
+/// shear, spread over its block.
+#[test]
+fn three_pushed_presses_are_three_contacts() {
+    let (renderer, mut estimator) = validation_sensor();
+    let force = 4.0;
+    let scale = force_scale(&renderer, &mut estimator, force);
+    let mut failures = Vec::new();
+    for (arrangement, presses) in [
+        ("a row 12 mm apart", [[-12.0, 2.0], [0.0, 2.0], [12.0, 2.0]]),
+        ("a triangle", [[-12.0, -8.0], [12.0, -8.0], [0.0, 9.0]]),
+    ] {
+        let push = [0.0, 0.25 * force];
+        if let Some(listed) = pushed_presses_misread(&renderer, &mut estimator, &presses, force, push, 1.5, scale) {
+            failures.push(format!("{arrangement}: listed {listed:.2?}"));
         }
     }
     assert!(failures.is_empty(), "{failures:#?}");
