@@ -9,8 +9,9 @@
 //! centre), 2 edges of 20 mm at any angle and 2 rest frames
 //! (other noise). Then the validation sensor itself under conditions: the camera moved after the rest frame (roll up
 //! to 5 deg, tilt 1 deg, shift 1.5 mm), uneven LEDs (each side 60-130 %), light (0.6-1 N) and heavy (10-20 N)
-//! presses, presses on the pattern's outer cells, a damaged pad and dirt on the glass in the rest frame too, and two
-//! presses 12-18 mm apart.
+//! presses, presses on the pattern's outer cells, a damaged pad and dirt on the glass in the rest frame too, two
+//! presses 12-18 mm apart, and three or four presses at once (5 mm spheres of 2-7 N each, anywhere within 36 x 24 mm
+//! of the centre, at least 12 mm apart).
 //!
 //! Per row: frames the estimator refused (a typed error), presses it missed, rest frames it read as a contact, presses
 //! read as more than one contact, the strongest contact's distance from the press (RMS and worst), the model's
@@ -39,8 +40,8 @@ enum Truth {
     Press(Point2, f64),
     /// One edge: its direction (degrees, [0, 180)).
     Edge(f64),
-    /// Two presses, each (centre, force): both must be listed.
-    Two([(Point2, f64); 2]),
+    /// Two presses or more, each (centre, force): every one must be listed.
+    Several(Vec<(Point2, f64)>),
 }
 
 struct Frame {
@@ -64,6 +65,8 @@ enum Condition {
     /// Dirt on the glass in the rest frame already.
     Dirt,
     TwoPresses,
+    /// This many presses at once, at least 12 mm apart.
+    SeveralPresses(usize),
 }
 
 struct Row {
@@ -76,7 +79,8 @@ struct Row {
     location_mm: Vec<f64>,
     force_ratio: Vec<f64>,
     edge_deg: Vec<Option<f64>>,
-    pairs_listed: (usize, usize),
+    /// Frames of several presses with every press listed (within 2 mm), and frames of several presses.
+    all_listed: (usize, usize),
 }
 
 impl Row {
@@ -91,7 +95,7 @@ impl Row {
             location_mm: Vec::new(),
             force_ratio: Vec::new(),
             edge_deg: Vec::new(),
-            pairs_listed: (0, 0),
+            all_listed: (0, 0),
         }
     }
 
@@ -102,9 +106,9 @@ impl Row {
             self.refused += 1;
             return Ok(());
         };
-        match frame.truth {
+        match &frame.truth {
             Truth::Rest => self.phantoms += usize::from(reading.touch.is_some()),
-            Truth::Press(at, force) => match reading.contact_mm() {
+            &Truth::Press(at, force) => match reading.contact_mm() {
                 None => self.missed += 1,
                 Some(found) => {
                     self.location_mm.push(distance(found, at));
@@ -112,17 +116,17 @@ impl Row {
                     self.split += usize::from(reading.contacts().len() > 1);
                 }
             },
-            Truth::Edge(angle) => match reading.contact_mm() {
+            &Truth::Edge(angle) => match reading.contact_mm() {
                 None => self.missed += 1,
                 Some(_) => self
                     .edge_deg
                     .push(reading.edge_angle_deg().map(|found| edge_angle_error_deg(found, angle))),
             },
-            Truth::Two(presses) => {
+            Truth::Several(presses) => {
                 let listed = reading.contacts();
-                let found = |(at, _): (Point2, f64)| listed.iter().any(|c| distance(c.centre_mm, at) < 2.0);
-                self.pairs_listed.1 += 1;
-                self.pairs_listed.0 += usize::from(presses.into_iter().all(found));
+                let found = |&(at, _): &(Point2, f64)| listed.iter().any(|c| distance(c.centre_mm, at) < 2.0);
+                self.all_listed.1 += 1;
+                self.all_listed.0 += usize::from(presses.iter().all(found));
             }
         }
         Ok(())
@@ -139,8 +143,8 @@ impl Row {
             .iter()
             .map(|e| e.map_or("none".into(), |e| format!("{e:.1}")))
             .collect();
-        let pairs = if self.pairs_listed.1 > 0 {
-            format!("{} of {}", self.pairs_listed.0, self.pairs_listed.1)
+        let several = if self.all_listed.1 > 0 {
+            format!("{} of {}", self.all_listed.0, self.all_listed.1)
         } else {
             String::new()
         };
@@ -159,7 +163,7 @@ impl Row {
             format!("{median:.3} / {:.1} %", 100.0 * rms(&scatter).unwrap_or(f64::NAN))
         };
         format!(
-            "| {} | {} | {} | {} | {} | {} | {located} | {force} | {} | {pairs} |",
+            "| {} | {} | {} | {} | {} | {} | {located} | {force} | {} | {several} |",
             self.name,
             self.frames,
             self.refused,
@@ -283,7 +287,26 @@ fn frames(condition: &Condition, base: &Scene, rng: &mut ChaCha8Rng) -> Vec<Fram
                 Frame {
                     scene,
                     leds: NOMINAL,
-                    truth: Truth::Two([(a, fa), (b, fb)]),
+                    truth: Truth::Several(vec![(a, fa), (b, fb)]),
+                }
+            })
+            .collect(),
+        Condition::SeveralPresses(count) => (0..6)
+            .map(|_| {
+                let mut presses: Vec<(Point2, f64)> = Vec::with_capacity(*count);
+                while presses.len() < *count {
+                    let at = [rng.gen_range(-18.0..18.0), rng.gen_range(-12.0..12.0)];
+                    if presses.iter().all(|&(other, _)| distance(other, at) >= 12.0) {
+                        presses.push((at, rng.gen_range(2.0..7.0)));
+                    }
+                }
+                let scene = presses.iter().fold(base.clone(), |scene, &(at, force)| {
+                    with_contact(&scene, Contact::sphere(5.0, at, force))
+                });
+                Frame {
+                    scene,
+                    leds: NOMINAL,
+                    truth: Truth::Several(presses),
                 }
             })
             .collect(),
@@ -340,6 +363,8 @@ fn variants() -> Vec<(String, SensorModel, Condition)> {
             ("pad damaged before the rest frame", Condition::Damaged),
             ("dirt on the glass before the rest frame", Condition::Dirt),
             ("two presses 12-18 mm apart", Condition::TwoPresses),
+            ("three presses, 12 mm apart or more", Condition::SeveralPresses(3)),
+            ("four presses, 12 mm apart or more", Condition::SeveralPresses(4)),
         ]
         .map(|(name, condition)| (name.to_string(), validation(), condition)),
     );
@@ -351,7 +376,7 @@ fn main() -> Result<(), Error> {
     let started = std::time::Instant::now();
     println!(
         "| sensor or condition | frames | refused | missed | rest read as contact | press listed in parts | \
-         location RMS / worst mm | model N over true: median / scatter | edge direction errors, deg | both of two listed |"
+         location RMS / worst mm | model N over true: median / scatter | edge direction errors, deg | all of several listed |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
     for (index, (name, sensor, condition)) in variants().into_iter().enumerate() {
