@@ -414,18 +414,12 @@ impl InverseModel {
         // the compact fit leaves. One compact load explains little of a rest frame's errors, spread over the pad: at
         // most 37 % of the squared scatter over the validation sets' rest frames and rest frames under camera motion
         // and uneven light.
-        let compact = compact.or_else(|| self.compact_scatter(stage, d, valid).map(|c| c.floored(floor_mm)));
-        let unexplained = 1.0 - FAR_FIELD_VARIANCE_SHARE;
-        if let Some(compact) =
-            compact.filter(|c| c.median_mm * c.median_mm < unexplained * noise.median_mm * noise.median_mm)
-        {
-            let rescued = self.test_estimated(stage, compact);
-            if rescued.contact {
-                if near.is_empty() {
-                    near = self.near_loads(stage, compact.median_mm, MEASURED_NOISE_REACH_CELLS);
-                }
-                return (rescued, near);
+        let compact = compact.or_else(|| self.compact_scatter(stage, d, valid));
+        if let Some((rescued, left)) = self.rescued_at(stage, compact, noise, FAR_FIELD_VARIANCE_SHARE, floor_mm) {
+            if near.is_empty() {
+                near = self.near_loads(stage, left.median_mm, MEASURED_NOISE_REACH_CELLS);
             }
+            return (rescued, near);
         }
         // A long load moves most of the corners and no compact one explains its far field: a 30 mm edge at 135 deg
         // through (0.82, 1.82) mm on the validation sensor scattered them by 17, 28 and 46 um at 3, 5 and 8 N (a rest
@@ -450,26 +444,15 @@ impl InverseModel {
                 // large), and the line's pressure, a few dozen unknowns against 2 per corner, absorbs little of the
                 // noise (that edge: 91 % explained over every corner; 68 of 1440 rest frames of the same three sensors,
                 // with camera moves, uneven light and JPEG, came this far, and their line loads explained at most 50 %).
-                let unexplained = 1.0 - LINE_FAR_FIELD_VARIANCE_SHARE;
-                if let Some(line_load) = self
-                    .scatter_about_load(
-                        FittedLoad {
-                            cells: &support,
-                            axes: &[2],
-                            shared_shear: &[],
-                        },
-                        &is_along,
-                        Judged::FarOrEveryCorner,
-                        d,
-                        valid,
-                    )
-                    .map(|s| s.floored(floor_mm))
-                    .filter(|s| s.median_mm * s.median_mm < unexplained * noise.median_mm * noise.median_mm)
+                let line_load = FittedLoad {
+                    cells: &support,
+                    axes: &[2],
+                    shared_shear: &[],
+                };
+                let left = self.scatter_about_load(line_load, &is_along, Judged::FarOrEveryCorner, d, valid);
+                if let Some((rescued, _)) = self.rescued_at(stage, left, noise, LINE_FAR_FIELD_VARIANCE_SHARE, floor_mm)
                 {
-                    let rescued = self.test_estimated(stage, line_load);
-                    if rescued.contact {
-                        return (rescued, along);
-                    }
+                    return (rescued, along);
                 }
             }
         }
@@ -484,32 +467,40 @@ impl InverseModel {
         // frames (1440 of three sensors, with camera moves, uneven light and JPEG; 4000 of the daemon's simulated
         // sensor; p99 44 %). Every frame with no contact comes this far, about 0.2 ms of its time.
         if let Some(loads) = self.compact_loads(stage, MAX_COMPACT_LOADS) {
-            let unexplained = 1.0 - LINE_FAR_FIELD_VARIANCE_SHARE;
-            if let Some(left) = self
-                .scatter_about_load(
-                    FittedLoad {
-                        cells: &loads.support(),
-                        axes: &[2],
-                        shared_shear: &loads.blocks,
-                    },
-                    &loads.near,
-                    Judged::FarOrEveryCorner,
-                    d,
-                    valid,
-                )
-                .map(|s| s.floored(floor_mm))
-                .filter(|s| s.median_mm * s.median_mm < unexplained * noise.median_mm * noise.median_mm)
+            let fitted = FittedLoad {
+                cells: &loads.support(),
+                axes: &[2],
+                shared_shear: &loads.blocks,
+            };
+            let left = self.scatter_about_load(fitted, &loads.near, Judged::FarOrEveryCorner, d, valid);
+            if let Some((rescued, left)) = self.rescued_at(stage, left, noise, LINE_FAR_FIELD_VARIANCE_SHARE, floor_mm)
             {
-                let rescued = self.test_estimated(stage, left);
-                if rescued.contact {
-                    return (
-                        rescued,
-                        self.near_loads(stage, left.median_mm, MEASURED_NOISE_REACH_CELLS),
-                    );
-                }
+                return (
+                    rescued,
+                    self.near_loads(stage, left.median_mm, MEASURED_NOISE_REACH_CELLS),
+                );
             }
         }
         (outcome, near)
+    }
+
+    /// The contact test's rescue by a load's fit: taken at `left` (the scatter the fit leaves, floored at `floor_mm`)
+    /// when the fit explains more than `share` of the squared scatter the test's `noise` came from, and kept, with
+    /// that scatter, when it then finds a contact.
+    fn rescued_at(
+        &self,
+        stage: &Stage1,
+        left: Option<NoiseEstimate>,
+        noise: NoiseEstimate,
+        share: f64,
+        floor_mm: f64,
+    ) -> Option<(TestOutcome, NoiseEstimate)> {
+        let left = left?.floored(floor_mm);
+        if !(left.median_mm * left.median_mm < (1.0 - share) * noise.median_mm * noise.median_mm) {
+            return None;
+        }
+        let rescued = self.test_estimated(stage, left);
+        rescued.contact.then_some((rescued, left))
     }
 
     /// The scatter about the motion-only fit ([`Self::rigid_scatter_mm`]) of the corners `valid` but those `near`
