@@ -23,6 +23,17 @@ pub(super) struct PairAgainstLine {
     amplitudes: Option<[f64; 2]>,
 }
 
+/// How round loads at the contacts' own centres must compare with the line that joins three contacts or more (see
+/// [`InverseModel::joined_as_line`]).
+#[derive(Clone, Copy)]
+enum RoundLoads {
+    /// The line explains more than they do by the margin (`join_long_groups`, which has no other evidence of a line).
+    WorseThanLine,
+    /// They do not explain more than the line by the margin (`join_cut_lines`, whose gap test already asks for the
+    /// line's pressure between the parts).
+    NotBetterThanLine,
+}
+
 /// A region's best straight line load, as [`InverseModel::best_line`] fits it: the matched filter's correlations it was
 /// fitted to, the line, and the sum of squares it explains (mm^2).
 struct BestLine {
@@ -266,13 +277,8 @@ impl InverseModel {
                                     && !r.cells.iter().any(|c| halved.contains(&c.0)))
                         })
                         .collect();
-                    let union = self.union_of(regions, &members, observed.tractions);
-                    let Some(best) = self.best_line(&union, observed) else {
-                        continue;
-                    };
-                    let centres: Vec<Point2> = members.iter().map(|&m| regions[m].centre_mm).collect();
-                    if self.pair_against(&best).gain_mm2 < -margin
-                        && (members.len() < 3 || !self.loads_against(&best, &centres).is_some_and(|gain| gain > margin))
+                    if let Some(union) =
+                        self.joined_as_line(regions, &members, observed, margin, RoundLoads::NotBetterThanLine)
                     {
                         joined = Some((members, union));
                         break 'pairs;
@@ -315,19 +321,42 @@ impl InverseModel {
             if members.len() < 2 {
                 continue;
             }
-            let union = self.union_of(regions, &members, observed.tractions);
-            let Some(best) = self.best_line(&union, observed) else {
-                continue;
-            };
-            let centres: Vec<Point2> = members.iter().map(|&m| regions[m].centre_mm).collect();
-            if self.pair_against(&best).gain_mm2 < -margin
-                && (members.len() < 3 || self.loads_against(&best, &centres).is_some_and(|gain| gain < -margin))
-            {
+            if let Some(union) = self.joined_as_line(regions, &members, observed, margin, RoundLoads::WorseThanLine) {
                 halved.retain(|j| !union.cells.iter().any(|c| c.0 == *j));
                 merge_into_first(regions, &members, union);
             }
         }
         regions.sort_by(|a, b| b.force_vector_n[2].total_cmp(&a.force_vector_n[2]));
+    }
+
+    /// The union of `members` (of `regions`) as one contact, when a straight line load explains it better than two
+    /// round loads by more than `margin` (mm^2) and, for three members or more, stands against round loads at the
+    /// members' own centres as `round_loads` asks ([`Self::loads_against`]); `None` otherwise.
+    fn joined_as_line(
+        &self,
+        regions: &[Region],
+        members: &[usize],
+        observed: Observed,
+        margin: f64,
+        round_loads: RoundLoads,
+    ) -> Option<Region> {
+        let union = self.union_of(regions, members, observed.tractions);
+        let best = self.best_line(&union, observed)?;
+        if !(self.pair_against(&best).gain_mm2 < -margin) {
+            return None;
+        }
+        if members.len() >= 3 {
+            let centres: Vec<Point2> = members.iter().map(|&m| regions[m].centre_mm).collect();
+            let gain = self.loads_against(&best, &centres);
+            let stands = match round_loads {
+                RoundLoads::WorseThanLine => gain.is_some_and(|gain| gain < -margin),
+                RoundLoads::NotBetterThanLine => !gain.is_some_and(|gain| gain > margin),
+            };
+            if !stands {
+                return None;
+            }
+        }
+        Some(union)
     }
 
     /// How much more of a region's displacements round loads at `centres` explain than its best straight line load
