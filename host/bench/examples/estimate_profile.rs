@@ -19,6 +19,13 @@
 //!   other modes and the renderer in the validation bench. With `after-fast` it writes the 64 MB and then runs fast mode
 //!   on the frame before timing MODE on it, untimed, as the validation bench does when it runs fast and inverse:
 //!   the frame's pattern is then in the caches and the model's matrices are not.
+//! - `... -- rest WxH FRAMES PASSES` times inverse mode on frames with no contact: the validation sensor at that size
+//!   at rest under uneven light (each LED's current off nominal by up to 8 %, its own seed per frame; JPEG q85, decoded
+//!   once), each frame estimated once per pass, and prints how long the estimator (its model with it) took to build,
+//!   the per-frame CPU ms's median and p90 per pass and how many frames read a contact (none should). Such frames run
+//!   every rescue of the contact test, the costliest path a frame with no contact takes; two builds run one after the
+//!   other this way give its speed ratio. The frames are rendered once and kept in `$NUSENSE_PROFILE_CACHE` (else the
+//!   temporary folder).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -105,6 +112,94 @@ fn run(mode: Mode, size: (u32, u32), repeats: usize, decode_scale: Option<Scale>
         first.contact_mm(),
         first.force_n(),
     );
+    Ok(())
+}
+
+/// LED currents off nominal by up to 8 % (the validation set's rest frames' drift), one set per frame `k`: uneven
+/// light, which moves the corners the way no camera motion does.
+fn uneven_leds(k: u64) -> [f32; 4] {
+    let offsets = [
+        [-0.08, 0.05, 0.02, -0.03],
+        [0.06, -0.04, -0.07, 0.08],
+        [0.0, 0.08, -0.05, 0.03],
+    ];
+    let o = offsets[(k % 3) as usize];
+    std::array::from_fn(|i| NOMINAL_LED_CURRENT_MA * (1.0 + o[i]))
+}
+
+/// The validation sensor's rest frame and `frames` frames at rest under uneven light (see [`uneven_leds`]), at `size`,
+/// as JPEG (q85), rendered once and kept in `cache`.
+fn rest_frames(size: (u32, u32), frames: usize, cache: &std::path::Path) -> Result<(Vec<u8>, Vec<Vec<u8>>), Error> {
+    let path = |name: String| cache.join(format!("{}x{}-{name}.jpg", size.0, size.1));
+    let renderer = ValidationRenderer::new(size)?;
+    let reference = match std::fs::read(path("rest".into())) {
+        Ok(bytes) => bytes,
+        Err(_) => encode(&renderer.reference(7)?),
+    };
+    std::fs::create_dir_all(cache)?;
+    std::fs::write(path("rest".into()), &reference)?;
+    let mut uneven = Vec::with_capacity(frames);
+    for k in 0..frames as u64 {
+        let name = format!("rest-uneven-{k}");
+        let bytes = match std::fs::read(path(name.clone())) {
+            Ok(bytes) => bytes,
+            Err(_) => {
+                let case = Case {
+                    name: name.clone(),
+                    kind: CaseKind::Rest,
+                    size,
+                    scene: Scene::rest(),
+                    camera_motion: None,
+                    led_currents_ma: uneven_leds(k),
+                    seed: 1000 + k,
+                };
+                let bytes = encode(&renderer.render(&case)?.0);
+                std::fs::write(path(name), &bytes)?;
+                bytes
+            }
+        };
+        uneven.push(bytes);
+    }
+    Ok((reference, uneven))
+}
+
+fn rest(size: (u32, u32), frames: usize, passes: usize) -> Result<(), Error> {
+    let cache = std::env::var_os("NUSENSE_PROFILE_CACHE").map_or_else(std::env::temp_dir, Into::into);
+    let (reference, uneven) = rest_frames(size, frames, &cache)?;
+    let reference = image::load_from_memory(&reference)?.to_rgb8();
+    let frames = uneven
+        .iter()
+        .map(|bytes| Ok(image::load_from_memory(bytes)?.to_rgb8()))
+        .collect::<Result<Vec<_>, Error>>()?;
+    let started = (thread_cpu_s(), Instant::now());
+    let mut estimator = Estimator::new(SensorConfig::default(), Mode::Inverse, &reference)?;
+    println!(
+        "inverse rest {}x{}: estimator built (the model with it) in {:.1} ms CPU, {:.1} ms wall",
+        size.0,
+        size.1,
+        (thread_cpu_s() - started.0) * 1e3,
+        started.1.elapsed().as_secs_f64() * 1e3
+    );
+    for pass in 0..passes {
+        let mut cpu_ms = Vec::with_capacity(frames.len());
+        let mut contacts = 0;
+        for frame in &frames {
+            let started = thread_cpu_s();
+            let reading = estimator.estimate(frame);
+            cpu_ms.push((thread_cpu_s() - started) * 1e3);
+            contacts += usize::from(reading.as_ref().is_ok_and(|r| r.is_contact()));
+            std::hint::black_box(reading.ok());
+        }
+        cpu_ms.sort_by(f64::total_cmp);
+        println!(
+            "inverse rest {}x{} pass {pass}: {} frames, CPU ms per frame median {:.3}, p90 {:.3}; {contacts} read a contact",
+            size.0,
+            size.1,
+            cpu_ms.len(),
+            cpu_ms[cpu_ms.len() / 2],
+            cpu_ms[cpu_ms.len() * 9 / 10],
+        );
+    }
     Ok(())
 }
 
@@ -263,6 +358,10 @@ fn main() -> Result<(), Error> {
             let scale = args.get(4).map(|s| s.parse::<Scale>()).transpose()?;
             run(mode, (w.parse()?, h.parse()?), repeats, scale)
         }
+        Some("rest") if args.len() == 4 => {
+            let (w, h) = args[1].split_once('x').ok_or("size is WxH")?;
+            rest((w.parse()?, h.parse()?), args[2].parse()?, args[3].parse()?)
+        }
         Some("dump") if args.len() == 3 || args.len() == 4 => {
             dump(&args[1], std::path::Path::new(&args[2]), profile_arg(args.get(3))?)
         }
@@ -279,7 +378,8 @@ fn main() -> Result<(), Error> {
             },
         ),
         _ => Err(
-            "usage: estimate_profile run MODE WxH REPEATS [DECODE_SCALE] | dump OUT CACHE_DIR [quick|full] \
+            "usage: estimate_profile run MODE WxH REPEATS [DECODE_SCALE] | rest WxH FRAMES PASSES \
+             | dump OUT CACHE_DIR [quick|full] \
              | time MODE CACHE_DIR PASSES [quick|full] [cold|after-fast]"
                 .into(),
         ),
