@@ -91,41 +91,17 @@ impl Dense {
         }
     }
 
-    /// [`Self::mul_vec`] of `K` vectors in one pass over the matrix with AVX2: [`dot`]'s four accumulators are the
-    /// lanes of one vector, combined as `dot` combines them, then its tail; the same operations in the same order
-    /// (no fused multiply-add), so every output is bit for bit what `mul_vec` gives it.
+    /// [`Self::mul_vec`] of `K` vectors in one pass over the matrix with AVX2 (see [`rows_dot_avx2`]): every output
+    /// is bit for bit what `mul_vec` gives it.
     ///
     /// # Safety
     /// The processor has AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn mul_vecs_avx2<const K: usize>(&self, x: [&[f64]; K], out: [&mut [f64]; K]) {
-        use std::arch::x86_64::*;
         assert!(x.iter().all(|x| x.len() == self.cols) && out.iter().all(|o| o.len() == self.rows));
-        let n = self.cols;
-        let chunks = n / 4;
-        for (r, row) in (0..self.rows).map(|r| self.row(r)).enumerate() {
-            let mut acc = [_mm256_setzero_pd(); K];
-            for c in 0..chunks {
-                // SAFETY: chunk c's four values lie in the row and in every x (4 * chunks <= cols, checked above).
-                unsafe {
-                    let a = _mm256_loadu_pd(row.as_ptr().add(4 * c));
-                    for k in 0..K {
-                        acc[k] = _mm256_add_pd(acc[k], _mm256_mul_pd(a, _mm256_loadu_pd(x[k].as_ptr().add(4 * c))));
-                    }
-                }
-            }
-            for k in 0..K {
-                let mut lanes = [0.0f64; 4];
-                // SAFETY: `lanes` holds four f64.
-                unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), acc[k]) };
-                let mut sum = (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
-                for i in 4 * chunks..n {
-                    sum += row[i] * x[k][i];
-                }
-                out[k][r] = sum;
-            }
-        }
+        // SAFETY: the processor has AVX2.
+        unsafe { rows_dot_avx2((0..self.rows).map(|r| self.row(r)), x, out) }
     }
 
     /// out = selfᵀ * x.
@@ -139,6 +115,88 @@ impl Dense {
                 }
             }
         }
+    }
+}
+
+/// [`dot`] of each of `rows` with `x`, into `out`: bit for bit what `dot` gives each, with AVX2 where the processor
+/// has it (checked at run time, see [`rows_dot_avx2`]).
+pub fn dot_each(rows: &[&[f64]], x: &[f64], out: &mut [f64]) {
+    assert!(rows.iter().all(|row| row.len() == x.len()) && out.len() == rows.len());
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the processor has AVX2.
+        unsafe { rows_dot_avx2(rows.iter().copied(), [x], [out]) };
+        return;
+    }
+    for (o, row) in out.iter_mut().zip(rows) {
+        *o = dot(row, x);
+    }
+}
+
+/// [`dot`] of each row with each of `K` vectors, in one pass over the rows, with AVX2: `dot`'s four accumulators are
+/// the lanes of one vector, combined as `dot` combines them, then its tail; the same operations in the same order (no
+/// fused multiply-add), so every output is bit for bit what `dot` gives it. Every row and every `x` is as long as
+/// `x[0]`, and every `out` holds a value per row.
+///
+/// # Safety
+/// The processor has AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn rows_dot_avx2<'a, const K: usize>(
+    rows: impl Iterator<Item = &'a [f64]>,
+    x: [&[f64]; K],
+    out: [&mut [f64]; K],
+) {
+    use std::arch::x86_64::*;
+    let n = x.first().map_or(0, |x| x.len());
+    assert!(x.iter().all(|x| x.len() == n));
+    let chunks = n / 4;
+    for (r, row) in rows.enumerate() {
+        assert!(row.len() == n && out.iter().all(|o| r < o.len()));
+        let mut acc = [_mm256_setzero_pd(); K];
+        for c in 0..chunks {
+            // SAFETY: chunk c's four values lie in the row and in every x (4 * chunks <= n, checked above).
+            unsafe {
+                let a = _mm256_loadu_pd(row.as_ptr().add(4 * c));
+                for k in 0..K {
+                    acc[k] = _mm256_add_pd(acc[k], _mm256_mul_pd(a, _mm256_loadu_pd(x[k].as_ptr().add(4 * c))));
+                }
+            }
+        }
+        for k in 0..K {
+            let mut lanes = [0.0f64; 4];
+            // SAFETY: `lanes` holds four f64.
+            unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), acc[k]) };
+            let mut sum = (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
+            for i in 4 * chunks..n {
+                sum += row[i] * x[k][i];
+            }
+            out[k][r] = sum;
+        }
+    }
+}
+
+/// A symmetric matrix stored as its lower triangle, row by row: entry (i, k), k <= i, at i (i + 1) / 2 + k (half
+/// the bytes of the square).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PackedSymmetric {
+    pub n: usize,
+    pub data: Vec<f64>,
+}
+
+impl PackedSymmetric {
+    /// The lower triangle of the symmetric `m`.
+    pub fn from_nalgebra(m: &nalgebra::DMatrix<f64>) -> Self {
+        let n = m.nrows();
+        assert_eq!(n, m.ncols(), "a symmetric matrix is square");
+        let data = (0..n).flat_map(|i| (0..=i).map(move |k| m[(i, k)])).collect();
+        Self { n, data }
+    }
+
+    /// Row i's entries up to the diagonal: (i, 0), ..., (i, i), contiguous.
+    #[inline]
+    pub fn row_to_diagonal(&self, i: usize) -> &[f64] {
+        &self.data[i * (i + 1) / 2..i * (i + 1) / 2 + i + 1]
     }
 }
 

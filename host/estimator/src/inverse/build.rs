@@ -12,7 +12,7 @@ use crate::config::{ElasticModel, SensorConfig};
 use crate::elastic::{
     image_matrix, normal_stack, parallax_shifts, Border, CameraView, Cell, ElasticError, PadResponse, PointKernel,
 };
-use crate::linalg::Dense;
+use crate::linalg::{gram, Dense, PackedSymmetric};
 
 /// Lengths (cells) of the line shapes stage 2 also picks its loaded cells by, along the grid's rows, columns and
 /// diagonals, and the sides (cells) of the square shapes a line must explain better than.
@@ -238,6 +238,7 @@ impl InverseModel {
             a_t: Dense::from_nalgebra(&a.transpose()),
             b_t: Dense::from_nalgebra(&b.transpose()),
             gram_bb: Dense::from_nalgebra(&test.btb),
+            fit_gram: fit_gram(&a, &b),
             a: Dense::from_nalgebra(&a),
             b: Dense::from_nalgebra(&b),
             s: Dense::from_nalgebra(&s),
@@ -294,6 +295,18 @@ impl InverseModel {
         self.a.mul_vec(&press, &mut d);
         d
     }
+}
+
+/// The Gram matrix of [B A] over every observation (see `InverseModel::fit_gram`).
+fn fit_gram(a: &DMatrix<f64>, b: &DMatrix<f64>) -> PackedSymmetric {
+    let columns = DMatrix::from_fn(a.nrows(), MOTION_PARAMETERS + a.ncols(), |r, c| {
+        if c < MOTION_PARAMETERS {
+            b[(r, c)]
+        } else {
+            a[(r, c - MOTION_PARAMETERS)]
+        }
+    });
+    PackedSymmetric::from_nalgebra(&gram(&columns))
 }
 
 /// The first `observations` columns of the kriging system's inverse ([C B; Bᵀ 0] with C = A Aᵀ + lambda I, see the

@@ -72,7 +72,7 @@
 use nusense_geometry::{PadGeometry, Point2};
 
 use crate::elastic::Cell;
-use crate::linalg::Dense;
+use crate::linalg::{Dense, PackedSymmetric};
 
 mod build;
 mod constrained;
@@ -119,6 +119,11 @@ pub struct InverseModel {
     lambda: f64,
     /// BᵀB over all observations (stage 2 subtracts missing rows).
     gram_bb: Dense,
+    /// The Gram matrix over all observations of the columns the contact test's load fits are made of: the motion
+    /// basis's, then every cell's three tractions' (cell j's traction k at `MOTION_PARAMETERS + 3 j + k`). A fit's
+    /// normal equations are read off it rather than summed over the corners every frame (see
+    /// `InverseModel::load_fit`).
+    fit_gram: PackedSymmetric,
     /// Expected share of each corner's residual |e|^2 under H0, per sigma^2.
     residual_share: Vec<f64>,
     /// Noise (per sigma) of each cell's stage 1 pressure.

@@ -7,7 +7,7 @@ use nusense_geometry::Point2;
 use super::build::NEAR_TABLE_REACH_CELLS;
 use super::noise::NoiseEstimate;
 use super::{f_quantile, f_upper_tail, neighbourhood, normal_quantile, InverseModel, MOTION_PARAMETERS};
-use crate::linalg::dot;
+use crate::linalg::{dot, dot_each, gram};
 
 /// The noise estimate leaves out this fraction of the corners with the largest residuals...
 const NOISE_TRIM: f64 = 0.05;
@@ -62,6 +62,22 @@ enum Judged {
     /// Those away from it, or every corner when it leaves too few away (a line across the pad, loads all over it).
     FarOrEveryCorner,
 }
+/// A load fit's columns (see `InverseModel::load_fit_columns`).
+struct LoadFitColumns {
+    /// (the model's fit column, the fit's column it adds to), ascending: each of the fit's columns is the sum of its
+    /// parts (one, or a shared-shear block's cells' shear along one axis).
+    parts: Vec<(usize, usize)>,
+    /// How many: the motion's first, then the load's.
+    columns: usize,
+    /// The prior on each of the load's columns (lambda per cell it spans).
+    prior: Vec<f64>,
+}
+
+/// The model's fit column of cell `j`'s traction `axis` (0, 1, 2: x, y, normal; see `InverseModel::fit_gram`).
+fn traction_column(j: usize, axis: usize) -> usize {
+    MOTION_PARAMETERS + 3 * j + axis
+}
+
 /// Fewer corners than this do not make a noise estimate.
 const MIN_NOISE_CORNERS: usize = 10;
 
@@ -585,62 +601,8 @@ impl InverseModel {
         d: &[f64],
         valid: &[bool],
     ) -> Option<NoiseEstimate> {
-        let (d0, _) = self.masked(d, valid);
-        // The columns of the fit (the motion basis, then each support cell's axes), zero on the corners not valid:
-        // rows of the transposed matrices, contiguous, so that the normal equations are dot products.
-        let mut columns: Vec<Vec<f64>> = (0..MOTION_PARAMETERS)
-            .map(|i| self.b_t.row(i))
-            .chain(
-                load.cells
-                    .iter()
-                    .flat_map(|&j| load.axes.iter().map(move |&axis| self.a_t.row(3 * j + axis))),
-            )
-            .map(|column| {
-                column
-                    .iter()
-                    .enumerate()
-                    .map(|(r, &v)| if valid[r / 2] { v } else { 0.0 })
-                    .collect()
-            })
-            .collect();
-        let mut prior = vec![self.lambda; columns.len() - MOTION_PARAMETERS];
-        for block in load.shared_shear {
-            for axis in 0..2 {
-                let mut column = vec![0.0; self.observations];
-                for &j in block {
-                    for (c, &v) in column.iter_mut().zip(self.a_t.row(3 * j + axis)) {
-                        *c += v;
-                    }
-                }
-                for (r, c) in column.iter_mut().enumerate() {
-                    if !valid[r / 2] {
-                        *c = 0.0;
-                    }
-                }
-                columns.push(column);
-                prior.push(self.lambda * block.len() as f64);
-            }
-        }
-        let unknowns = columns.len();
-        let mut normal = DMatrix::<f64>::zeros(unknowns, unknowns);
-        for i in 0..unknowns {
-            for k in 0..=i {
-                let product = dot(&columns[i], &columns[k]);
-                normal[(i, k)] = product;
-                normal[(k, i)] = product;
-            }
-        }
-        for (i, p) in (MOTION_PARAMETERS..unknowns).zip(&prior) {
-            normal[(i, i)] += p;
-        }
-        let projected = DVector::<f64>::from_fn(unknowns, |i, _| dot(&columns[i], &d0));
-        let solution = normal.cholesky()?.solve(&projected);
-        let mut residuals = d0;
-        for (column, &x) in columns.iter().zip(solution.iter()) {
-            for (r, v) in residuals.iter_mut().zip(column) {
-                *r -= x * v;
-            }
-        }
+        let (d0, missing) = self.masked(d, valid);
+        let residuals = self.load_fit_residuals(load, &d0, &missing)?;
         let squares_where = |judging: &dyn Fn(usize) -> bool| -> Vec<f64> {
             (0..valid.len())
                 .filter(|&i| valid[i] && judging(i))
@@ -656,6 +618,102 @@ impl InverseModel {
         }
         let estimate = NoiseEstimate::censored_of(&mut squares);
         estimate.mm.is_finite().then_some(estimate)
+    }
+
+    /// The residuals (2 per corner, mm) of `load` fitted jointly with the motion to `d0` (2 per corner, mm, zero on
+    /// the `missing` rows) by least squares over the rows not missing, its tractions under their prior (see
+    /// [`Self::scatter_about_load`]); on the missing rows they are not meaningful. `None` for a singular fit.
+    fn load_fit_residuals(&self, load: FittedLoad, d0: &[f64], missing: &[usize]) -> Option<Vec<f64>> {
+        let fit = self.load_fit_columns(load);
+        let mut normal = self.load_fit_normal_matrix(&fit, missing);
+        for (i, p) in fit.prior.iter().enumerate() {
+            normal[(MOTION_PARAMETERS + i, MOTION_PARAMETERS + i)] += p;
+        }
+        // d0 is zero on the missing rows, so the full columns project it as the masked ones would.
+        let rows: Vec<&[f64]> = fit.parts.iter().map(|&(c, _)| self.fit_column(c)).collect();
+        let mut part_projected = vec![0.0; rows.len()];
+        dot_each(&rows, d0, &mut part_projected);
+        let mut projected = DVector::<f64>::zeros(fit.columns);
+        for (&(_, column), v) in fit.parts.iter().zip(&part_projected) {
+            projected[column] += v;
+        }
+        let solution = normal.cholesky()?.solve(&projected);
+        let mut residuals = d0.to_vec();
+        for (&(_, column), row) in fit.parts.iter().zip(&rows) {
+            let x = solution[column];
+            for (r, v) in residuals.iter_mut().zip(row.iter()) {
+                *r -= x * v;
+            }
+        }
+        Some(residuals)
+    }
+
+    /// `load`'s fit columns (see [`Self::load_fit_residuals`]): the motion basis, each support cell's axes, each
+    /// shared-shear block's two, as the model's fit columns (see `fit_gram`) they sum.
+    fn load_fit_columns(&self, load: FittedLoad) -> LoadFitColumns {
+        let mut parts: Vec<(usize, usize)> = (0..MOTION_PARAMETERS).map(|i| (i, i)).collect();
+        for &j in load.cells {
+            for &axis in load.axes {
+                parts.push((traction_column(j, axis), parts.len()));
+            }
+        }
+        let mut columns = parts.len();
+        let mut prior = vec![self.lambda; columns - MOTION_PARAMETERS];
+        for block in load.shared_shear {
+            for axis in 0..2 {
+                parts.extend(block.iter().map(|&j| (traction_column(j, axis), columns)));
+                prior.push(self.lambda * block.len() as f64);
+                columns += 1;
+            }
+        }
+        parts.sort_unstable();
+        LoadFitColumns { parts, columns, prior }
+    }
+
+    /// The Gram matrix over the rows not `missing` of `fit`'s columns: sums of `fit_gram`'s entries, less the
+    /// missing rows' products (the same sums as over the rows, in another order: equal to within rounding). Every
+    /// frame's fits read it so rather than summing products over the corners (about 330 rows per entry): on a frame
+    /// with no contact the contact test fits one compact load (35 columns) and four (52), and often the line shapes'
+    /// load. The parts ascending, each pair's entry is read from the later part's row of `fit_gram`, so that the
+    /// reads run forward along each row.
+    fn load_fit_normal_matrix(&self, fit: &LoadFitColumns, missing: &[usize]) -> DMatrix<f64> {
+        let mut normal = DMatrix::<f64>::zeros(fit.columns, fit.columns);
+        for (i, &(p, u)) in fit.parts.iter().enumerate() {
+            let row = self.fit_gram.row_to_diagonal(p);
+            for &(q, v) in &fit.parts[..i] {
+                normal[(u, v)] += row[q];
+                normal[(v, u)] += row[q];
+            }
+            normal[(u, u)] += row[p];
+        }
+        if !missing.is_empty() {
+            let mut rows = DMatrix::<f64>::zeros(missing.len(), fit.columns);
+            for (m, &r) in missing.iter().enumerate() {
+                for &(c, column) in &fit.parts {
+                    rows[(m, column)] += self.fit_column_at(r, c);
+                }
+            }
+            normal -= gram(&rows);
+        }
+        normal
+    }
+
+    /// The model's fit column `c` (see `fit_gram`): one value per observation.
+    fn fit_column(&self, c: usize) -> &[f64] {
+        if c < MOTION_PARAMETERS {
+            self.b_t.row(c)
+        } else {
+            self.a_t.row(c - MOTION_PARAMETERS)
+        }
+    }
+
+    /// Row `r` of the model's fit column `c`.
+    fn fit_column_at(&self, r: usize, c: usize) -> f64 {
+        if c < MOTION_PARAMETERS {
+            self.b.at(r, c)
+        } else {
+            self.a.at(r, c - MOTION_PARAMETERS)
+        }
     }
 
     /// The corners' scatter about the motion-only fit, mm per axis, with the largest `NOISE_CENSORED_SHARE` of
@@ -726,7 +784,149 @@ impl InverseModel {
 
 #[cfg(test)]
 mod tests {
-    use crate::inverse::test_support::{field, model, node_at, node_press, pseudo_gauss};
+    use nalgebra::{DMatrix, DVector};
+
+    use super::{FittedLoad, InverseModel, MAX_COMPACT_LOADS, MOTION_PARAMETERS};
+    use crate::inverse::test_support::{cell_at, field, model, node_at, node_press, pseudo_gauss};
+    use crate::linalg::dot;
+
+    /// A load fit's normal matrix and residuals as summed over the valid corners' rows, product by product: what
+    /// `load_fit_residuals` reads off the model's Gram instead.
+    fn fit_summed_over_rows(
+        model: &InverseModel,
+        load: FittedLoad,
+        d0: &[f64],
+        valid: &[bool],
+    ) -> (DMatrix<f64>, Vec<f64>) {
+        let masked = |column: Vec<f64>| -> Vec<f64> {
+            column
+                .iter()
+                .enumerate()
+                .map(|(r, &v)| if valid[r / 2] { v } else { 0.0 })
+                .collect()
+        };
+        let mut columns: Vec<Vec<f64>> = (0..MOTION_PARAMETERS)
+            .map(|i| masked(model.b_t.row(i).to_vec()))
+            .collect();
+        for &j in load.cells {
+            for &axis in load.axes {
+                columns.push(masked(model.a_t.row(3 * j + axis).to_vec()));
+            }
+        }
+        let mut prior = vec![model.lambda; columns.len() - MOTION_PARAMETERS];
+        for block in load.shared_shear {
+            for axis in 0..2 {
+                let mut column = vec![0.0; model.observations];
+                for &j in block {
+                    for (c, &v) in column.iter_mut().zip(model.a_t.row(3 * j + axis)) {
+                        *c += v;
+                    }
+                }
+                columns.push(masked(column));
+                prior.push(model.lambda * block.len() as f64);
+            }
+        }
+        let n = columns.len();
+        let gram = DMatrix::from_fn(n, n, |i, k| dot(&columns[i], &columns[k]));
+        let mut normal = gram.clone();
+        for (i, p) in (MOTION_PARAMETERS..n).zip(&prior) {
+            normal[(i, i)] += p;
+        }
+        let projected = DVector::from_fn(n, |i, _| dot(&columns[i], d0));
+        let solution = normal.cholesky().unwrap().solve(&projected);
+        let mut residuals = d0.to_vec();
+        for (column, &x) in columns.iter().zip(solution.iter()) {
+            for (r, v) in residuals.iter_mut().zip(column) {
+                *r -= x * v;
+            }
+        }
+        (gram, residuals)
+    }
+
+    #[test]
+    fn load_fits_read_off_the_gram_are_the_fits_summed_over_the_valid_corners() {
+        let model = model();
+        let motion = [0.3, -0.2, 0.01, 0.03, -0.02, 0.01, 0.002, 0.001];
+        // Three pushed presses apart, and noise.
+        let mut forces = Vec::new();
+        for (at, force) in [
+            ([-12.0, -6.0], [1.0, 0.5, 4.0]),
+            ([10.0, 4.0], [-0.5, 1.0, 3.0]),
+            ([0.0, 10.0], [0.0, 0.0, 2.0]),
+        ] {
+            let (row, col) = node_at(&model, at);
+            forces.extend(node_press(&model, row, col, force));
+        }
+        let mut gauss = pseudo_gauss(4242);
+        let d: Vec<f64> = field(&model, &forces, motion)
+            .iter()
+            .map(|v| v + 0.002 * gauss())
+            .collect();
+        // Corners missing under the first press (the fit's own columns lose their largest rows there) and here and
+        // there over the pad.
+        let under = model.cells[cell_at(&model, [-12.0, -6.0])].centre_mm;
+        let corners: Vec<_> = model.pad.corners().map(|c| model.pad.corner_mm(c)).collect();
+        let valid: Vec<bool> = corners
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (p[0] - under[0]).hypot(p[1] - under[1]) > 4.0 && i % 7 != 3)
+            .collect();
+        let missing_corners = valid.iter().filter(|&&v| !v).count();
+        assert!((25..60).contains(&missing_corners), "{missing_corners}");
+        let stage = model.stage1(&d, &valid);
+        let one = model.compact_loads(&stage, 1).unwrap();
+        let several = model.compact_loads(&stage, MAX_COMPACT_LOADS).unwrap();
+        let line: Vec<usize> = (3..12).map(|c| 5 * usize::from(model.pad.cols) + c).collect();
+        let (one_cells, several_cells) = (one.support(), several.support());
+        let loads = [
+            FittedLoad {
+                cells: &one_cells,
+                axes: &[0, 1, 2],
+                shared_shear: &[],
+            },
+            FittedLoad {
+                cells: &several_cells,
+                axes: &[2],
+                shared_shear: &several.blocks,
+            },
+            FittedLoad {
+                cells: &line,
+                axes: &[2],
+                shared_shear: &[],
+            },
+        ];
+        let (d0, missing) = model.masked(&d, &valid);
+        for load in loads {
+            let (summed, expected) = fit_summed_over_rows(&model, load, &d0, &valid);
+            let read = model.load_fit_normal_matrix(&model.load_fit_columns(load), &missing);
+            // Each entry within rounding of the larger of its row's and column's diagonal entries.
+            for i in 0..summed.nrows() {
+                for k in 0..summed.ncols() {
+                    let scale = (summed[(i, i)] * summed[(k, k)]).sqrt();
+                    assert!(
+                        (read[(i, k)] - summed[(i, k)]).abs() <= 1e-13 * scale,
+                        "entry ({i}, {k}) of {} columns: {} against {}",
+                        summed.nrows(),
+                        read[(i, k)],
+                        summed[(i, k)]
+                    );
+                }
+            }
+            let residuals = model.load_fit_residuals(load, &d0, &missing).unwrap();
+            let valid_rows = (0..model.observations).filter(|&r| valid[r / 2]);
+            let rms = (valid_rows.clone().map(|r| expected[r].powi(2)).sum::<f64>()
+                / valid_rows.clone().count() as f64)
+                .sqrt();
+            let worst = valid_rows
+                .map(|r| (residuals[r] - expected[r]).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                worst <= 1e-10 * rms,
+                "{} columns: residuals differ by {worst} against an rms of {rms}",
+                summed.nrows()
+            );
+        }
+    }
 
     #[test]
     fn motion_alone_is_not_a_contact_and_the_noise_estimate_is_unbiased() {
