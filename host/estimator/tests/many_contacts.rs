@@ -38,14 +38,30 @@ fn pushed_presses_misread(
     within_mm: f64,
     scale: f64,
 ) -> Option<Vec<([f64; 2], f64)>> {
+    let contacts: Vec<Contact> = presses
+        .iter()
+        .map(|&at| Contact {
+            tangential_force_n: push,
+            ..Contact::sphere(5.0, at, force)
+        })
+        .collect();
+    contacts_misread(renderer, estimator, contacts, within_mm, 0.2, scale)
+}
+
+/// `contacts` read by the inverse estimator on the validation sensor: `None` when they are listed as as many
+/// contacts, each within `within_mm` of its contact's centre and, at `scale` N of force per N the model reads, within
+/// `force_share` of its normal force, else what was listed (centres and forces).
+fn contacts_misread(
+    renderer: &Renderer,
+    estimator: &mut Estimator,
+    contacts: Vec<Contact>,
+    within_mm: f64,
+    force_share: f64,
+    scale: f64,
+) -> Option<Vec<([f64; 2], f64)>> {
+    let truth: Vec<([f64; 2], f64)> = contacts.iter().map(|c| (c.position_mm, c.normal_force_n)).collect();
     let scene = Scene {
-        contacts: presses
-            .iter()
-            .map(|&at| Contact {
-                tangential_force_n: push,
-                ..Contact::sphere(5.0, at, force)
-            })
-            .collect(),
+        contacts,
         ..Scene::default()
     };
     let reading = estimator
@@ -56,12 +72,12 @@ fn pushed_presses_misread(
         .iter()
         .map(|c| (c.centre_mm, c.force_n * scale))
         .collect();
-    let each_found = presses.iter().all(|p| {
+    let each_found = truth.iter().all(|(p, force)| {
         listed
             .iter()
-            .any(|(c, f)| (c[0] - p[0]).hypot(c[1] - p[1]) < within_mm && (f - force).abs() <= 0.2 * force)
+            .any(|(c, f)| (c[0] - p[0]).hypot(c[1] - p[1]) < within_mm && (f - force).abs() <= force_share * force)
     });
-    (listed.len() != presses.len() || !each_found).then_some(listed)
+    (listed.len() != truth.len() || !each_found).then_some(listed)
 }
 
 /// N of force per N the model reads, from one 5 mm sphere of `force` at the pad's centre (seed 949), as a user
@@ -146,6 +162,48 @@ fn four_presses_in_a_square_are_four_contacts() {
         let presses = [[-10.0, -8.0], [10.0, -8.0], [-10.0, 8.0], [10.0, 8.0]];
         if let Some(listed) = presses_misread(&renderer, &mut estimator, &presses, force, scale) {
             failures.push(format!("{force} N each: listed {listed:.2?}"));
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// Four 5 mm spheres of 2-7 N at random places at least 12 mm apart (three of a scratch sweep's scenes), the weakest
+/// beside heavier ones: four contacts, each within 1 mm and 25 % of its press (four presses read up to a fifth light:
+/// the motion fit takes part of their summed far field for the camera's scale, see the README). The weakest took up
+/// 0.69-0.83 of its force in the others' far field, and with that asked of it as of a load on the pattern's outermost
+/// cells (`InverseModel::far_field_shadow`) it was dropped: each scene listed three contacts, one two.
+#[test]
+fn four_presses_of_unequal_force_are_four_contacts() {
+    let (renderer, mut estimator) = validation_sensor();
+    let scale = force_scale(&renderer, &mut estimator, 4.0);
+    let scenes: [[([f64; 2], f64); 4]; 3] = [
+        [
+            ([10.7, -0.9], 5.3),
+            ([-1.9, -11.4], 3.1),
+            ([-17.4, -9.0], 6.5),
+            ([-8.6, -0.5], 2.6),
+        ],
+        [
+            ([2.9, -3.8], 3.7),
+            ([-16.1, -3.9], 2.2),
+            ([13.5, 6.5], 3.3),
+            ([-11.0, 11.4], 5.9),
+        ],
+        [
+            ([0.2, 4.8], 4.3),
+            ([-9.6, -10.8], 6.8),
+            ([5.2, -8.5], 2.5),
+            ([12.3, 7.5], 6.3),
+        ],
+    ];
+    let mut failures = Vec::new();
+    for presses in scenes {
+        let contacts = presses
+            .iter()
+            .map(|&(at, force)| Contact::sphere(5.0, at, force))
+            .collect();
+        if let Some(listed) = contacts_misread(&renderer, &mut estimator, contacts, 1.0, 0.25, scale) {
+            failures.push(format!("{presses:?}: listed {listed:.2?}"));
         }
     }
     assert!(failures.is_empty(), "{failures:#?}");
