@@ -11,21 +11,21 @@
 //!   full one with `full`) in fast and inverse modes to OUT, to diff before and after a change, and prints CPU ms
 //!   per frame for each mode and size (the frames are rendered once into CACHE_DIR as raw RGB: about 3.8 GB for
 //!   the full set).
-//! - `... -- time MODE CACHE_DIR PASSES [quick|full]` times MODE alone on the set's main-size frames (those of
-//!   `dump`'s cache, rendered there if missing), PASSES times over the set, the frames read in batches of 32 (not
-//!   in the cache, as in `dump`), and prints the per-frame CPU ms's median and p99 per pass: two builds run one after
-//!   the other this way give a speed ratio on a busy machine. With `cold` it writes 64 MB between two frames, so that
-//!   each estimate starts with none of its own data cached, as after a frame's decoding in the daemon, or after the
-//!   other modes and the renderer in the validation bench. With `after-fast` it writes the 64 MB and then runs fast mode
-//!   on the frame before timing MODE on it, untimed, as the validation bench does when it runs fast and inverse:
-//!   the frame's pattern is then in the caches and the model's matrices are not.
+//! - `... -- time MODE CACHE_DIR PASSES [quick|full]` times MODE alone on the set's main-size frames (those of `dump`'s
+//!   cache, rendered there if missing), PASSES times over the set, the frames read in batches of 32 (not in the cache,
+//!   as in `dump`), and prints the per-frame CPU ms's median, p90, p99 and mean per pass: two builds run one after the
+//!   other this way give a speed ratio on a busy machine. With `cold` it writes 64 MB between two frames, so that each
+//!   estimate starts with none of its own data cached, as after a frame's decoding in the daemon, or after the other
+//!   modes and the renderer in the validation bench. With `after-fast` it writes the 64 MB and then runs fast mode on
+//!   the frame before timing MODE on it, untimed, as the validation bench does when it runs fast and inverse: the
+//!   frame's pattern is then in the caches and the model's matrices are not.
 //! - `... -- rest WxH FRAMES PASSES` times inverse mode on frames with no contact: the validation sensor at that size
 //!   at rest under uneven light (each LED's current off nominal by up to 8 %, its own seed per frame; JPEG q85, decoded
 //!   once), each frame estimated once per pass, and prints how long the estimator (its model with it) took to build,
-//!   the per-frame CPU ms's median and p90 per pass and how many frames read a contact (none should). Such frames run
-//!   every rescue of the contact test, the costliest path a frame with no contact takes; two builds run one after the
-//!   other this way give its speed ratio. The frames are rendered once and kept in `$NUSENSE_PROFILE_CACHE` (else the
-//!   temporary folder).
+//!   the per-frame CPU ms's median, p90, p99 and mean per pass and how many frames read a contact (none should). Such
+//!   frames run every rescue of the contact test, the costliest path a frame with no contact takes; two builds run one
+//!   after the other this way give its speed ratio. The frames are rendered once and kept in `$NUSENSE_PROFILE_CACHE`
+//!   (else the temporary folder).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -115,6 +115,20 @@ fn run(mode: Mode, size: (u32, u32), repeats: usize, decode_scale: Option<Scale>
     Ok(())
 }
 
+/// One pass's CPU times per frame (ms; sorted here) as the commands print them.
+fn cpu_summary(cpu_ms: &mut [f64]) -> String {
+    cpu_ms.sort_by(f64::total_cmp);
+    let at = |percent: usize| cpu_ms[cpu_ms.len() * percent / 100];
+    format!(
+        "{} frames, CPU ms per frame median {:.3}, p90 {:.3}, p99 {:.3}, mean {:.3}",
+        cpu_ms.len(),
+        at(50),
+        at(90),
+        at(99),
+        cpu_ms.iter().sum::<f64>() / cpu_ms.len() as f64
+    )
+}
+
 /// LED currents off nominal by up to 8 % (the validation set's rest frames' drift), one set per frame `k`: uneven
 /// light, which moves the corners the way no camera motion does.
 fn uneven_leds(k: u64) -> [f32; 4] {
@@ -190,14 +204,11 @@ fn rest(size: (u32, u32), frames: usize, passes: usize) -> Result<(), Error> {
             contacts += usize::from(reading.as_ref().is_ok_and(|r| r.is_contact()));
             std::hint::black_box(reading.ok());
         }
-        cpu_ms.sort_by(f64::total_cmp);
         println!(
-            "inverse rest {}x{} pass {pass}: {} frames, CPU ms per frame median {:.3}, p90 {:.3}; {contacts} read a contact",
+            "inverse rest {}x{} pass {pass}: {}; {contacts} read a contact",
             size.0,
             size.1,
-            cpu_ms.len(),
-            cpu_ms[cpu_ms.len() / 2],
-            cpu_ms[cpu_ms.len() * 9 / 10],
+            cpu_summary(&mut cpu_ms)
         );
     }
     Ok(())
@@ -312,17 +323,7 @@ fn time(mode: Mode, cache: &std::path::Path, passes: usize, profile: Profile, be
                 std::hint::black_box(reading.ok());
             }
         }
-        cpu_ms.sort_by(f64::total_cmp);
-        println!(
-            "{mode} {}x{} pass {pass}: {} frames, CPU ms per frame median {:.3}, p90 {:.3}, p99 {:.3}, mean {:.3}",
-            size.0,
-            size.1,
-            cpu_ms.len(),
-            cpu_ms[cpu_ms.len() / 2],
-            cpu_ms[cpu_ms.len() * 9 / 10],
-            cpu_ms[cpu_ms.len() * 99 / 100],
-            cpu_ms.iter().sum::<f64>() / cpu_ms.len() as f64
-        );
+        println!("{mode} {}x{} pass {pass}: {}", size.0, size.1, cpu_summary(&mut cpu_ms));
     }
     Ok(())
 }
