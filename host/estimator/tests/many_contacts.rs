@@ -169,9 +169,10 @@ fn four_presses_in_a_square_are_four_contacts() {
 
 /// Four 5 mm spheres of 2-7 N at random places at least 12 mm apart (three of a scratch sweep's scenes), the weakest
 /// beside heavier ones: four contacts, each within 1 mm and 25 % of its press (four presses read up to a fifth light:
-/// the motion fit takes part of their summed far field for the camera's scale, see the README). The weakest took up
-/// 0.69-0.83 of its force in the others' far field, and with that asked of it as of a load on the pattern's outermost
-/// cells (`InverseModel::far_field_shadow`) it was dropped: each scene listed three contacts, one two.
+/// the motion fit takes part of their summed far field for the camera's scale, see the README). Asked to clear the
+/// floor less its share of the others' far field, as a load on the pattern's outermost cells is
+/// (`InverseModel::far_field_shadow`; the dropped presses of the first two scenes took up 0.69-0.83 of their force),
+/// the weakest was dropped: two scenes listed three contacts, the first two.
 #[test]
 fn four_presses_of_unequal_force_are_four_contacts() {
     let (renderer, mut estimator) = validation_sensor();

@@ -88,11 +88,11 @@ impl InverseModel {
     /// them back towards a press as a weaker far field would. On the full validation set, the extra contacts of
     /// 0.24-1.2 N (the model's newtons) on those cells, 8-12 mm from presses of 1.2-5.9 N, shadow 0.9 to 3.7 times
     /// their own force. Inside the pattern a press beside several others takes up as much of theirs: of four 5 mm
-    /// spheres of 2-7 N at least 12 mm apart on the validation sensor, the weakest (2.2-3.1 N) shadowed 0.69-0.83 of
-    /// its force, and with the shadow asked of every contact one press or two were dropped in 9 of 24 random scenes
-    /// (1 since). There the shadow is not asked: on both validation sets and 632 frames of their round presses
-    /// rendered again, that lists one contact more, 0.65 N on a damaged pad whose frame already lists one that is not
-    /// there (the full set's damaged_270). `valid`: per corner.
+    /// spheres of 2-7 N at least 12 mm apart on the validation sensor, the dropped presses printed (2.2-3.7 N) shadowed
+    /// 0.69-0.83 of their force, and with the shadow asked of every contact one press or two were dropped in 9 of 24
+    /// random scenes (none since). There the shadow is not asked: on both validation sets and 632 frames of their
+    /// round presses rendered again, that lists one contact more, 0.65 N on a damaged pad whose frame already lists
+    /// one that is not there (the full set's damaged_270). `valid`: per corner.
     pub fn far_field_shadow(&self, valid: &[bool], tractions: &[f64], region: &Region) -> f64 {
         let Some(others) = self.others_and_shape(tractions, region) else {
             return 0.0;

@@ -122,7 +122,7 @@ pub struct InverseModel {
     /// The Gram matrix over all observations of the columns the contact test's load fits are made of: the motion
     /// basis's, then every cell's three tractions' (cell j's traction k at `MOTION_PARAMETERS + 3 j + k`). A fit's
     /// normal equations are read off it rather than summed over the corners every frame (see
-    /// `InverseModel::load_fit`).
+    /// `InverseModel::load_fit_normal_matrix`).
     fit_gram: PackedSymmetric,
     /// Expected share of each corner's residual |e|^2 under H0, per sigma^2.
     residual_share: Vec<f64>,

@@ -8,9 +8,9 @@ use super::{neighbourhood, InverseModel, Observed, Region, Stage1, Traction, MOT
 /// region: a 20 mm edge of 2-3.5 N at 63 deg across the validation sensor's cells holds two node peaks 10 mm apart.
 /// The part without the contact's peak cell belongs to its shape when it lies mostly on the contact's cells and
 /// stands about as high as the part with it (there 0.93 of its peak); read from one part alone, that edge was 10 mm
-/// long, too short for a direction. The node map's other regions on a contact's cells are its noise and the pad's
-/// border: on the validation sets 0.12-0.32 of the contact's peak, and they would turn its axis (the full set's
-/// edges read 2.68 -> 2.94 deg with them).
+/// long, too short for a direction. The node map's other regions on a contact's cells are mostly its noise and the
+/// pad's border, lower: 0.12-0.32 of the contact's peak on the full set's edge_152, edge_159, edge_170 and press_042,
+/// and with them all the full set's edges read 2.68 -> 2.94 deg.
 const CUT_PART_PEAK_FRACTION: f64 = 0.6;
 
 /// One pass of stage 2: its groups of cells, their union (ascending), the motion, the contacts (strongest first)
