@@ -210,6 +210,58 @@ fn four_presses_of_unequal_force_are_four_contacts() {
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
+/// Four presses, one of them beside the pattern's outermost row or column: its contact spreads onto those cells, and
+/// it was dropped as a load of the border's (scenes of a scratch sweep of random four-press scenes, where these failed
+/// at 3650cf5: three contacts listed).
+#[test]
+fn a_press_whose_pressure_spreads_onto_the_outermost_cells_is_listed_beside_others() {
+    let (renderer, mut estimator) = validation_sensor();
+    let scale = force_scale(&renderer, &mut estimator, 4.0);
+    let scenes: [[([f64; 2], f64); 4]; 5] = [
+        [
+            ([6.2, 6.0], 2.8),
+            ([-5.1, -10.3], 2.4),
+            ([-5.9, 7.6], 6.9),
+            ([9.6, -6.9], 5.3),
+        ],
+        [
+            ([-7.6, 0.8], 6.4),
+            ([4.8, -6.0], 5.0),
+            ([12.1, 10.9], 2.5),
+            ([-11.1, -11.7], 2.1),
+        ],
+        [
+            ([-0.8, 11.8], 2.1),
+            ([14.1, 10.4], 3.5),
+            ([-15.9, 4.9], 6.9),
+            ([6.4, 0.2], 5.2),
+        ],
+        [
+            ([-15.4, 4.1], 4.7),
+            ([12.8, 11.8], 2.2),
+            ([1.6, 7.4], 5.5),
+            ([9.4, -6.2], 6.7),
+        ],
+        [
+            ([-15.6, 6.8], 6.9),
+            ([-1.5, -8.2], 4.8),
+            ([11.3, -6.2], 2.0),
+            ([-17.1, -11.0], 3.0),
+        ],
+    ];
+    let mut failures = Vec::new();
+    for presses in scenes {
+        let contacts = presses
+            .iter()
+            .map(|&(at, force)| Contact::sphere(5.0, at, force))
+            .collect();
+        if let Some(listed) = contacts_misread(&renderer, &mut estimator, contacts, 1.0, 0.25, scale) {
+            failures.push(format!("{presses:?}: listed {listed:.2?}"));
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
 /// Three 5 mm spheres of 4 N each, in a row 12 mm apart and in a triangle, each pushed sideways by a quarter of its
 /// load the same way (as fingers that lift what they hold): three contacts, each within 1.5 mm (a pushed press's
 /// pressure reads behind its push, see `elastic.push_centre_shift_mm`) and 20 % of its press. The push moves every
