@@ -2,6 +2,7 @@
 //! pressure >= 0, in one or two passes, and the strongest contact's shape for its edge direction.
 
 use super::constrained::PressureBasis;
+use super::regions::DipNoise;
 use super::{neighbourhood, InverseModel, Observed, Region, Stage1, Traction, MOTION_PARAMETERS, SUPPORT_SIGMAS};
 
 /// The node map's blur can cut a light long contact that the cell map keeps whole into parts, each its own watershed
@@ -76,8 +77,13 @@ impl InverseModel {
             };
             let mut support: Vec<usize> = groups.iter().flatten().copied().collect();
             support.sort_unstable();
+            let dips = (pass == 1).then(|| DipNoise {
+                covariance: &covariance,
+                sigma_mm: noise_mm,
+                found_apart: solved.as_ref().map_or(&[], |found| &found.regions),
+            });
             let regions = self.contacts(
-                self.regions(&tractions, &support, (pass == 1).then_some((&covariance, noise_mm))),
+                self.regions(&tractions, &support, dips),
                 &groups,
                 Observed {
                     d,
