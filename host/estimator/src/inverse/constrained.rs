@@ -1,6 +1,8 @@
 //! Stage 2's constrained solve: least squares on the loaded cells with pressure >= 0, by an active set over a
 //! Cholesky factor updated as pressures join and leave the free set.
 
+use std::cell::OnceCell;
+
 use nalgebra::{DMatrix, DVector};
 
 use super::{InverseModel, Stage1, MOTION_PARAMETERS};
@@ -20,18 +22,22 @@ const PUSH_SHAPE_MIN_RATIO: f64 = 0.5;
 /// Most active-set iterations of stage 2 (it converges in a few).
 const MAX_ACTIVE_SET_ITERATIONS: usize = 50;
 
-/// Stage 2's cell pressures' covariance per sigma^2.
+/// Stage 2's cell pressures' covariance per sigma^2, from the unconstrained problem's H^-1 (the bound p >= 0 only
+/// narrows it). Its block is computed the first time a dip is judged: most frames judge none.
 pub(super) struct PressureCovariance {
     /// Per cell: its unknown in `inverse`, if on the support.
     unknown_of: Vec<Option<usize>>,
-    inverse: Option<DMatrix<f64>>,
+    /// H's factor and how many of its first unknowns are the cells' pressures (none for the node basis).
+    factor: Option<(UpdatedCholesky, usize)>,
+    inverse: OnceCell<DMatrix<f64>>,
 }
 
 impl PressureCovariance {
     /// The noise (per sigma) of the difference of two cells' pressures.
     pub(super) fn difference_noise(&self, i: usize, j: usize) -> Option<f64> {
-        let inverse = self.inverse.as_ref()?;
+        let (factor, pressures) = self.factor.as_ref()?;
         let (a, b) = (self.unknown_of.get(i).copied()??, self.unknown_of.get(j).copied()??);
+        let inverse = self.inverse.get_or_init(|| factor.inverse_block(*pressures));
         Some(
             (inverse[(a, a)] + inverse[(b, b)] - 2.0 * inverse[(a, b)])
                 .max(0.0)
@@ -156,7 +162,6 @@ impl InverseModel {
         seed: &Stage1,
         groups: &[Vec<usize>],
         basis: PressureBasis,
-        with_covariance: bool,
     ) -> Option<(Vec<f64>, [f64; MOTION_PARAMETERS], PressureCovariance)> {
         let cells = self.cells.len();
         let mut unknowns = self.pressure_unknowns(groups, basis);
@@ -178,21 +183,22 @@ impl InverseModel {
             }
         }
         let motion = std::array::from_fn(|p| x[nt + p]);
-        // Per sigma^2, the covariance of the cells' pressures (the cell basis's unknowns: one per cell), from the
-        // unconstrained problem's H^-1 (the bound p >= 0 only narrows it), when asked for.
-        let covariance = if basis == PressureBasis::Cells && with_covariance {
+        // The cell basis's unknowns are one per cell.
+        let covariance = if basis == PressureBasis::Cells {
             let mut unknown_of = vec![None; cells];
             for (k, combination) in unknowns.combinations.iter().take(pressures).enumerate() {
                 unknown_of[combination[0].0 / 3] = Some(k);
             }
             PressureCovariance {
                 unknown_of,
-                inverse: Some(whole.inverse_block(pressures)),
+                factor: Some((whole, pressures)),
+                inverse: OnceCell::new(),
             }
         } else {
             PressureCovariance {
                 unknown_of: Vec::new(),
-                inverse: None,
+                factor: None,
+                inverse: OnceCell::new(),
             }
         };
         Some((tractions, motion, covariance))

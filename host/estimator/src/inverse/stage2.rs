@@ -2,7 +2,7 @@
 //! pressure >= 0, in one or two passes, and the strongest contact's shape for its edge direction.
 
 use super::constrained::PressureBasis;
-use super::regions::DipNoise;
+use super::regions::CellNoise;
 use super::{neighbourhood, InverseModel, Observed, Region, Stage1, Traction, MOTION_PARAMETERS, SUPPORT_SIGMAS};
 
 /// The node map's blur can cut a light long contact that the cell map keeps whole into parts, each its own watershed
@@ -71,19 +71,19 @@ impl InverseModel {
                 continue;
             }
             let Some((tractions, motion, covariance)) =
-                self.constrained_solve(d, valid, seed, &groups, PressureBasis::Cells, pass == 1)
+                self.constrained_solve(d, valid, seed, &groups, PressureBasis::Cells)
             else {
                 continue;
             };
             let mut support: Vec<usize> = groups.iter().flatten().copied().collect();
             support.sort_unstable();
-            let dips = (pass == 1).then(|| DipNoise {
+            let noise = CellNoise {
                 covariance: &covariance,
                 sigma_mm: noise_mm,
-                found_apart: solved.as_ref().map_or(&[], |found| &found.regions),
-            });
+                found_apart: (pass == 1).then(|| solved.as_ref().map_or(&[][..], |found| &found.regions[..])),
+            };
             let regions = self.contacts(
-                self.regions(&tractions, &support, dips),
+                self.regions(&tractions, &support, Some(noise)),
                 &groups,
                 Observed {
                     d,
@@ -232,14 +232,8 @@ impl InverseModel {
             return None;
         }
         let peak = first.cells.iter().max_by(|a, b| a.1[2].total_cmp(&b.1[2]))?.0;
-        let (smooth, _, _) = self.constrained_solve(
-            observed.d,
-            observed.valid,
-            seed,
-            &solved.groups,
-            PressureBasis::Nodes,
-            false,
-        )?;
+        let (smooth, _, _) =
+            self.constrained_solve(observed.d, observed.valid, seed, &solved.groups, PressureBasis::Nodes)?;
         let node_regions = self.regions(&smooth, &solved.support, None);
         let peak_pressure = |r: &Region| r.cells.iter().map(|c| c.1[2]).fold(0.0, f64::max);
         let main = node_regions.iter().find(|r| r.cells.iter().any(|c| c.0 == peak))?;
