@@ -266,9 +266,9 @@ fn a_press_whose_pressure_spreads_onto_the_outermost_cells_is_listed_beside_othe
 /// by the pattern's left border. Stage 2's first pass lists the four; its second merged bumps whose dip is noise, and
 /// joined each of those two to a low bump of the border's between them: one contact between the two presses (on 8
 /// of 12 noise seeds at 3650cf5, the bench's among them; on 3 more the press by the border was dropped). Each press
-/// must be listed with its force; the one 6.7 mm from the pattern's edge reads 2.4-2.7 mm from its place, inwards
-/// along the border, as its contact takes in the border's bump (on other rest frames 0.7 mm), so its place is held
-/// to 3 mm and the others' to 1 mm.
+/// must be listed with its force; the one 8.6 mm from the pattern's edge reads 2.4-2.7 mm from its place, along the
+/// border towards the other, as its contact takes in a maximum on the outermost column (on other rest frames 0.7 mm),
+/// so its place is held to 3 mm and the others' to 1 mm.
 #[test]
 fn two_presses_by_the_border_are_not_joined_through_the_border_between_them() {
     let renderer = Renderer::new(SensorModel::validation(1024, 768)).expect("the validation sensor model is valid");
