@@ -18,14 +18,25 @@ const SIZE: (u32, u32) = (1024, 768);
 
 /// The reading of a press of `contact`, nominal LEDs, no camera motion.
 fn read_press(renderer: &ValidationRenderer, estimator: &mut Estimator, contact: Contact) -> Reading {
+    read_press_at(renderer, estimator, SIZE, contact, 31)
+}
+
+/// The same at frame size `size` (the renderer's) and noise seed `seed`.
+fn read_press_at(
+    renderer: &ValidationRenderer,
+    estimator: &mut Estimator,
+    size: (u32, u32),
+    contact: Contact,
+    seed: u64,
+) -> Reading {
     let case = Case {
         name: "press near the border".into(),
         kind: CaseKind::Press,
-        size: SIZE,
+        size,
         scene: Scene::with_contact(contact),
         camera_motion: None,
         led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
-        seed: 31,
+        seed,
     };
     let (frame, _) = renderer.render(&case).unwrap();
     estimator.estimate(&frame).unwrap()
@@ -86,18 +97,11 @@ fn contacts_at(
     contact: Contact,
     seed: u64,
 ) -> Vec<([f64; 2], f64)> {
-    let case = Case {
-        name: "press near the border".into(),
-        kind: CaseKind::Press,
-        size,
-        scene: Scene::with_contact(contact),
-        camera_motion: None,
-        led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
-        seed,
-    };
-    let (frame, _) = renderer.render(&case).unwrap();
-    let reading = estimator.estimate(&frame).unwrap();
-    reading.contacts().iter().map(|c| (c.centre_mm, c.force_n)).collect()
+    read_press_at(renderer, estimator, size, contact, seed)
+        .contacts()
+        .iter()
+        .map(|c| (c.centre_mm, c.force_n))
+        .collect()
 }
 
 /// The full validation set's press_042 (a 3 mm flat punch of 6.55 N at (-17.4, 10.6) mm, two cells from the

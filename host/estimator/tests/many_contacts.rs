@@ -95,6 +95,27 @@ fn force_scale(renderer: &Renderer, estimator: &mut Estimator, force: f64) -> f6
     force / read
 }
 
+/// The scenes of four 5 mm spheres (place, force) that are not read as four contacts, each within 1 mm and 25 % of its
+/// press at `scale` (see [`contacts_misread`]), each with what was listed.
+fn four_press_scenes_misread(
+    renderer: &Renderer,
+    estimator: &mut Estimator,
+    scenes: &[[([f64; 2], f64); 4]],
+    scale: f64,
+) -> Vec<String> {
+    scenes
+        .iter()
+        .filter_map(|presses| {
+            let contacts = presses
+                .iter()
+                .map(|&(at, force)| Contact::sphere(5.0, at, force))
+                .collect();
+            contacts_misread(renderer, estimator, contacts, 1.0, 0.25, scale)
+                .map(|listed| format!("{presses:?}: listed {listed:.2?}"))
+        })
+        .collect()
+}
+
 fn validation_sensor() -> (Renderer, Estimator) {
     let renderer = Renderer::new(SensorModel::validation(1024, 768)).expect("the validation sensor model is valid");
     let reference = render(&renderer, &Scene::rest(), 1);
@@ -197,16 +218,7 @@ fn four_presses_of_unequal_force_are_four_contacts() {
             ([12.3, 7.5], 6.3),
         ],
     ];
-    let mut failures = Vec::new();
-    for presses in scenes {
-        let contacts = presses
-            .iter()
-            .map(|&(at, force)| Contact::sphere(5.0, at, force))
-            .collect();
-        if let Some(listed) = contacts_misread(&renderer, &mut estimator, contacts, 1.0, 0.25, scale) {
-            failures.push(format!("{presses:?}: listed {listed:.2?}"));
-        }
-    }
+    let failures = four_press_scenes_misread(&renderer, &mut estimator, &scenes, scale);
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
@@ -249,16 +261,7 @@ fn a_press_whose_pressure_spreads_onto_the_outermost_cells_is_listed_beside_othe
             ([-17.1, -11.0], 3.0),
         ],
     ];
-    let mut failures = Vec::new();
-    for presses in scenes {
-        let contacts = presses
-            .iter()
-            .map(|&(at, force)| Contact::sphere(5.0, at, force))
-            .collect();
-        if let Some(listed) = contacts_misread(&renderer, &mut estimator, contacts, 1.0, 0.25, scale) {
-            failures.push(format!("{presses:?}: listed {listed:.2?}"));
-        }
-    }
+    let failures = four_press_scenes_misread(&renderer, &mut estimator, &scenes, scale);
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
