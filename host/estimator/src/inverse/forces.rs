@@ -45,14 +45,7 @@ impl InverseModel {
     /// held 15 % of its 2.3 N (the model's) on the outermost column and shadowed 0.75 of it, and was dropped while
     /// any cell there counted (the unseen-sensors bench, at 3650cf5).
     fn mostly_on_outermost_cells(&self, region: &Region) -> bool {
-        let (on_outermost, all) = region.cells.iter().fold((0.0, 0.0), |(on, all), &(j, f)| {
-            let pressure = f[2].max(0.0);
-            (
-                if self.on_outermost_cells(j) { on + pressure } else { on },
-                all + pressure,
-            )
-        });
-        on_outermost > 0.5 * all
+        region.mostly_on(|j| self.on_outermost_cells(j))
     }
 
     /// A contact beside another one's, doubted by how the pad is held at its edge: its normal force by least squares

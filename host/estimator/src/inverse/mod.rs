@@ -184,6 +184,18 @@ pub struct Region {
     pub floor_scale: f64,
 }
 
+impl Region {
+    /// Whether more than half of the region's pressure (negative pressure counted as none) lies on the cells `on`
+    /// picks.
+    pub(super) fn mostly_on(&self, on: impl Fn(usize) -> bool) -> bool {
+        let (on_picked, all) = self.cells.iter().fold((0.0, 0.0), |(picked, all), &(j, f)| {
+            let pressure = f[2].max(0.0);
+            (if on(j) { picked + pressure } else { picked }, all + pressure)
+        });
+        on_picked > 0.5 * all
+    }
+}
+
 /// A cell and its (fx, fy, fz), N.
 type Traction = (usize, [f64; 3]);
 

@@ -238,16 +238,7 @@ impl InverseModel {
         let peak_pressure = |r: &Region| r.cells.iter().map(|c| c.1[2]).fold(0.0, f64::max);
         let main = node_regions.iter().find(|r| r.cells.iter().any(|c| c.0 == peak))?;
         let main_peak = peak_pressure(main);
-        let mostly_on_first = |r: &Region| {
-            let pressure = |c: &&Traction| c.1[2].max(0.0);
-            let on_first: f64 = r
-                .cells
-                .iter()
-                .filter(|c| first.cells.iter().any(|f| f.0 == c.0))
-                .map(|c| pressure(&c))
-                .sum();
-            on_first > 0.5 * r.cells.iter().map(|c| pressure(&c)).sum::<f64>()
-        };
+        let mostly_on_first = |r: &Region| r.mostly_on(|j| first.cells.iter().any(|f| f.0 == j));
         let shape = self.region(
             node_regions
                 .iter()
