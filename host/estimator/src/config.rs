@@ -275,29 +275,29 @@ pub struct ElasticConfig {
     /// `skin_modulus_ratio`, `gel_mm`, `bond_mm`) with its gel at `shear_modulus_kpa` times `LAYERED_GEL_KPA` /
     /// `EQUIVALENT_LAYER_KPA`, the stack that stands for the equivalent layer in-plane (see [`ElasticConfig`]). The
     /// equivalent layer is fitted to the in-plane field, and its normal displacement is not the pad's: a stiff skin
-    /// over soft gel bends, and the pattern under it sinks further and wider. On the validation pad, for the true
-    /// loads of ten full-set presses of 1-7 N (flat punches of 1.5 and 3 mm, spheres of 3-8 mm; least squares over
-    /// every corner, at the force calibration's modulus), the equivalent layer's normal displacement is 0.27-0.57 of
-    /// the pad's, the stack's 0.94-1.34; the parallax's geometry (the camera's place, refraction) is within 5 %. The
-    /// shift away from the camera's foot that the model lacked read as a tangential force pointing outwards and as
-    /// extra pressure, most under flat punches far from the foot (host/estimator/tests/border_force.rs,
+    /// over soft gel bends, and the pattern under it sinks further and wider. On the validation pad, for the true loads
+    /// of ten full-set presses of 1-7 N (flat punches of 1.5 and 3 mm, spheres of 3-8 mm; least squares over every
+    /// corner, at the force calibration's modulus), the equivalent layer's normal displacement is 0.27-0.57 of the
+    /// pad's, the stack's 0.94-1.34; the parallax's geometry (the camera's place, refraction) is within 5 %. The shift
+    /// away from the camera's foot that the model lacked read as a tangential force pointing outwards and as extra
+    /// pressure, most under flat punches far from the foot (host/estimator/tests/border_force.rs,
     /// docs/benchmarks/validation-full.md). With it, inverse only: the full validation set's force over the pad 0.306
     /// -> 0.229 N (camera moved 0.302 -> 0.236), the quick set's 0.252 -> 0.144 N, localisation, edge direction and
     /// torque better on the full set. Off by default, because three checks and two of the quick set's figures disagree
     /// with it on (measured at d7b6f31, the checks again at d35d57f). On the simulated real sensor, whose camera sees
     /// the pattern directly (a half-space pad, no parallax at all), a press one cell from the border reads 4.71 N for 6
-    /// N against 4.80 (host/estimator/tests/hard_cases.rs holds 4.80-7.20; 4.82 with the option off). Making that
-    /// sensor a stack on its plate would not settle it: rendered so (this stack, seen through 3 mm of Plexiglass and
-    /// the gel), the press reads 5.25 N on and 6.91 N off with the frame's walls 10 mm beyond the pattern, 9.14 and
-    /// 9.51 N with them 3 mm beyond, and where the real pad is held is not known. On the validation sensor, which is
-    /// such a stack: 2 N beside 6 N, 10 mm apart, about (-6, -7) and (-15, -6) mm read as one contact (2 of the 24
-    /// pairs of host/estimator/tests/inverse_shape.rs, none off). Three 8 N presses in a diagonal row read no contact
-    /// with it on until 2fe17d7 (the contact test took the misfit, 0.094 mm against 0.048 off, for noise); since the
-    /// test judges several compact loads at once, host/estimator/tests/many_contacts.rs passes either way. The quick
-    /// set's edge direction reads 2.01 deg mean (1.71 off), its edges' floor 0.5 N (0.3 off; one edge of 0.3 N is
-    /// missed), its pushes' tangential force 0.146 N RMS (0.114) and torque 1.43 N mm (1.11). A 30 mm edge it listed as
-    /// two to four contacts, depending on where it crossed the cell rows, is one contact since `join_long_groups`
-    /// (host/estimator/tests/light_edges.rs, with the option off and on).
+    /// N against 4.80 (host/estimator/tests/hard_cases.rs holds 4.80-7.20; 4.8005 with the option off, at c5114ae).
+    /// Making that sensor a stack on its plate would not settle it: rendered so (this stack, seen through 3 mm of
+    /// Plexiglass and the gel), the press reads 5.25 N on and 6.91 N off with the frame's walls 10 mm beyond the
+    /// pattern, 9.14 and 9.51 N with them 3 mm beyond, and where the real pad is held is not known. On the validation
+    /// sensor, which is such a stack: 2 N beside 6 N, 10 mm apart, about (-6, -7) and (-15, -6) mm read as one contact
+    /// (2 of the 24 pairs of host/estimator/tests/inverse_shape.rs, none off). Three 8 N presses in a diagonal row read
+    /// no contact with it on until 2fe17d7 (the contact test took the misfit, 0.094 mm against 0.048 off, for noise);
+    /// since the test judges several compact loads at once, host/estimator/tests/many_contacts.rs passes either way.
+    /// The quick set's edge direction reads 2.01 deg mean (1.71 off), its edges' floor 0.5 N (0.3 off; one edge of 0.3
+    /// N is missed), its pushes' tangential force 0.146 N RMS (0.114) and torque 1.43 N mm (1.11). A 30 mm edge it
+    /// listed as two to four contacts, depending on where it crossed the cell rows, is one contact since
+    /// `join_long_groups` (host/estimator/tests/light_edges.rs, with the option off and on).
     pub normal_from_stack: bool,
     /// The reference's tangential force (and torque about the normal) over the model's, after the modulus: the
     /// force vector's fx, fy and the torques are multiplied by it. One equivalent material cannot match a skin over

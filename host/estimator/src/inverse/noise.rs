@@ -5,7 +5,8 @@
 /// residuals, only as being at least as large as the rest (see `NoiseEstimate::censored_of`): a contact's corners,
 /// a minority, barely count, and the rest measure the noise as precisely as 1.5 squares per corner. The median
 /// corner's scatter alone was as precise as 0.96: with it the threshold on rest frames of the daemon's simulated
-/// sensor was 640-713 (now 575-620) and the real pair's detection floor 0.46 N (now 0.415 N).
+/// sensor was 640-713 and the real pair's detection floor 0.46 N; with the censored scatter, when it came in, 575-620
+/// and 0.415 N (the floor 0.414 N at c5114ae).
 const NOISE_CENSORED_SHARE: f64 = 0.25;
 
 /// Standard normal quantile (Acklam's rational approximation, relative error below 1.2e-9).
