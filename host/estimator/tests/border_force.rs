@@ -15,10 +15,12 @@ use nusense_sim::validation::{Case, CaseKind, ValidationRenderer};
 use nusense_sim::{Contact, Scene, NOMINAL_LED_CURRENT_MA};
 
 const SIZE: (u32, u32) = (1024, 768);
+/// The noise seed of the presses read at `SIZE`.
+const SEED: u64 = 31;
 
 /// The reading of a press of `contact`, nominal LEDs, no camera motion.
 fn read_press(renderer: &ValidationRenderer, estimator: &mut Estimator, contact: Contact) -> Reading {
-    read_press_at(renderer, estimator, SIZE, contact, 31)
+    read_press_at(renderer, estimator, SIZE, contact, SEED)
 }
 
 /// The same at frame size `size` (the renderer's) and noise seed `seed`.
@@ -133,32 +135,37 @@ fn a_flat_punch_two_cells_from_the_edge_reads_its_force_without_the_borders_load
             Contact::flat_punch(3.0, at, 6.55),
             seed,
         );
-        assert_eq!(
-            border.len(),
-            1,
-            "seed {seed}, {at:?}: one press, one contact: {border:?}"
-        );
-        let (found, force) = border[0];
-        assert!(
-            (found[0] - at[0]).hypot(found[1] - at[1]) <= 1.0,
-            "seed {seed}, {at:?}: read at {found:?}"
-        );
-        assert!(
-            (force / centre[0].1 - 1.0).abs() <= 0.1,
-            "seed {seed}, {at:?}: {force:.3} N against {:.3} N at the centre",
-            centre[0].1
-        );
+        let case = format!("seed {seed}, {at:?}");
+        assert_one_contact_as_at_the_centre(&case, &border, at, 1.0, centre[0].1, 0.1);
     }
+}
+
+/// That `contacts`, read of one press at `at` (`case` names the frame), are one contact within `within_mm` of it whose
+/// force is within `force_fraction` of `centre_force_n`, the same press's at the centre.
+fn assert_one_contact_as_at_the_centre(
+    case: &str,
+    contacts: &[([f64; 2], f64)],
+    at: [f64; 2],
+    within_mm: f64,
+    centre_force_n: f64,
+    force_fraction: f64,
+) {
+    assert_eq!(contacts.len(), 1, "{case}: one press, one contact: {contacts:?}");
+    let (found, force) = contacts[0];
+    assert!(
+        (found[0] - at[0]).hypot(found[1] - at[1]) <= within_mm,
+        "{case}: read at {found:?}"
+    );
+    assert!(
+        (force / centre_force_n - 1.0).abs() <= force_fraction,
+        "{case}: {force:.3} N against {centre_force_n:.3} N at the centre"
+    );
 }
 
 /// Each contact (centre in pad mm, normal force in the pad model's newtons) a 6.5 N press of a 3 mm flat punch at
 /// `at` reads as.
 fn flat_press_contacts(renderer: &ValidationRenderer, estimator: &mut Estimator, at: [f64; 2]) -> Vec<([f64; 2], f64)> {
-    read_press(renderer, estimator, Contact::flat_punch(3.0, at, 6.5))
-        .contacts()
-        .iter()
-        .map(|c| (c.centre_mm, c.force_n))
-        .collect()
+    contacts_at(renderer, estimator, SIZE, Contact::flat_punch(3.0, at, 6.5), SEED)
 }
 
 /// A heavy press two or three cells from the border moves the pattern's outermost corners less than the layer model
@@ -175,17 +182,7 @@ fn a_heavy_press_near_the_border_is_one_contact_with_its_force() {
     assert_eq!(centre.len(), 1, "a press at the centre: {centre:?}");
     for at in [[-17.4, 10.6], [-14.3, -16.4], [-16.4, -0.1], [20.1, -8.2]] {
         let contacts = flat_press_contacts(&renderer, &mut estimator, at);
-        assert_eq!(contacts.len(), 1, "{at:?}: one press, one contact: {contacts:?}");
-        let (found, force) = contacts[0];
-        assert!(
-            (found[0] - at[0]).hypot(found[1] - at[1]) <= 2.0,
-            "{at:?}: read at {found:?}"
-        );
-        assert!(
-            (force / centre[0].1 - 1.0).abs() <= 0.25,
-            "{at:?}: {force:.3} N against {:.3} N at the centre",
-            centre[0].1
-        );
+        assert_one_contact_as_at_the_centre(&format!("{at:?}"), &contacts, at, 2.0, centre[0].1, 0.25);
     }
 }
 
