@@ -4,12 +4,14 @@
 //! For a look case by case: `NUSENSE_VALIDATION_CASES=CASES.jsonl` writes every mode's reading of every case (its
 //! JSON, pressure map included) beside the case's truth, one line each, and `NUSENSE_VALIDATION_MODES=inverse,fast`
 //! runs those modes only (the table's speed-up column then needs `paper` among them).
+//! `NUSENSE_VALIDATION_CONFIG=SENSOR.toml` starts every mode's sensor config from that file instead of the defaults
+//! (an option measured on the set; the calibration the set fits is applied on top of it, as for the defaults).
 
 use std::io::Write;
 
 use nusense_bench::report::validation_markdown;
 use nusense_bench::validation::{estimator_modes, run_validation_with};
-use nusense_estimator::Mode;
+use nusense_estimator::{Mode, SensorConfig};
 use nusense_sim::validation::Profile;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -26,12 +28,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(path) => Some(std::io::BufWriter::new(std::fs::File::create(path)?)),
         None => None,
     };
+    let base = match std::env::var_os("NUSENSE_VALIDATION_CONFIG") {
+        Some(path) => SensorConfig::from_toml_str(&std::fs::read_to_string(path)?)?,
+        None => SensorConfig::default(),
+    };
     let mut written = Ok(());
     let started = std::time::Instant::now();
     let report = run_validation_with(
         profile,
         7,
         &modes,
+        &base,
         &mut |step: &str| eprintln!("{step}"),
         &mut |record| {
             if let (Some(out), Ok(())) = (cases.as_mut(), &written) {

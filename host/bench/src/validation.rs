@@ -205,20 +205,22 @@ pub fn run_validation(
     modes: &[Mode],
     progress: &mut dyn FnMut(&str),
 ) -> Result<ValidationReport, BenchError> {
-    run_validation_with(profile, seed, modes, progress, &mut |_| {})
+    run_validation_with(profile, seed, modes, &SensorConfig::default(), progress, &mut |_| {})
 }
 
-/// [`run_validation`], handing every mode's reading of every case to `record` as it is measured.
+/// [`run_validation`] with every mode's sensor config starting from `base` rather than the defaults (before the
+/// calibration fitted on the set), handing every mode's reading of every case to `record` as it is measured.
 pub fn run_validation_with(
     profile: Profile,
     seed: u64,
     modes: &[Mode],
+    base: &SensorConfig,
     progress: &mut dyn FnMut(&str),
     record: &mut dyn FnMut(&CaseRecord),
 ) -> Result<ValidationReport, BenchError> {
     let set = ValidationSet::new(profile, seed);
     let sizes = set.sizes();
-    let (configs, calibration_frames) = sensor_configs(&set, seed, modes, progress)?;
+    let (configs, calibration_frames) = sensor_configs(&set, seed, modes, base, progress)?;
     let mut calibration_frames = calibration_frames.into_iter().peekable();
     let mut scored: Vec<Vec<Scored>> = modes.iter().map(|_| Vec::new()).collect();
     let mut errors: Vec<Option<String>> = vec![None; modes.len()];
@@ -357,11 +359,12 @@ fn sensor_configs(
     set: &ValidationSet,
     seed: u64,
     modes: &[Mode],
+    base: &SensorConfig,
     progress: &mut dyn FnMut(&str),
 ) -> Result<(Vec<SensorConfig>, Vec<(String, (RgbImage, CaseTruth))>), BenchError> {
     let cases: Vec<_> = set.cases.iter().filter(|c| c.kind == CaseKind::Calibration).collect();
     let Some(size) = cases.first().map(|c| c.size) else {
-        return Ok((vec![SensorConfig::default(); modes.len()], Vec::new()));
+        return Ok((vec![base.clone(); modes.len()], Vec::new()));
     };
     progress(&format!(
         "validation: fitting the gamma line on {} calibration presses at {}x{}",
@@ -378,7 +381,7 @@ fn sensor_configs(
     let configs = modes
         .iter()
         .map(|&mode| {
-            let mut config = SensorConfig::default();
+            let mut config = base.clone();
             if mode == Mode::Inverse {
                 return config;
             }
