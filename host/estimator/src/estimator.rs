@@ -547,7 +547,7 @@ impl Estimator {
         let valid: Vec<bool> = (0..all_valid.len())
             .map(|i| all_valid[i] && (steady[i] || near_loads.binary_search(&i).is_ok()))
             .collect();
-        let (mut kept, tractions, edge_region) = self.listed_contacts(motion, &valid, outcome);
+        let (mut kept, tractions, edge_region, edge_line_deg) = self.listed_contacts(motion, &valid, outcome);
         if kept.is_empty() {
             return (None, Some(zero_map));
         }
@@ -556,7 +556,7 @@ impl Estimator {
         if contacts.is_empty() {
             return (None, Some(zero_map));
         }
-        let touch = self.touch_of(&kept, contacts, &pressure_n, edge_region.as_ref());
+        let touch = self.touch_of(&kept, contacts, &pressure_n, edge_region.as_ref(), edge_line_deg);
         (Some(touch), Some(self.pressure_map(&tractions)))
     }
 
@@ -567,7 +567,12 @@ impl Estimator {
         motion: &Compensated,
         valid: &[bool],
         outcome: &TestOutcome,
-    ) -> (Vec<crate::inverse::Region>, Vec<f64>, Option<crate::inverse::Region>) {
+    ) -> (
+        Vec<crate::inverse::Region>,
+        Vec<f64>,
+        Option<crate::inverse::Region>,
+        Option<f64>,
+    ) {
         // Stage 2 picks the loaded cells at the noise its own fit leaves (corners near the loads left out), never
         // below its floor (`inverse.noise_floor_px`), as before the test measured its noise. Its regions are contacts
         // above the floor at that noise; the strongest is one above the test's floor too (the test found a contact),
@@ -594,6 +599,7 @@ impl Estimator {
             regions: mut kept,
             mut tractions,
             edge_region,
+            edge_line_deg,
             ..
         } = described;
         // Each contact beside the strongest must hold its own at the others' floor (`InverseModel::holds_its_own`),
@@ -611,7 +617,7 @@ impl Estimator {
             }
             listed
         });
-        (kept, tractions, edge_region)
+        (kept, tractions, edge_region, edge_line_deg)
     }
 
     /// What the calibration pushes taught, applied to each contact: its centre moved along its push, and what the
@@ -639,13 +645,15 @@ impl Estimator {
 
     /// The reading's touch from the listed contacts (`kept`, and `contacts` as the reading lists them, both
     /// strongest first, not empty): the total force vector, the torque about their pressure-weighted centre
-    /// (`pressure_n`: each one's normal force as solved) and the strongest's edge direction.
+    /// (`pressure_n`: each one's normal force as solved) and the strongest's edge direction (`edge_line_deg`: its
+    /// line load's, with `inverse.edge_from_line`).
     fn touch_of(
         &self,
         kept: &[crate::inverse::Region],
         contacts: Vec<ContactRegion>,
         pressure_n: &[f64],
         edge_region: Option<&crate::inverse::Region>,
+        edge_line_deg: Option<f64>,
     ) -> Touch {
         let cells = self.model.cells();
         let shear = self.config.elastic.tangential_force_scale;
@@ -674,7 +682,8 @@ impl Estimator {
                 confidence: 0.0,
             },
             |m| EdgeReading {
-                angle_deg: m.angle_deg,
+                // The moments decide whether the contact has a direction; the line load, when asked for, gives it.
+                angle_deg: m.angle_deg.map(|a| edge_line_deg.unwrap_or(a)),
                 confidence: m.confidence,
             },
         );

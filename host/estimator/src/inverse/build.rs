@@ -7,7 +7,7 @@ use nalgebra::DMatrix;
 use nusense_geometry::Point2;
 
 use super::stage1::{motion_basis, MEASURED_NOISE_REACH_CELLS};
-use super::{normal_quantile, InverseModel, Quarters, MOTION_PARAMETERS, SUPPORT_SIGMAS};
+use super::{normal_quantile, FineGrid, InverseModel, Quarters, FINE_PER_CELL, MOTION_PARAMETERS, SUPPORT_SIGMAS};
 use crate::config::{ElasticModel, SensorConfig};
 use crate::elastic::{
     image_matrix, normal_stack, parallax_shifts, Border, CameraView, Cell, ElasticError, PadResponse, PointKernel,
@@ -64,11 +64,17 @@ struct ViewFreeParts {
     /// The layered model's quarter cells (each cell's four, cell-major) and their in-plane response without the
     /// parallax; none for the other models (see [`InverseModel::quarter_centres`]).
     quarters: Option<(Vec<Cell>, PadResponse)>,
+    /// The fine grid's cells (see [`FineGrid`]) and their in-plane response without the parallax, when the config
+    /// asks for the edge's line load (`inverse.edge_from_line`).
+    fine: Option<(Vec<Cell>, PadResponse)>,
 }
 
 impl ViewFreeParts {
     fn shared(config: &SensorConfig) -> Result<Arc<Self>, ElasticError> {
-        let key = format!("{:?}|{:?}", config.pad, config.elastic);
+        let key = format!(
+            "{:?}|{:?}|{}",
+            config.pad, config.elastic, config.inverse.edge_from_line
+        );
         cached(&VIEW_FREE_PARTS, key, || Self::new(config))
     }
 
@@ -121,6 +127,13 @@ impl ViewFreeParts {
         } else {
             None
         };
+        let fine = if config.inverse.edge_from_line {
+            let fine_cells = fine_cells(&cells, size);
+            let response = PadResponse::new(&kernel, &corners, &fine_cells, border)?;
+            Some((fine_cells, response))
+        } else {
+            None
+        };
         Ok(Self {
             kernel,
             normal,
@@ -129,12 +142,18 @@ impl ViewFreeParts {
             response,
             images_t,
             quarters,
+            fine,
         })
     }
 
-    /// The in-plane response and the layered model's quarters' as the camera at `view` sees them: with the parallax
-    /// of the pattern's normal displacement through a gel of `refractive_index` (none without a view or an index).
-    fn seen_from(&self, view: Option<CameraView>, refractive_index: f64) -> (PadResponse, Option<Quarters>) {
+    /// The in-plane response, the layered model's quarters' and the fine grid's pressure response (if any) as the
+    /// camera at `view` sees them: with the parallax of the pattern's normal displacement through a gel of
+    /// `refractive_index` (none without a view or an index).
+    fn seen_from(
+        &self,
+        view: Option<CameraView>,
+        refractive_index: f64,
+    ) -> (PadResponse, Option<Quarters>, Option<FineGrid>) {
         let ViewFreeParts {
             kernel,
             normal,
@@ -144,6 +163,7 @@ impl ViewFreeParts {
         } = self;
         let mut response = self.response.clone();
         let mut quarters = self.quarters.clone();
+        let mut fine = self.fine.clone();
         let n = refractive_index;
         if let (Some(view), true) = (view, n > 0.0) {
             let shifts = parallax_shifts(&view, n, corners);
@@ -152,15 +172,60 @@ impl ViewFreeParts {
             if let Some((cells, response)) = &mut quarters {
                 response.add_parallax(normal, corners, cells, &shifts);
             }
+            if let Some((cells, response)) = &mut fine {
+                response.add_parallax(normal, corners, cells, &shifts);
+            }
         }
+        let fine = fine.map(|(fine_cells, response)| {
+            let (cols, rows) = fine_extent(cells, cells[0].size_mm);
+            FineGrid {
+                origin_mm: fine_cells[0].centre_mm,
+                step_mm: fine_cells[0].size_mm,
+                cols,
+                rows,
+                pressure_t: Dense::from_nalgebra(&DMatrix::from_fn(
+                    fine_cells.len(),
+                    response.matrix.nrows(),
+                    |j, r| response.matrix[(r, 3 * j + 2)],
+                )),
+            }
+        });
         let quarters = quarters.map(|(cells, response)| Quarters {
             pressure_t: Dense::from_nalgebra(&DMatrix::from_fn(cells.len(), response.matrix.nrows(), |j, r| {
                 response.matrix[(r, 3 * j + 2)]
             })),
             centres_mm: cells.iter().map(|q| q.centre_mm).collect(),
         });
-        (response, quarters)
+        (response, quarters, fine)
     }
+}
+
+/// The fine grid's cells: the pattern's `cells` (row-major, `size` apart) each split into [`FINE_PER_CELL`] x
+/// [`FINE_PER_CELL`], row-major over the whole grid.
+fn fine_cells(cells: &[Cell], size: Point2) -> Vec<Cell> {
+    let step = [size[0] / FINE_PER_CELL as f64, size[1] / FINE_PER_CELL as f64];
+    let first = [
+        cells[0].centre_mm[0] - 0.5 * (size[0] - step[0]),
+        cells[0].centre_mm[1] - 0.5 * (size[1] - step[1]),
+    ];
+    let (cols, rows) = fine_extent(cells, size);
+    (0..rows)
+        .flat_map(|row| (0..cols).map(move |col| (row, col)))
+        .map(|(row, col)| Cell {
+            centre_mm: [first[0] + col as f64 * step[0], first[1] + row as f64 * step[1]],
+            size_mm: step,
+        })
+        .collect()
+}
+
+/// The fine grid's columns and rows (see [`fine_cells`]).
+fn fine_extent(cells: &[Cell], size: Point2) -> (usize, usize) {
+    let last = cells[cells.len() - 1].centre_mm;
+    let count = |from: f64, to: f64, pitch: f64| ((to - from) / pitch).round() as usize + 1;
+    (
+        count(cells[0].centre_mm[0], last[0], size[0]) * FINE_PER_CELL,
+        count(cells[0].centre_mm[1], last[1], size[1]) * FINE_PER_CELL,
+    )
 }
 
 /// Distance (mm) from a corner to a cell's centre, as [`InverseModel::near_loads`] compares it with its reach.
@@ -222,7 +287,7 @@ impl InverseModel {
         let pad = config.pad;
         let parts = ViewFreeParts::shared(config)?;
         let ViewFreeParts { corners, cells, .. } = &*parts;
-        let (response, quarters) = parts.seen_from(view, config.elastic.gel_refractive_index);
+        let (response, quarters, fine) = parts.seen_from(view, config.elastic.gel_refractive_index);
         let a = response.matrix;
         let observations = a.nrows();
         let motion_length_mm = (pad.width_mm.max(pad.height_mm)) / 2.0;
@@ -262,6 +327,7 @@ impl InverseModel {
             corners_near_cell: Vec::new(),
             images_t: parts.images_t.clone(),
             quarters,
+            fine,
         };
         let table_reach = NEAR_TABLE_REACH_CELLS * pad.pitch_x_mm().max(pad.pitch_y_mm());
         model.corners_near_cell = corners_near_cells(&model.cells, corners, table_reach);

@@ -8,9 +8,9 @@ use super::{InverseModel, Observed, Region};
 
 /// [`InverseModel::fit_line_to`]'s points along a line (mm apart), its most rounds, and the angle step (degrees) at
 /// which it stops.
-const LINE_SAMPLE_MM: f64 = 0.5;
+pub(super) const LINE_SAMPLE_MM: f64 = 0.5;
 const LINE_FIT_ROUNDS: usize = 200;
-const LINE_FIT_ANGLE_TOLERANCE_DEG: f64 = 0.1;
+pub(super) const LINE_FIT_ANGLE_TOLERANCE_DEG: f64 = 0.1;
 
 /// The spread (mm, the radius of [`InverseModel::line_shape`]'s hexagon) of the line and round loads
 /// [`InverseModel::pair_against_line`] compares: the line's fit starts it at this many grid pitches and keeps it within
@@ -118,6 +118,11 @@ impl InverseModel {
     /// [`Self::matched`] of the displacements less those of stage 2's tractions but the pressure on `cells`
     /// (sorted).
     pub(super) fn matched_without(&self, observed: Observed, cells: &[usize]) -> Vec<f64> {
+        self.matched(&self.displacements_without(observed, cells), observed.valid)
+    }
+
+    /// The displacements of `observed` less those of stage 2's tractions but the pressure on `cells` (sorted).
+    pub(super) fn displacements_without(&self, observed: Observed, cells: &[usize]) -> Vec<f64> {
         // Only the support's cells carry tractions: their columns of A, not all of it.
         let mut rest = observed.d.to_vec();
         for (component, &t) in observed.tractions.iter().enumerate() {
@@ -128,7 +133,7 @@ impl InverseModel {
                 }
             }
         }
-        self.matched(&rest, observed.valid)
+        rest
     }
 
     /// The straight, uniform line load (centre, direction, length, spread) that explains the most of a normal load in
@@ -368,8 +373,7 @@ impl InverseModel {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::inverse::test_support::{field, model};
-    use crate::inverse::MOTION_PARAMETERS;
+    use crate::inverse::test_support::{camera_moved, field, model};
 
     #[test]
     fn line_shape_is_the_same_in_a_reused_buffer() {
@@ -406,9 +410,7 @@ mod tests {
     fn a_line_load_is_fitted_at_angles_off_the_grid_and_not_split() {
         let model = model();
         let valid = vec![true; model.observations / 2];
-        let mut motion = [0.0; MOTION_PARAMETERS];
-        motion[0] = 0.05;
-        motion[3] = 0.002;
+        let motion = camera_moved();
         for (angle, centre) in [
             (12.0, [-3.0, 2.0]),
             (33.0, [4.0, -1.0]),

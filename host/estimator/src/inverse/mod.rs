@@ -61,13 +61,14 @@
 //! contacts of one loaded group are one when a line explains their union so (`InverseModel::join_long_groups`:
 //! pairwise, the lumps of a 30 mm edge can each fail the other tests). The edge direction (second moments of the
 //! pressure) comes from a second solve with the pressure's unknowns on the grid's nodes instead of its cells, which has
-//! no checkerboard noise (see `PressureBasis`).
+//! no checkerboard noise (see `PressureBasis`); with `inverse.edge_from_line`, when those moments give a direction, it
+//! is the direction of the straight line load that best explains the displacements (see `InverseModel::edge_line`).
 //!
 //! The parts, one file each: `build` (the model, once per sensor config and camera view), `stage1` (the motion,
 //! stage 1 and the contact test), `noise` (the noise estimate, the F and normal quantiles), `constrained` (stage 2's
 //! solve with pressure >= 0), `stage2` (its passes), `regions` (its contacts), `forces` (a contact's force against
 //! the floor, its neighbours' far field and the border), `lines` and `pairs` (line loads, two presses against one
-//! line), `moments` (the edge direction).
+//! line), `moments` (the edge direction), `edge_line` (the edge's line load).
 
 use nusense_geometry::{PadGeometry, Point2};
 
@@ -76,6 +77,7 @@ use crate::linalg::{Dense, PackedSymmetric};
 
 mod build;
 mod constrained;
+mod edge_line;
 mod forces;
 mod lines;
 mod moments;
@@ -159,6 +161,27 @@ pub struct InverseModel {
     images_t: Dense,
     /// The layered model's quarter cells, for the contacts' centres (see [`Self::quarter_centres`]).
     quarters: Option<Quarters>,
+    /// The pressure response of a finer grid, for the edge's straight line load (see [`Self::edge_line`]), when
+    /// the config asks for it (`inverse.edge_from_line`).
+    fine: Option<FineGrid>,
+}
+
+/// Cells of the fine grid per cell of the pattern, each way.
+const FINE_PER_CELL: usize = 4;
+
+/// The pattern's cells split into [`FINE_PER_CELL`] x [`FINE_PER_CELL`] (row-major over the whole grid), with the
+/// pressure rows of their response (parallax included): a point load between their centres is shared bilinearly
+/// among the four around it, close to exact at a quarter of a pitch (the kernel at the pattern's depth varies over
+/// about a pitch).
+#[derive(Debug)]
+struct FineGrid {
+    /// The first fine cell's centre and the step between centres, mm.
+    origin_mm: Point2,
+    step_mm: Point2,
+    cols: usize,
+    rows: usize,
+    /// fine cells x observations.
+    pressure_t: Dense,
 }
 
 /// Each cell's four quarters (cell-major: cell j's are 4 j .. 4 j + 4).

@@ -260,15 +260,7 @@ impl InverseModel {
 
     /// Residuals of the motion basis alone (2 per corner, mm; zero on invalid corners). `d0` is zero where invalid.
     pub(super) fn rigid_residuals(&self, d0: &[f64], valid: &[bool]) -> Vec<f64> {
-        let mut btb = self.gram_bb_nalgebra();
-        for r in (0..self.observations).filter(|&r| !valid[r / 2]) {
-            let row = self.b.row(r);
-            for i in 0..MOTION_PARAMETERS {
-                for j in 0..MOTION_PARAMETERS {
-                    btb[(i, j)] -= row[i] * row[j];
-                }
-            }
-        }
+        let btb = self.motion_gram(valid);
         let mut btd = vec![0.0; MOTION_PARAMETERS];
         self.b_t.mul_vec(d0, &mut btd);
         let m = btb.cholesky().map(|c| c.solve(&DVector::from_column_slice(&btd)));
@@ -279,6 +271,20 @@ impl InverseModel {
                 None => d0[r],
             })
             .collect()
+    }
+
+    /// BᵀB over the corners `valid`.
+    pub(super) fn motion_gram(&self, valid: &[bool]) -> DMatrix<f64> {
+        let mut btb = self.gram_bb_nalgebra();
+        for r in (0..self.observations).filter(|&r| !valid[r / 2]) {
+            let row = self.b.row(r);
+            for i in 0..MOTION_PARAMETERS {
+                for j in 0..MOTION_PARAMETERS {
+                    btb[(i, j)] -= row[i] * row[j];
+                }
+            }
+        }
+        btb
     }
 
     fn gram_bb_nalgebra(&self) -> DMatrix<f64> {

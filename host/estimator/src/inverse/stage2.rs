@@ -34,6 +34,10 @@ pub struct Stage2 {
     pub regions: Vec<Region>,
     /// The strongest contact as the node solve sees it (see `PressureBasis`), for its edge direction.
     pub edge_region: Option<Region>,
+    /// The direction (degrees from +x towards +y, in [0, 180)) of the straight line load that best explains the
+    /// strongest contact, when its shape is elongated and the config asks for it (`inverse.edge_from_line`; see
+    /// [`InverseModel::edge_line`]).
+    pub edge_line_deg: Option<f64>,
 }
 
 impl InverseModel {
@@ -46,6 +50,7 @@ impl InverseModel {
             motion: seed.motion,
             regions: Vec::new(),
             edge_region: None,
+            edge_line_deg: None,
         };
         // The loaded cells are those of stage 1's per-cell test; only when they hold no contact (a light long one,
         // whose load no single cell carries above its noise) also those of the line shapes. Picked everywhere, the
@@ -159,6 +164,20 @@ impl InverseModel {
             tractions: &solved.tractions,
         };
         let edge_region = self.edge_region(observed, seed, &solved, halved, noise_mm);
+        let edge_line_deg = edge_region.as_ref().filter(|_| self.fine.is_some()).and_then(|shape| {
+            let start = self.elongation(shape)?;
+            let mut loaded: Vec<usize> = shape.cells.iter().map(|c| c.0).collect();
+            loaded.extend(
+                solved
+                    .regions
+                    .first()
+                    .into_iter()
+                    .flat_map(|r| r.cells.iter().map(|c| c.0)),
+            );
+            loaded.sort_unstable();
+            loaded.dedup();
+            Some(self.edge_line(observed, &loaded, start)?.angle_deg)
+        });
         let Solved { motion, regions, .. } = solved;
         // Tractions outside the contacts are not reported (they are below the floor).
         let mut kept = vec![0.0; 3 * cells];
@@ -172,6 +191,7 @@ impl InverseModel {
             motion,
             regions,
             edge_region,
+            edge_line_deg,
         }
     }
 

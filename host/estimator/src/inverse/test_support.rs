@@ -26,6 +26,14 @@ pub(super) fn pseudo_gauss(seed: u64) -> impl FnMut() -> f64 {
     }
 }
 
+/// A small camera motion: a shift of 0.05 in x and a shear (of the motion basis's units).
+pub(super) fn camera_moved() -> [f64; MOTION_PARAMETERS] {
+    let mut motion = [0.0; MOTION_PARAMETERS];
+    motion[0] = 0.05;
+    motion[3] = 0.002;
+    motion
+}
+
 /// Displacements of `forces` (per cell), plus a camera motion.
 pub(super) fn field(model: &InverseModel, forces: &[(usize, [f64; 3])], motion: [f64; MOTION_PARAMETERS]) -> Vec<f64> {
     let mut t = vec![0.0; 3 * model.cells.len()];
