@@ -292,10 +292,12 @@ impl InverseModel {
         };
         let second_pass = noise.as_ref().is_some_and(|n| n.found_apart.is_some());
         let mut insignificant_dips: Vec<(f64, usize, usize)> = Vec::new();
+        // Each pair once: the highest pass between two basins is the same both ways (the lower of each pair of
+        // neighbouring cells across their border), and a pair the first visit joined stays joined.
         for a in 0..peaks.len() {
-            for b in 0..peaks.len() {
+            for b in a + 1..peaks.len() {
                 let (level, pass) = saddle[a][b];
-                if a == b || pass == usize::MAX {
+                if pass == usize::MAX {
                     continue;
                 }
                 let (lower_peak, higher_peak) = if pressure(peaks[a]) <= pressure(peaks[b]) {
