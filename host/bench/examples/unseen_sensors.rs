@@ -17,6 +17,8 @@
 //! read as more than one contact, the strongest contact's distance from the press (RMS and worst), the model's
 //! newtons over the truth (median: the calibration this sensor would need) and the scatter of that ratio about its
 //! median (RMS), and the edges' direction errors. Every frame is seeded: two runs print the same table.
+//! `NUSENSE_VALIDATION_CONFIG=SENSOR.toml` starts the estimator's config from that file instead of the defaults (an
+//! option measured here, as the validation example does).
 
 use nusense_bench::metrics::{distance, edge_angle_error_deg, rms};
 use nusense_estimator::{Estimator, Mode, SensorConfig};
@@ -373,6 +375,10 @@ fn variants() -> Vec<(String, SensorModel, Condition)> {
 
 fn main() -> Result<(), Error> {
     let filter = std::env::args().nth(1);
+    let config = match std::env::var_os("NUSENSE_VALIDATION_CONFIG") {
+        Some(path) => SensorConfig::from_toml_str(&std::fs::read_to_string(path)?)?,
+        None => SensorConfig::default(),
+    };
     let started = std::time::Instant::now();
     println!(
         "| sensor or condition | frames | refused | missed | rest read as contact | press listed in parts | \
@@ -416,7 +422,7 @@ fn main() -> Result<(), Error> {
         let renderer = Renderer::new(sensor)?;
         let mut row = Row::new(&name);
         let rest = renderer.render(&base, NOMINAL, REST_SEED)?.0;
-        let mut estimator = match Estimator::new(SensorConfig::default(), Mode::Inverse, &rest) {
+        let mut estimator = match Estimator::new(config.clone(), Mode::Inverse, &rest) {
             Ok(estimator) => estimator,
             Err(error) => {
                 println!("| {name} | rest frame refused: {error} |");
