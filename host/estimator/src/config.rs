@@ -387,15 +387,15 @@ pub struct InverseConfig {
     pub noise_floor_px: f64,
     /// Probability that the contact test calls a rest frame a contact.
     pub false_alarm_probability: f64,
-    /// A long contact's edge direction from the straight, uniform line load that best explains its displacements
-    /// (on a grid of cells a quarter pitch wide, the motion free; see `InverseModel::edge_line`) instead of the second moments of
-    /// its pressure map, which read a line with an error that depends on where it crosses between the corners. Off by
-    /// default: it reads the direction through the model's far field, and so follows the model's error of the pad
-    /// there. Measured inverse only, on c87f237's estimator (`NUSENSE_VALIDATION_CONFIG`, docs/benchmarks): the full
-    /// validation set's 24 edges (a layered pad held in a frame, not the model's) 2.66 / 6.41 -> 1.72 / 3.28 deg mean /
-    /// worst, the quick set's 8 1.71 / 3.36 -> 1.58 / 3.34, 40 other edges of that sensor 1.92 / 7.80 -> 1.53 / 4.78
-    /// (tests/edge_line.rs), the unseen sensors' 38 2.26 / 10.1 -> 2.06 / 6.4 (worse on some: 320x240, 640x360, the
-    /// camera 86 mm away); every other figure the same. But on the simulated real sensor, a half-space
+    /// A long contact's edge direction from the straight, uniform line load that best explains its displacements (on a
+    /// grid of cells a quarter pitch wide, the motion free; see `InverseModel::edge_line`) instead of the second
+    /// moments of its pressure map, which read a line with an error that depends on where it crosses between the
+    /// corners. Off by default: it reads the direction through the model's far field, and so follows the model's error
+    /// of the pad there. Measured inverse only, on c87f237's estimator (`NUSENSE_VALIDATION_CONFIG`, docs/benchmarks):
+    /// the full validation set's 24 edges (a layered pad held in a frame, not the model's) 2.66 / 6.41 -> 1.72 / 3.28
+    /// deg mean / worst, the quick set's 8 1.71 / 3.36 -> 1.58 / 3.34, 40 other edges of that sensor 1.92 / 7.80 ->
+    /// 1.53 / 4.78 (tests/edge_line.rs), the unseen sensors' 38 2.26 / 10.1 -> 2.06 / 6.4 (worse on some: 320x240,
+    /// 640x360, the camera 86 mm away); every other figure the same. But on the simulated real sensor, a half-space
     /// pad, the 8 N edges at 30 and 105 deg of tests/hard_cases.rs read 2.3 and 3.5 deg off where the moments read 0.04
     /// and 0.4 (that test asks 2). It costs a model build of 1.8 s instead of 0.55 s (the response of those cells;
     /// release, 1024x768) and about 0.5 ms more per frame with an edge.
