@@ -1,7 +1,9 @@
 //! Speed per stage and per frame, fast, inverse and paper mode, on the real frames at full, 1/2 and 1/4 size and at
 //! 640x480. `cargo bench -p nusense-estimator` (add `-- --quick` for a short run). After criterion's own report it
 //! prints a table of ms per frame of every mode measured in the same run (thread CPU time, and wall time), with the
-//! ratios between them. `-- table` (a filter no criterion benchmark matches) prints the table alone.
+//! ratios between them. `-- table` (a filter no criterion benchmark matches) prints the table alone. A second table
+//! times the inverse on a 20 mm edge press of the validation sensor with the edge direction from the moments (the
+//! default) and from the line load (`inverse.edge_from_line`), in the same run.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -12,6 +14,8 @@ use nusense_estimator::contact::{divergence_centre, fit_affine_motion, FieldPoin
 use nusense_estimator::registration::register;
 use nusense_estimator::shear::{gamma, ShearSampler};
 use nusense_estimator::{Estimator, Mode, SensorConfig};
+use nusense_sim::validation::{Case, CaseKind, ValidationRenderer};
+use nusense_sim::{Contact, Scene, NOMINAL_LED_CURRENT_MA};
 
 fn load(name: &str) -> RgbImage {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real");
@@ -163,7 +167,18 @@ fn thread_cpu_s() -> f64 {
 /// Mean ms per `estimate` over `repeats` frames (after one warm-up frame), (thread CPU, wall); `None` if the mode
 /// fails.
 fn ms_per_frame(mode: Mode, reference: &RgbImage, touch: &RgbImage, repeats: usize) -> Option<(f64, f64)> {
-    let mut estimator = Estimator::new(SensorConfig::default(), mode, reference).ok()?;
+    ms_per_frame_with(SensorConfig::default(), mode, reference, touch, repeats)
+}
+
+/// [`ms_per_frame`] with the sensor config `config`.
+fn ms_per_frame_with(
+    config: SensorConfig,
+    mode: Mode,
+    reference: &RgbImage,
+    touch: &RgbImage,
+    repeats: usize,
+) -> Option<(f64, f64)> {
+    let mut estimator = Estimator::new(config, mode, reference).ok()?;
     estimator.estimate(touch).ok()?;
     let (cpu, wall) = (thread_cpu_s(), Instant::now());
     for _ in 0..repeats {
@@ -215,4 +230,40 @@ fn main() {
             ratio(paper, fast, 0)
         );
     }
+    edge_direction_table();
+}
+
+/// The inverse's ms per frame on an edge press of the validation sensor, the edge direction from the moments and
+/// from the line load, and their ratio.
+fn edge_direction_table() {
+    const SIZE: (u32, u32) = (1024, 768);
+    let renderer = ValidationRenderer::new(SIZE).expect("the validation sensor renders");
+    let reference = renderer.reference(7).expect("its rest frame");
+    let case = Case {
+        name: "edge".into(),
+        kind: CaseKind::Edge,
+        size: SIZE,
+        scene: Scene::with_contact(Contact::edge(20.0, 1.0, 85.0, [3.0, 3.0], 5.0)),
+        camera_motion: None,
+        led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
+        seed: 3,
+    };
+    let (edge, _) = renderer.render(&case).expect("the edge press renders");
+    let mut line = SensorConfig::default();
+    line.inverse.edge_from_line = true;
+    let moments = ms_per_frame(Mode::Inverse, &reference, &edge, 100);
+    let line = ms_per_frame_with(line, Mode::Inverse, &reference, &edge, 100);
+    println!(
+        "\ninverse ms per frame on a 5 N, 20 mm edge press of the validation sensor at 1024x768 (thread CPU, wall):"
+    );
+    println!("{:>18} {:>18} {:>15}", "moments", "line load", "line/moments");
+    let show = |v: Option<(f64, f64)>| {
+        v.map(|(cpu, wall)| format!("{cpu:.3} ({wall:.3})"))
+            .unwrap_or_else(|| "n/a".into())
+    };
+    let ratio = match (line, moments) {
+        (Some((a, _)), Some((b, _))) if b > 0.0 => format!("{:.2}x", a / b),
+        _ => "n/a".into(),
+    };
+    println!("{:>18} {:>18} {:>15}", show(moments), show(line), ratio);
 }

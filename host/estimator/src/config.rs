@@ -398,7 +398,8 @@ pub struct InverseConfig {
     /// 640x360, the camera 86 mm away); every other figure the same. But on the simulated real sensor, a half-space
     /// pad, the 8 N edges at 30 and 105 deg of tests/hard_cases.rs read 2.3 and 3.5 deg off where the moments read 0.04
     /// and 0.4 (that test asks 2). It costs a model build of 1.8 s instead of 0.55 s (the response of those cells;
-    /// release, 1024x768) and about 0.5 ms more per frame with an edge.
+    /// release, 1024x768) and 1.41 times the inverse's time on a frame with an edge (1.61 -> 2.26 ms CPU at 1024x768,
+    /// `cargo bench -p nusense-estimator -- table`).
     pub edge_from_line: bool,
 }
 
