@@ -21,7 +21,8 @@
 //! option measured here, as the validation example does).
 
 use nusense_bench::metrics::{distance, edge_angle_error_deg, rms};
-use nusense_estimator::{Estimator, Mode, SensorConfig};
+use nusense_bench::validation::base_config_from_env;
+use nusense_estimator::{Estimator, Mode};
 use nusense_geometry::Point2;
 use nusense_sim::{Contact, Damage, Occlusion, Renderer, Scene, SensorModel, NOMINAL_LED_CURRENT_MA};
 use rand::{Rng, SeedableRng};
@@ -375,10 +376,7 @@ fn variants() -> Vec<(String, SensorModel, Condition)> {
 
 fn main() -> Result<(), Error> {
     let filter = std::env::args().nth(1);
-    let config = match std::env::var_os("NUSENSE_VALIDATION_CONFIG") {
-        Some(path) => SensorConfig::from_toml_str(&std::fs::read_to_string(path)?)?,
-        None => SensorConfig::default(),
-    };
+    let config = base_config_from_env()?;
     let started = std::time::Instant::now();
     println!(
         "| sensor or condition | frames | refused | missed | rest read as contact | press listed in parts | \

@@ -10,8 +10,8 @@
 use std::io::Write;
 
 use nusense_bench::report::validation_markdown;
-use nusense_bench::validation::{estimator_modes, run_validation_with};
-use nusense_estimator::{Mode, SensorConfig};
+use nusense_bench::validation::{base_config_from_env, estimator_modes, run_validation_with};
+use nusense_estimator::Mode;
 use nusense_sim::validation::Profile;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -28,10 +28,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(path) => Some(std::io::BufWriter::new(std::fs::File::create(path)?)),
         None => None,
     };
-    let base = match std::env::var_os("NUSENSE_VALIDATION_CONFIG") {
-        Some(path) => SensorConfig::from_toml_str(&std::fs::read_to_string(path)?)?,
-        None => SensorConfig::default(),
-    };
+    let base = base_config_from_env()?;
     let mut written = Ok(());
     let started = std::time::Instant::now();
     let report = run_validation_with(

@@ -198,6 +198,15 @@ pub(crate) struct Scored {
     elapsed_ms: Option<f64>,
 }
 
+/// The sensor config the examples measure from: the TOML file `NUSENSE_VALIDATION_CONFIG` names (an option measured
+/// on the set), or the defaults.
+pub fn base_config_from_env() -> Result<SensorConfig, Box<dyn std::error::Error>> {
+    Ok(match std::env::var_os("NUSENSE_VALIDATION_CONFIG") {
+        Some(path) => SensorConfig::from_toml_str(&std::fs::read_to_string(path)?)?,
+        None => SensorConfig::default(),
+    })
+}
+
 /// Renders the set once, size by size, and runs every mode on each frame as it is made.
 pub fn run_validation(
     profile: Profile,

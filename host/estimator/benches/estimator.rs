@@ -213,14 +213,6 @@ fn main() {
         let fast = ms_per_frame(Mode::Fast, reference, touch, 200);
         let inverse = ms_per_frame(Mode::Inverse, reference, touch, 200);
         let paper = ms_per_frame(Mode::Paper, reference, touch, 3);
-        let show = |v: Option<(f64, f64)>| {
-            v.map(|(cpu, wall)| format!("{cpu:.3} ({wall:.3})"))
-                .unwrap_or_else(|| "n/a".into())
-        };
-        let ratio = |a: Option<(f64, f64)>, b: Option<(f64, f64)>, digits: usize| match (a, b) {
-            (Some((a, _)), Some((b, _))) if b > 0.0 => format!("{:.digits$}x", a / b),
-            _ => "n/a".into(),
-        };
         println!(
             "{label:>10} {:>18} {:>18} {:>20} {:>13} {:>11}",
             show(fast),
@@ -257,13 +249,24 @@ fn edge_direction_table() {
         "\ninverse ms per frame on a 5 N, 20 mm edge press of the validation sensor at 1024x768 (thread CPU, wall):"
     );
     println!("{:>18} {:>18} {:>15}", "moments", "line load", "line/moments");
-    let show = |v: Option<(f64, f64)>| {
-        v.map(|(cpu, wall)| format!("{cpu:.3} ({wall:.3})"))
-            .unwrap_or_else(|| "n/a".into())
-    };
-    let ratio = match (line, moments) {
-        (Some((a, _)), Some((b, _))) if b > 0.0 => format!("{:.2}x", a / b),
+    println!(
+        "{:>18} {:>18} {:>15}",
+        show(moments),
+        show(line),
+        ratio(line, moments, 2)
+    );
+}
+
+/// A [`ms_per_frame`] as "cpu (wall)", or "n/a".
+fn show(v: Option<(f64, f64)>) -> String {
+    v.map(|(cpu, wall)| format!("{cpu:.3} ({wall:.3})"))
+        .unwrap_or_else(|| "n/a".into())
+}
+
+/// The ratio of two [`ms_per_frame`]s' CPU times with `digits` decimals, or "n/a".
+fn ratio(a: Option<(f64, f64)>, b: Option<(f64, f64)>, digits: usize) -> String {
+    match (a, b) {
+        (Some((a, _)), Some((b, _))) if b > 0.0 => format!("{:.digits$}x", a / b),
         _ => "n/a".into(),
-    };
-    println!("{:>18} {:>18} {:>15}", show(moments), show(line), ratio);
+    }
 }
