@@ -7,7 +7,7 @@
 //! depends on the map only through where the search starts. Every corner counts: fitted only on the corners within 5,
 //! 8 or 12 mm of the line, the quick validation set's edges read 3.9, 2.2 and 1.8 deg mean instead of 1.6.
 
-use super::lines::{pattern_search, LineLoad, LINE_FIT_ANGLE_TOLERANCE_DEG, LINE_SAMPLE_MM};
+use super::lines::{bilinear_split, pattern_search, LineLoad, LINE_FIT_ANGLE_TOLERANCE_DEG, LINE_SAMPLE_MM};
 use super::{FineGrid, InverseModel, Observed, MOTION_PARAMETERS};
 use crate::linalg::dot;
 
@@ -29,11 +29,7 @@ impl<'a> MotionProjection<'a> {
     /// aᵀ P0 a for a field `a` that is zero on the invalid corners' rows.
     fn energy(&self, a: &[f64]) -> f64 {
         let mut bta = nalgebra::DVector::zeros(MOTION_PARAMETERS);
-        for (r, &v) in a.iter().enumerate().filter(|(_, v)| **v != 0.0) {
-            for (sum, b) in bta.iter_mut().zip(self.model.b.row(r)) {
-                *sum += b * v;
-            }
-        }
+        self.model.b_t.mul_vec(a, bta.as_mut_slice());
         dot(a, a) - bta.dot(&self.gram.solve(&bta))
     }
 }
@@ -92,16 +88,11 @@ impl FineGrid {
         let points = (length_mm / LINE_SAMPLE_MM).ceil().max(2.0) as usize;
         let (c, s) = (angle_deg.to_radians().cos(), angle_deg.to_radians().sin());
         let share = 1.0 / points as f64;
-        let split = |at: f64, n: usize| -> (usize, f64) {
-            let clamped = at.clamp(0.0, (n - 1) as f64);
-            let low = (clamped.floor() as usize).min(n - 2);
-            (low, clamped - low as f64)
-        };
         let mut touched: Vec<usize> = Vec::with_capacity(4 * points);
         for i in 0..points {
             let t = ((i as f64 + 0.5) / points as f64 - 0.5) * length_mm;
-            let (col, fx) = split((centre[0] + t * c - self.origin_mm[0]) / self.step_mm[0], self.cols);
-            let (row, fy) = split((centre[1] + t * s - self.origin_mm[1]) / self.step_mm[1], self.rows);
+            let (col, fx) = bilinear_split((centre[0] + t * c - self.origin_mm[0]) / self.step_mm[0], self.cols);
+            let (row, fy) = bilinear_split((centre[1] + t * s - self.origin_mm[1]) / self.step_mm[1], self.rows);
             let below = row * self.cols + col;
             for (j, w) in [
                 (below, (1.0 - fx) * (1.0 - fy)),

@@ -40,6 +40,17 @@ const SPREAD_HEXAGON: [Point2; 7] = [
     [0.5, -0.866_025_403_784_438_6],
 ];
 
+/// A place `at` (in grid steps from the first of `n` nodes) as the node below it and the fraction of a step beyond it,
+/// clamped to the grid (the last step's far end at most): the bilinear shares of a point between nodes.
+pub(super) fn bilinear_split(at: f64, n: usize) -> (usize, f64) {
+    let clamped = at.clamp(0.0, (n - 1) as f64);
+    // Not negative, so the cast truncates as `floor` would (NaN to 0 either way), without a libm call: on x86-64
+    // without SSE4.1, `floor` is a function call, most of a line's cost. Below n (a u16 or a few times one), the cast
+    // through u32 is the same, in fewer instructions than a u64's.
+    let low = (clamped as u32 as usize).min(n.saturating_sub(2));
+    (low, clamped - low as f64)
+}
+
 /// A uniform load along a straight segment.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct LineLoad {
@@ -221,14 +232,6 @@ impl InverseModel {
             &[[0.0, 0.0]]
         };
         let weight = 1.0 / (points * spread.len()) as f64;
-        let split = |at: f64, n: usize| -> (usize, f64) {
-            let clamped = at.clamp(0.0, (n - 1) as f64);
-            // Not negative, so the cast truncates as `floor` would (NaN to 0 either way), without a libm call: on
-            // x86-64 without SSE4.1, `floor` is a function call, most of this loop's cost. Below n (a u16), the
-            // cast through u32 is the same, in fewer instructions than a u64's.
-            let low = (clamped as u32 as usize).min(n.saturating_sub(2));
-            (low, clamped - low as f64)
-        };
         let along = |i: usize| ((i as f64 + 0.5) / points as f64 - 0.5) * length_mm;
         let cell_x = |t: f64, offset: &Point2| (centre[0] + t * c + spread_mm * offset[0] - origin[0]) / px;
         let cell_y = |t: f64, offset: &Point2| (centre[1] + t * s + spread_mm * offset[1] - origin[1]) / py;
@@ -238,7 +241,10 @@ impl InverseModel {
         let (mut rows_reached, mut cols_reached) = ((usize::MAX, 0), (usize::MAX, 0));
         for t in [along(0), along(points - 1)] {
             for offset in spread {
-                let (col, row) = (split(cell_x(t, offset), cols).0, split(cell_y(t, offset), rows).0);
+                let (col, row) = (
+                    bilinear_split(cell_x(t, offset), cols).0,
+                    bilinear_split(cell_y(t, offset), rows).0,
+                );
                 rows_reached = (rows_reached.0.min(row), rows_reached.1.max(row));
                 cols_reached = (cols_reached.0.min(col), cols_reached.1.max(col));
             }
@@ -247,8 +253,8 @@ impl InverseModel {
         for i in 0..points {
             let t = along(i);
             for offset in spread {
-                let (col, fx) = split(cell_x(t, offset), cols);
-                let (row, fy) = split(cell_y(t, offset), rows);
+                let (col, fx) = bilinear_split(cell_x(t, offset), cols);
+                let (row, fy) = bilinear_split(cell_y(t, offset), rows);
                 let below = row * cols + col;
                 let (low, high) = dense[below..below + cols + 2].split_at_mut(cols);
                 low[0] += weight * (1.0 - fx) * (1.0 - fy);
