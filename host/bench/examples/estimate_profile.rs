@@ -59,15 +59,13 @@ fn press_pair(size: (u32, u32), cache: &std::path::Path) -> Result<(Vec<u8>, Vec
     }
     let renderer = ValidationRenderer::new(size)?;
     let reference = encode(&renderer.reference(7)?);
-    let case = Case {
-        name: "press".into(),
-        kind: CaseKind::Press,
+    let case = Case::still(
+        "press",
+        CaseKind::Press,
         size,
-        scene: Scene::with_contact(Contact::sphere(5.0, [3.0, -2.0], 5.0)),
-        camera_motion: None,
-        led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
-        seed: 11,
-    };
+        Scene::with_contact(Contact::sphere(5.0, [3.0, -2.0], 5.0)),
+        11,
+    );
     let touch = encode(&renderer.render(&case)?.0);
     std::fs::create_dir_all(cache)?;
     std::fs::write(path("rest"), &reference)?;
@@ -159,13 +157,8 @@ fn rest_frames(size: (u32, u32), frames: usize, cache: &std::path::Path) -> Resu
             Ok(bytes) => bytes,
             Err(_) => {
                 let case = Case {
-                    name: name.clone(),
-                    kind: CaseKind::Rest,
-                    size,
-                    scene: Scene::rest(),
-                    camera_motion: None,
                     led_currents_ma: uneven_leds(k),
-                    seed: 1000 + k,
+                    ..Case::still(name.clone(), CaseKind::Rest, size, Scene::rest(), 1000 + k)
                 };
                 let bytes = encode(&renderer.render(&case)?.0);
                 std::fs::write(path(name), &bytes)?;

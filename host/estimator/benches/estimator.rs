@@ -15,7 +15,7 @@ use nusense_estimator::registration::register;
 use nusense_estimator::shear::{gamma, ShearSampler};
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use nusense_sim::validation::{Case, CaseKind, ValidationRenderer};
-use nusense_sim::{Contact, Scene, NOMINAL_LED_CURRENT_MA};
+use nusense_sim::{Contact, Scene};
 
 fn load(name: &str) -> RgbImage {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/real");
@@ -231,15 +231,13 @@ fn edge_direction_table() {
     const SIZE: (u32, u32) = (1024, 768);
     let renderer = ValidationRenderer::new(SIZE).expect("the validation sensor renders");
     let reference = renderer.reference(7).expect("its rest frame");
-    let case = Case {
-        name: "edge".into(),
-        kind: CaseKind::Edge,
-        size: SIZE,
-        scene: Scene::with_contact(Contact::edge(20.0, 1.0, 85.0, [3.0, 3.0], 5.0)),
-        camera_motion: None,
-        led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
-        seed: 3,
-    };
+    let case = Case::still(
+        "edge",
+        CaseKind::Edge,
+        SIZE,
+        Scene::with_contact(Contact::edge(20.0, 1.0, 85.0, [3.0, 3.0], 5.0)),
+        3,
+    );
     let (edge, _) = renderer.render(&case).expect("the edge press renders");
     let mut line = SensorConfig::default();
     line.inverse.edge_from_line = true;

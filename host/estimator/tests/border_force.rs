@@ -12,7 +12,7 @@
 
 use nusense_estimator::{Estimator, Mode, Reading, SensorConfig};
 use nusense_sim::validation::{Case, CaseKind, ValidationRenderer};
-use nusense_sim::{Contact, Scene, NOMINAL_LED_CURRENT_MA};
+use nusense_sim::{Contact, Scene};
 
 const SIZE: (u32, u32) = (1024, 768);
 /// The noise seed of the presses read at `SIZE`.
@@ -31,15 +31,13 @@ fn read_press_at(
     contact: Contact,
     seed: u64,
 ) -> Reading {
-    let case = Case {
-        name: "press near the border".into(),
-        kind: CaseKind::Press,
+    let case = Case::still(
+        "press near the border",
+        CaseKind::Press,
         size,
-        scene: Scene::with_contact(contact),
-        camera_motion: None,
-        led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
+        Scene::with_contact(contact),
         seed,
-    };
+    );
     let (frame, _) = renderer.render(&case).unwrap();
     estimator.estimate(&frame).unwrap()
 }

@@ -11,7 +11,7 @@ use nusense_estimator::detection::FastTracker;
 use nusense_estimator::motion::fit_raw_similarity;
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use nusense_sim::validation::{CameraMotion, Case, CaseKind, ValidationRenderer};
-use nusense_sim::{Contact, Scene, NOMINAL_LED_CURRENT_MA};
+use nusense_sim::{Contact, Scene};
 
 const SIZE: (u32, u32) = (1024, 768);
 /// A square the tracker does not flag follows the camera's rigid motion this closely, px: the squares away from the
@@ -20,16 +20,11 @@ const RIGID_MISS_PX: f64 = 0.7;
 
 fn rest_case(name: &str, roll_deg: f64, seed: u64) -> Case {
     Case {
-        name: name.into(),
-        kind: CaseKind::Rest,
-        size: SIZE,
-        scene: Scene::rest(),
         camera_motion: (roll_deg != 0.0).then_some(CameraMotion {
             rotation_deg: [0.0, 0.0, roll_deg],
             shift_mm: [0.0, 0.0],
         }),
-        led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
-        seed,
+        ..Case::still(name, CaseKind::Rest, SIZE, Scene::rest(), seed)
     }
 }
 
@@ -152,13 +147,14 @@ fn a_camera_shifted_more_than_half_a_cell_diagonally_keeps_every_square_s_index(
             shift_mm,
         };
         let case = |name: &str, scene: Scene, seed: u64| Case {
-            name: format!("shift {shift_mm:?}: {name}"),
-            kind: CaseKind::CameraMotion,
-            size: SIZE,
-            scene,
             camera_motion: Some(motion),
-            led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
-            seed,
+            ..Case::still(
+                format!("shift {shift_mm:?}: {name}"),
+                CaseKind::CameraMotion,
+                SIZE,
+                scene,
+                seed,
+            )
         };
         let rest = case("at rest", Scene::rest(), 40 + k as u64);
         let (frame, truth) = renderer.render(&rest).unwrap();

@@ -20,13 +20,8 @@ fn read(
     camera_motion: Option<CameraMotion>,
 ) -> Reading {
     let case = Case {
-        name: "moved press".into(),
-        kind: CaseKind::CameraMotion,
-        size: SIZE,
-        scene: scene.clone(),
         camera_motion,
-        led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
-        seed: 29,
+        ..Case::still("moved press", CaseKind::CameraMotion, SIZE, scene.clone(), 29)
     };
     let (frame, _) = renderer.render(&case).unwrap();
     estimator.estimate(&frame).unwrap()

@@ -9,7 +9,7 @@
 
 use nusense_estimator::{Estimator, Mode, SensorConfig};
 use nusense_sim::validation::{Case, CaseKind, ValidationRenderer};
-use nusense_sim::{Contact, Scene, NOMINAL_LED_CURRENT_MA};
+use nusense_sim::{Contact, Scene};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -36,15 +36,13 @@ fn the_line_load_reads_a_layered_pads_edges_better_than_the_moments() {
         let angle = rng.gen_range(0.0..180.0);
         let centre = [rng.gen_range(-10.0..=10.0), rng.gen_range(-7.0..=7.0)];
         let force = rng.gen_range(3.0..=8.0);
-        let case = Case {
-            name: format!("{force:.1} N edge at {angle:.1} deg about {centre:.1?} mm"),
-            kind: CaseKind::Edge,
-            size: SIZE,
-            scene: Scene::with_contact(Contact::edge(20.0, 1.0, angle, centre, force)),
-            camera_motion: None,
-            led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
-            seed: 60 + k as u64,
-        };
+        let case = Case::still(
+            format!("{force:.1} N edge at {angle:.1} deg about {centre:.1?} mm"),
+            CaseKind::Edge,
+            SIZE,
+            Scene::with_contact(Contact::edge(20.0, 1.0, angle, centre, force)),
+            60 + k as u64,
+        );
         let (frame, _) = renderer.render(&case).unwrap();
         for (estimator, errors) in [(&mut moments, &mut moments_off), (&mut line, &mut line_off)] {
             let reading = estimator.estimate(&frame).unwrap();

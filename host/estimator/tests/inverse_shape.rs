@@ -5,7 +5,7 @@
 
 use nusense_estimator::{Estimator, Mode, Reading, SensorConfig};
 use nusense_sim::validation::{Case, CaseKind, CaseTruth, ValidationRenderer};
-use nusense_sim::{Contact, Scene, NOMINAL_LED_CURRENT_MA};
+use nusense_sim::{Contact, Scene};
 
 const SIZE: (u32, u32) = (1024, 768);
 
@@ -32,15 +32,7 @@ impl Bench {
     }
 
     fn read(&mut self, name: &str, kind: CaseKind, scene: Scene, seed: u64) -> (Reading, CaseTruth) {
-        let case = Case {
-            name: name.into(),
-            kind,
-            size: self.size,
-            scene,
-            camera_motion: None,
-            led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
-            seed,
-        };
+        let case = Case::still(name, kind, self.size, scene, seed);
         let (frame, truth) = self.renderer.render(&case).unwrap();
         let reading = self
             .estimator

@@ -8,28 +8,24 @@
 use nusense_estimator::detection::{Detection, FastTracker};
 use nusense_estimator::SensorConfig;
 use nusense_sim::validation::{CameraMotion, Case, CaseKind, ValidationRenderer};
-use nusense_sim::{Damage, Scene, NOMINAL_LED_CURRENT_MA};
+use nusense_sim::{Damage, Scene};
 
 const SIZE: (u32, u32) = (1024, 768);
 
 fn damaged_case(name: &str, roll_deg: f64, seed: u64) -> Case {
+    let scene = Scene {
+        damage: vec![Damage::Missing {
+            centre_mm: [9.0, -5.0],
+            radius_mm: 4.0,
+        }],
+        ..Scene::rest()
+    };
     Case {
-        name: name.into(),
-        kind: CaseKind::Damaged,
-        size: SIZE,
-        scene: Scene {
-            damage: vec![Damage::Missing {
-                centre_mm: [9.0, -5.0],
-                radius_mm: 4.0,
-            }],
-            ..Scene::rest()
-        },
         camera_motion: (roll_deg != 0.0).then_some(CameraMotion {
             rotation_deg: [0.0, 0.0, roll_deg],
             shift_mm: [0.0, 0.0],
         }),
-        led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
-        seed,
+        ..Case::still(name, CaseKind::Damaged, SIZE, scene, seed)
     }
 }
 

@@ -15,7 +15,7 @@ use nusense_estimator::calibration::push_centre::{fit_push_centre_shift, PushCen
 use nusense_estimator::calibration::push_normal::{corrected_normal_n, fit_push_normal_share, PushNormalSample};
 use nusense_estimator::{Estimator, Mode, Reading, SensorConfig};
 use nusense_sim::validation::{Case, CaseKind, ValidationRenderer};
-use nusense_sim::{Contact, Scene, NOMINAL_LED_CURRENT_MA};
+use nusense_sim::{Contact, Scene};
 
 const SIZE: (u32, u32) = (640, 480);
 const LOAD_N: f64 = 4.0;
@@ -43,15 +43,7 @@ fn pushed(
     let mut contact = Contact::sphere(5.0, at, load_n);
     let (s, c) = angle_deg.to_radians().sin_cos();
     contact.tangential_force_n = [push_n * c, push_n * s];
-    let case = Case {
-        name: "push".into(),
-        kind: CaseKind::Tangential,
-        size: SIZE,
-        scene: Scene::with_contact(contact),
-        camera_motion: None,
-        led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
-        seed,
-    };
+    let case = Case::still("push", CaseKind::Tangential, SIZE, Scene::with_contact(contact), seed);
     renderer.render(&case).unwrap().0
 }
 

@@ -123,6 +123,23 @@ pub struct Case {
     pub seed: u64,
 }
 
+impl Case {
+    /// A case under the LEDs' nominal currents with the camera where the rest frame saw it: one effect at a time, as
+    /// the tests and benches that are not about the light or the mount need (set `camera_motion` or
+    /// `led_currents_ma` on it for one that is).
+    pub fn still(name: impl Into<String>, kind: CaseKind, size: (u32, u32), scene: Scene, seed: u64) -> Self {
+        Self {
+            name: name.into(),
+            kind,
+            size,
+            scene,
+            camera_motion: None,
+            led_currents_ma: [NOMINAL_LED_CURRENT_MA; 4],
+            seed,
+        }
+    }
+}
+
 /// Everything true about one case's frame.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CaseTruth {
@@ -679,16 +696,11 @@ mod tests {
     fn a_rolled_camera_turns_the_image_by_about_its_roll() {
         let renderer = ValidationRenderer::new((320, 240)).unwrap();
         let case = Case {
-            name: "roll".into(),
-            kind: CaseKind::Rest,
-            size: (320, 240),
-            scene: Scene::rest(),
             camera_motion: Some(CameraMotion {
                 rotation_deg: [0.0, 0.0, 4.0],
                 shift_mm: [0.0, 0.0],
             }),
-            led_currents_ma: [100.0; 4],
-            seed: 1,
+            ..Case::still("roll", CaseKind::Rest, (320, 240), Scene::rest(), 1)
         };
         let (_, truth) = renderer.render(&case).unwrap();
         let (_, image) = truth.camera_motion.unwrap();
