@@ -299,6 +299,26 @@ pub struct ElasticConfig {
     /// listed as two to four contacts, depending on where it crossed the cell rows, is one contact since
     /// `join_long_groups` (host/estimator/tests/light_edges.rs, with the option off and on).
     pub normal_from_stack: bool,
+    /// Each corner modelled as the fast tracker observes it, the midpoint of its two yellow squares' centres, rather
+    /// than at the material corner (the response, the walls' images and the parallax alike). The squares fill 0.86
+    /// of a pitch, so no junction marks the corner in the image: the tracker finds the squares, and a strain gradient
+    /// moves their midpoint off the corner (host/bench/examples/localisation_budget.rs). One probe per square, at its
+    /// centre: a model build takes about 2 s more. Off by default: the equivalent layer was fitted to the real pair
+    /// as tracked, so it stands for the tracker's averaging already (with it, the quick validation set's localisation
+    /// reads 0.73 mm and the force over the pad 0.41 N, against 0.34 and 0.25). It belongs with a model of the pad as
+    /// built. Measured inverse only at d543c54 plus the option (`NUSENSE_VALIDATION_CONFIG`, docs/benchmarks), off ->
+    /// on: with the validation pad's own stack and frame (`model = "layered"`, its three layers, `sliding_walls` 4 mm
+    /// beyond the pattern) the quick set's localisation 0.263 -> 0.24 mm, force over the pad 0.38 -> 0.11 N, edge
+    /// direction 1.9 / 3.4 -> 1.4 / 3.5 deg, and the full set reads 0.22 mm and 0.18 N with it, but its edge direction
+    /// 2.4 / 11.1 deg (one missed), two contacts 15 of 16 and 20 mm edges as one contact 22 of 24. With the defaults'
+    /// stack (`model = "layered"`, `shear_modulus_kpa = 11`) and the walls 4 mm beyond the pattern: quick 0.252 ->
+    /// 0.24 mm and 0.30 -> 0.21 N, full 0.49 -> 0.30 mm and 0.51 -> 0.25 N (two contacts 15 -> 13 of 16, two round
+    /// presses read as an edge in 2 of 16); 3 mm beyond, quick 0.288 -> 0.26 mm. Not yet sound where a load falls
+    /// between cells: fed its own noise-free field of a 2.5 mm square press, stage 2 places it 0.16-1.06 mm off at
+    /// 0.8-2.0 mm from a cell's centre with 10 um of noise assumed, up to 2.1 mm with 2 um (the corners' model holds
+    /// 0.25 mm at 2 um in the same test, `the_layered_model_places_a_press_within_a_cell`); its heuristics were built
+    /// on the corners' response.
+    pub tracker_averaging: bool,
     /// The reference's tangential force (and torque about the normal) over the model's, after the modulus: the
     /// force vector's fx, fy and the torques are multiplied by it. One equivalent material cannot match a skin over
     /// soft gel in shear and in pressure at once: calibrated on normal presses alone, the equivalent layer reads the
@@ -342,6 +362,7 @@ impl Default for ElasticConfig {
             border_margin_mm: 3.0,
             gel_refractive_index: 1.41,
             normal_from_stack: false,
+            tracker_averaging: false,
             tangential_force_scale: 1.0,
             push_centre_shift_mm: 0.0,
             push_normal_share: 0.0,

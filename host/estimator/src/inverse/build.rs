@@ -4,7 +4,7 @@
 use std::sync::{Arc, Mutex};
 
 use nalgebra::DMatrix;
-use nusense_geometry::Point2;
+use nusense_geometry::{CornerIndex, PadGeometry, Point2, SquareIndex};
 
 use super::stage1::{motion_basis, MEASURED_NOISE_REACH_CELLS};
 use super::{normal_quantile, FineGrid, InverseModel, Quarters, FINE_PER_CELL, MOTION_PARAMETERS, SUPPORT_SIGMAS};
@@ -55,6 +55,11 @@ struct ViewFreeParts {
     /// [`crate::elastic::normal_stack`]).
     normal: Option<PointKernel>,
     corners: Vec<Point2>,
+    /// Where the responses are taken: the corners, or with `elastic.tracker_averaging` the two yellow squares' centres
+    /// of each corner in turn (see [`observation_points`]).
+    observations: Vec<Point2>,
+    /// `elastic.tracker_averaging`: the responses' rows come in pairs, one per square, to be averaged.
+    averaging: bool,
     cells: Vec<Cell>,
     /// The in-plane response without the parallax.
     response: PadResponse,
@@ -87,7 +92,7 @@ impl ViewFreeParts {
         let corners: Vec<Point2> = pad.corners().map(|c| pad.corner_mm(c)).collect();
         let size = [pad.pitch_x_mm(), pad.pitch_y_mm()];
         let cells: Vec<Cell> = (0..pad.rows)
-            .flat_map(|row| (0..pad.cols).map(move |col| nusense_geometry::SquareIndex { row, col }))
+            .flat_map(|row| (0..pad.cols).map(move |col| SquareIndex { row, col }))
             .map(|cell| Cell {
                 centre_mm: pad.square_centre_mm(cell),
                 size_mm: size,
@@ -106,8 +111,11 @@ impl ViewFreeParts {
             (ElasticModel::BondedLayer | ElasticModel::Layered, false, true) => Border::Sliding(frame),
             _ => Border::None,
         };
-        let response = PadResponse::new(&kernel, &corners, &cells, border)?;
-        let images_t = Dense::from_nalgebra(&image_matrix(&kernel, &corners, &cells, frame).transpose());
+        let averaging = config.elastic.tracker_averaging;
+        let observations = observation_points(&pad, averaging);
+        let response = PadResponse::new(&kernel, &observations, &cells, border)?;
+        let images = image_matrix(&kernel, &observations, &cells, frame);
+        let images_t = Dense::from_nalgebra(&observed_at_corners(images, averaging).transpose());
         let quarters = if config.elastic.model == ElasticModel::Layered {
             let quarters: Vec<Cell> = cells
                 .iter()
@@ -122,14 +130,14 @@ impl ViewFreeParts {
                     })
                 })
                 .collect();
-            let response = PadResponse::new(&kernel, &corners, &quarters, border)?;
+            let response = PadResponse::new(&kernel, &observations, &quarters, border)?;
             Some((quarters, response))
         } else {
             None
         };
         let fine = if config.inverse.edge_from_line {
             let fine_cells = fine_cells(&cells, size);
-            let response = PadResponse::new(&kernel, &corners, &fine_cells, border)?;
+            let response = PadResponse::new(&kernel, &observations, &fine_cells, border)?;
             Some((fine_cells, response))
         } else {
             None
@@ -138,6 +146,8 @@ impl ViewFreeParts {
             kernel,
             normal,
             corners,
+            observations,
+            averaging,
             cells,
             response,
             images_t,
@@ -157,7 +167,8 @@ impl ViewFreeParts {
         let ViewFreeParts {
             kernel,
             normal,
-            corners,
+            observations,
+            averaging,
             cells,
             ..
         } = self;
@@ -166,14 +177,20 @@ impl ViewFreeParts {
         let mut fine = self.fine.clone();
         let n = refractive_index;
         if let (Some(view), true) = (view, n > 0.0) {
-            let shifts = parallax_shifts(&view, n, corners);
+            let shifts = parallax_shifts(&view, n, observations);
             let normal = normal.as_ref().unwrap_or(kernel);
-            response.add_parallax(normal, corners, cells, &shifts);
+            response.add_parallax(normal, observations, cells, &shifts);
             if let Some((cells, response)) = &mut quarters {
-                response.add_parallax(normal, corners, cells, &shifts);
+                response.add_parallax(normal, observations, cells, &shifts);
             }
             if let Some((cells, response)) = &mut fine {
-                response.add_parallax(normal, corners, cells, &shifts);
+                response.add_parallax(normal, observations, cells, &shifts);
+            }
+        }
+        if *averaging {
+            response.matrix = observed_at_corners(response.matrix, true);
+            for (_, response) in quarters.iter_mut().chain(fine.iter_mut()) {
+                response.matrix = observed_at_corners(std::mem::take(&mut response.matrix), true);
             }
         }
         let fine = fine.map(|(fine_cells, response)| {
@@ -198,6 +215,37 @@ impl ViewFreeParts {
         });
         (response, quarters, fine)
     }
+}
+
+/// Where a model takes its responses: the pad's interior corners (row-major), or with `averaging` each corner's two
+/// yellow squares' centres in turn, as the fast tracker pairs them (`detection::corners_from_squares`).
+fn observation_points(pad: &PadGeometry, averaging: bool) -> Vec<Point2> {
+    if !averaging {
+        return pad.corners().map(|c| pad.corner_mm(c)).collect();
+    }
+    pad.corners()
+        .flat_map(|CornerIndex { row, col }| {
+            let squares = if pad.is_yellow(SquareIndex { row, col }) {
+                [(row, col), (row + 1, col + 1)]
+            } else {
+                [(row, col + 1), (row + 1, col)]
+            };
+            squares.map(|(row, col)| pad.square_centre_mm(SquareIndex { row, col }))
+        })
+        .collect()
+}
+
+/// A response taken at [`observation_points`] as the corners see it: with `averaging`, each pair of rows' pairs (one
+/// per square, x and y) averaged into one corner's.
+fn observed_at_corners(matrix: DMatrix<f64>, averaging: bool) -> DMatrix<f64> {
+    if !averaging {
+        return matrix;
+    }
+    let corners = matrix.nrows() / 4;
+    DMatrix::from_fn(2 * corners, matrix.ncols(), |r, c| {
+        let (corner, axis) = (r / 2, r % 2);
+        0.5 * (matrix[(4 * corner + axis, c)] + matrix[(4 * corner + 2 + axis, c)])
+    })
 }
 
 /// The fine grid's cells: the pattern's `cells` (row-major, `size` apart) each split into [`FINE_PER_CELL`] x

@@ -450,9 +450,9 @@ impl InverseModel {
 mod tests {
     use crate::config::{ElasticModel, SensorConfig};
     use crate::elastic::{Border, Cell, PadResponse, PointKernel};
-    use crate::inverse::test_support::cell_at;
-    use crate::inverse::InverseModel;
-    use nusense_geometry::Point2;
+    use crate::inverse::test_support::{cell_at, field as field_of};
+    use crate::inverse::{InverseModel, MOTION_PARAMETERS};
+    use nusense_geometry::{CornerIndex, Point2, SquareIndex};
 
     /// The layered model's contact centre from its quarter cells: noise-free, a 2.5 mm square press is found within
     /// the 0.25 mm wherever it falls in a cell (0.22 mm at worst here; the cells' own centroid is 0.31 mm off
@@ -481,6 +481,49 @@ mod tests {
             let found = stage2.regions[0].centre_mm;
             let error = (found[0] - at[0]).hypot(found[1] - at[1]);
             assert!(error < 0.25, "{offset:?}: {found:?} is {error} mm off");
+        }
+    }
+
+    /// With `elastic.tracker_averaging` the model sees each corner where the fast tracker does: at the midpoint of its
+    /// two yellow squares' centres (`detection::corners_from_squares`). Its field of a load is, corner by corner, the
+    /// mean of the pad's field at those two centres (taken from the kernel here), which differs from the field at the
+    /// corners themselves by a fifth of the peak next to a cell's load.
+    #[test]
+    fn tracker_averaging_sees_each_corner_as_the_midpoint_of_its_squares() {
+        let mut config = SensorConfig::default();
+        config.elastic.model = ElasticModel::Layered;
+        config.elastic.shear_modulus_kpa = 11.0;
+        let at_corners = InverseModel::new(&config, None).unwrap();
+        config.elastic.tracker_averaging = true;
+        let averaged = InverseModel::new(&config, None).unwrap();
+        let pad = config.pad;
+        let squares: Vec<Point2> = pad
+            .corners()
+            .flat_map(|CornerIndex { row, col }| {
+                let diagonal = if (row + col).is_multiple_of(2) == pad.top_left_yellow {
+                    [(row, col), (row + 1, col + 1)]
+                } else {
+                    [(row, col + 1), (row + 1, col)]
+                };
+                diagonal.map(|(row, col)| pad.square_centre_mm(SquareIndex { row, col }))
+            })
+            .collect();
+        let kernel = PointKernel::new(&config.elastic).unwrap();
+        for p in [[3.0, 2.0], [-20.0, 14.0], [0.0, 0.0]] {
+            let cell = cell_at(&averaged, p);
+            let response = PadResponse::new(&kernel, &squares, &[averaged.cells[cell]], Border::None).unwrap();
+            let field = crate::elastic::apply(&response, &[0.3, -0.2, 1.0]);
+            let seen: Vec<f64> = (0..field.len() / 2)
+                .map(|r| 0.5 * (field[4 * (r / 2) + r % 2] + field[4 * (r / 2) + 2 + r % 2]))
+                .collect();
+            let load = [(cell, [0.3, -0.2, 1.0])];
+            let no_motion = [0.0; MOTION_PARAMETERS];
+            let modelled = field_of(&averaged, &load, no_motion);
+            let at_the_corners = field_of(&at_corners, &load, no_motion);
+            let largest = |v: &[f64]| v.iter().map(|x| x.abs()).fold(0.0, f64::max);
+            let apart = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+            assert!(apart(&modelled, &seen) <= 1e-12 * largest(&seen), "{p:?}");
+            assert!(apart(&at_the_corners, &seen) > 0.2 * largest(&seen), "{p:?}");
         }
     }
 }
