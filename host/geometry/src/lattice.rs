@@ -85,6 +85,22 @@ impl PadGeometry {
         (0..self.corner_rows()).flat_map(move |row| (0..self.corner_cols()).map(move |col| CornerIndex { row, col }))
     }
 
+    /// The two yellow squares that meet diagonally at an interior corner, the upper first. The fast tracker takes the
+    /// corner as the midpoint of their centroids.
+    pub fn corner_squares(&self, CornerIndex { row, col }: CornerIndex) -> [SquareIndex; 2] {
+        if self.is_yellow(SquareIndex { row, col }) {
+            [
+                SquareIndex { row, col },
+                SquareIndex {
+                    row: row + 1,
+                    col: col + 1,
+                },
+            ]
+        } else {
+            [SquareIndex { row, col: col + 1 }, SquareIndex { row: row + 1, col }]
+        }
+    }
+
     /// Row-major.
     pub fn yellow_squares(&self) -> impl Iterator<Item = SquareIndex> + '_ {
         (0..self.rows)
@@ -129,6 +145,26 @@ mod tests {
         assert_eq!(pad.corner_count(), 165);
         assert!(pad.is_yellow(SquareIndex { row: 0, col: 0 }));
         assert!(!pad.is_yellow(SquareIndex { row: 0, col: 1 }));
+    }
+
+    #[test]
+    fn each_corner_joins_two_yellow_squares_across_it() {
+        for top_left_yellow in [true, false] {
+            let pad = PadGeometry {
+                top_left_yellow,
+                ..PadGeometry::default()
+            };
+            for corner in pad.corners() {
+                let [upper, lower] = pad.corner_squares(corner);
+                assert!(pad.is_yellow(upper) && pad.is_yellow(lower), "{corner:?}");
+                // Diagonal neighbours, one on each side of the corner in both directions.
+                let centre = pad.corner_mm(corner);
+                let (a, b) = (pad.square_centre_mm(upper), pad.square_centre_mm(lower));
+                assert!(((a[0] + b[0]) / 2.0 - centre[0]).abs() < 1e-12, "{corner:?}");
+                assert!(((a[1] + b[1]) / 2.0 - centre[1]).abs() < 1e-12, "{corner:?}");
+                assert!(a[1] < centre[1] && b[1] > centre[1] && (a[0] - centre[0]) * (b[0] - centre[0]) < 0.0);
+            }
+        }
     }
 
     #[test]

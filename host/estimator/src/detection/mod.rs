@@ -16,7 +16,7 @@ pub mod window;
 pub mod yellowness;
 
 use image::RgbImage;
-use nusense_geometry::{CornerIndex, PadGeometry, Point2, Similarity, SquareIndex};
+use nusense_geometry::{PadGeometry, Point2, Similarity, SquareIndex};
 
 use crate::config::Thresholds;
 use crate::error::EstimateError;
@@ -1064,18 +1064,14 @@ fn local_cells(pad: &PadGeometry, squares: &[Option<Point2>]) -> Result<Vec<Opti
 /// Interior corners from the yellow squares: the midpoint of the two yellow cells of each corner's 2 x 2 block.
 pub fn corners_from_squares(pad: &PadGeometry, squares: &[Option<Point2>]) -> Vec<Option<Point2>> {
     let slots: Vec<SquareIndex> = pad.yellow_squares().collect();
-    let at = |r: u16, c: u16| -> Option<Point2> {
-        let slot = slots.binary_search(&SquareIndex { row: r, col: c }).ok()?;
+    let at = |square: SquareIndex| -> Option<Point2> {
+        let slot = slots.binary_search(&square).ok()?;
         squares.get(slot).copied().flatten()
     };
     pad.corners()
-        .map(|CornerIndex { row, col }| {
-            let (a, b) = if pad.is_yellow(SquareIndex { row, col }) {
-                (at(row, col), at(row + 1, col + 1))
-            } else {
-                (at(row, col + 1), at(row + 1, col))
-            };
-            Some(lerp_mid(a?, b?))
+        .map(|corner| {
+            let [a, b] = pad.corner_squares(corner);
+            Some(lerp_mid(at(a)?, at(b)?))
         })
         .collect()
 }

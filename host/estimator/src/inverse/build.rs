@@ -4,7 +4,7 @@
 use std::sync::{Arc, Mutex};
 
 use nalgebra::DMatrix;
-use nusense_geometry::{CornerIndex, PadGeometry, Point2, SquareIndex};
+use nusense_geometry::{PadGeometry, Point2, SquareIndex};
 
 use super::stage1::{motion_basis, MEASURED_NOISE_REACH_CELLS};
 use super::{normal_quantile, FineGrid, InverseModel, Quarters, FINE_PER_CELL, MOTION_PARAMETERS, SUPPORT_SIGMAS};
@@ -56,7 +56,7 @@ struct ViewFreeParts {
     normal: Option<PointKernel>,
     corners: Vec<Point2>,
     /// Where the responses are taken: the corners, or with `elastic.tracker_averaging` the two yellow squares' centres
-    /// of each corner in turn (see [`observation_points`]).
+    /// of each corner in turn (see [`corner_square_centres`]).
     observations: Vec<Point2>,
     /// `elastic.tracker_averaging`: the responses' rows come in pairs, one per square, to be averaged.
     averaging: bool,
@@ -112,7 +112,11 @@ impl ViewFreeParts {
             _ => Border::None,
         };
         let averaging = config.elastic.tracker_averaging;
-        let observations = observation_points(&pad, averaging);
+        let observations = if averaging {
+            corner_square_centres(&pad)
+        } else {
+            corners.clone()
+        };
         let response = PadResponse::new(&kernel, &observations, &cells, border)?;
         let images = image_matrix(&kernel, &observations, &cells, frame);
         let images_t = Dense::from_nalgebra(&observed_at_corners(images, averaging).transpose());
@@ -187,12 +191,10 @@ impl ViewFreeParts {
                 response.add_parallax(normal, observations, cells, &shifts);
             }
         }
-        if *averaging {
-            response.matrix = observed_at_corners(response.matrix, true);
-            for (_, response) in quarters.iter_mut().chain(fine.iter_mut()) {
-                response.matrix = observed_at_corners(std::mem::take(&mut response.matrix), true);
-            }
+        for (_, response) in quarters.iter_mut().chain(fine.iter_mut()) {
+            response.matrix = observed_at_corners(std::mem::take(&mut response.matrix), *averaging);
         }
+        response.matrix = observed_at_corners(response.matrix, *averaging);
         let fine = fine.map(|(fine_cells, response)| {
             let (cols, rows) = fine_extent(cells, cells[0].size_mm);
             FineGrid {
@@ -217,26 +219,16 @@ impl ViewFreeParts {
     }
 }
 
-/// Where a model takes its responses: the pad's interior corners (row-major), or with `averaging` each corner's two
-/// yellow squares' centres in turn, as the fast tracker pairs them (`detection::corners_from_squares`).
-fn observation_points(pad: &PadGeometry, averaging: bool) -> Vec<Point2> {
-    if !averaging {
-        return pad.corners().map(|c| pad.corner_mm(c)).collect();
-    }
+/// Each interior corner's two yellow squares' centres in turn (row-major), where `elastic.tracker_averaging` takes a
+/// model's responses.
+fn corner_square_centres(pad: &PadGeometry) -> Vec<Point2> {
     pad.corners()
-        .flat_map(|CornerIndex { row, col }| {
-            let squares = if pad.is_yellow(SquareIndex { row, col }) {
-                [(row, col), (row + 1, col + 1)]
-            } else {
-                [(row, col + 1), (row + 1, col)]
-            };
-            squares.map(|(row, col)| pad.square_centre_mm(SquareIndex { row, col }))
-        })
+        .flat_map(|corner| pad.corner_squares(corner).map(|square| pad.square_centre_mm(square)))
         .collect()
 }
 
-/// A response taken at [`observation_points`] as the corners see it: with `averaging`, each pair of rows' pairs (one
-/// per square, x and y) averaged into one corner's.
+/// A response taken at the model's observation points as the corners see it: with `averaging` (taken at
+/// [`corner_square_centres`]), each pair of rows' pairs (one per square, x and y) averaged into one corner's.
 fn observed_at_corners(matrix: DMatrix<f64>, averaging: bool) -> DMatrix<f64> {
     if !averaging {
         return matrix;
