@@ -9,7 +9,10 @@
 //! The estimator proper also leaves out the corners under the glare and makes further passes, so its column and the
 //! tracked one differ a little. Where the tracked column and the perfect one differ, the tracker's measurement makes
 //! the error (its corner is the midpoint of two yellow squares' centroids, which a strain gradient moves off the
-//! material corner); where the perfect one is off, the model does.
+//! material corner); where the perfect one is off, the model does. The last two columns feed the same stages, of
+//! models of the same config that observe the yellow squares instead (`InverseModel::observing_squares`), the
+//! squares' motion as the tracker measured it (every square found in both frames): modelled at the squares'
+//! centres, and as the mean motion of 3 x 3 points over each square's cell.
 
 use nusense_bench::validation::base_config_from_env;
 use nusense_estimator::inverse::InverseModel;
@@ -20,13 +23,14 @@ use nusense_sim::Indenter;
 
 type Error = Box<dyn std::error::Error>;
 
-/// Squared errors of one kind of tip, per column.
-#[derive(Default)]
-struct Errors {
-    estimator: Vec<f64>,
-    tracked: Vec<f64>,
-    perfect: Vec<f64>,
-}
+/// The columns: what places the contact.
+const COLUMNS: [&str; 5] = [
+    "estimator",
+    "tracked corners",
+    "perfect tracker",
+    "tracked squares, at centres",
+    "tracked squares, 3 x 3 over each",
+];
 
 fn main() -> Result<(), Error> {
     let profile = match std::env::args().nth(1).as_deref() {
@@ -44,8 +48,20 @@ fn main() -> Result<(), Error> {
         .mm_per_px_at_centre()
         .map_or(0.0, |mm| config.inverse.noise_floor_px * mm)
         .max(config.inverse.noise_floor_mm);
-    let (mut spheres, mut flats) = (Errors::default(), Errors::default());
-    println!("press, tip, force N, at mm: error mm of the estimator | tracked corners | perfect tracker");
+    let view = estimator.mapping().camera_view();
+    let square_models = [
+        InverseModel::observing_squares(&config, view, 1)?,
+        InverseModel::observing_squares(&config, view, 3)?,
+    ];
+    let rest_squares: Vec<Option<Point2>> = estimator
+        .reference_lattice()
+        .squares
+        .iter()
+        .map(|s| s.raw_px.and_then(|p| estimator.mapping().raw_to_mm(p)))
+        .collect();
+    // Squared errors per column, of spheres and of flat punches.
+    let (mut spheres, mut flats) = (vec![Vec::new(); COLUMNS.len()], vec![Vec::new(); COLUMNS.len()]);
+    println!("press, tip, force N, at mm: error mm of the {}", COLUMNS.join(" | "));
     for case in set.of_kind(CaseKind::Press) {
         let (frame, truth) = renderer.render(case)?;
         let Some(contact) = truth.frame.contacts.first() else {
@@ -74,6 +90,17 @@ fn main() -> Result<(), Error> {
             perfect
                 .extend(moved(Some(corner.rest_px), Some(corner.displaced_px)).ok_or("a true corner is out of view")?);
         }
+        let now = estimator.detect(&frame)?;
+        let mut squares_moved = Vec::with_capacity(2 * now.squares.len());
+        let mut squares_valid = Vec::with_capacity(now.squares.len());
+        for (rest, seen) in rest_squares.iter().zip(&now.squares) {
+            let moved = match (rest, seen.raw_px.and_then(|p| estimator.mapping().raw_to_mm(p))) {
+                (Some(a), Some(b)) => Some([b[0] - a[0], b[1] - a[1]]),
+                _ => None,
+            };
+            squares_valid.push(moved.is_some());
+            squares_moved.extend(moved.unwrap_or([0.0, 0.0]));
+        }
         let model = estimator.inverse_model();
         let all = vec![true; valid.len()];
         let off = |found: Option<Point2>| {
@@ -85,36 +112,46 @@ fn main() -> Result<(), Error> {
             off(reading.touch.as_ref().map(|t| t.strongest.centre_mm)),
             off(strongest_centre(model, &tracked, &valid, floor_mm)),
             off(strongest_centre(model, &perfect, &all, floor_mm)),
+            off(strongest_centre(
+                &square_models[0],
+                &squares_moved,
+                &squares_valid,
+                floor_mm,
+            )),
+            off(strongest_centre(
+                &square_models[1],
+                &squares_moved,
+                &squares_valid,
+                floor_mm,
+            )),
         ];
         let (name, kind) = match contact.indenter {
             Indenter::Sphere { radius_mm } => (format!("{radius_mm} mm sphere"), &mut spheres),
             Indenter::FlatPunch { radius_mm } => (format!("{radius_mm} mm flat punch"), &mut flats),
             Indenter::Edge { .. } => continue,
         };
+        let shown: Vec<String> = errors.iter().map(|e| format!("{e:.3}")).collect();
         println!(
-            "{}, {name}, {:.2}, ({:.1}, {:.1}): {:.3} | {:.3} | {:.3}",
+            "{}, {name}, {:.2}, ({:.1}, {:.1}): {}",
             case.name,
             contact.normal_force_n,
             contact.centre_mm[0],
             contact.centre_mm[1],
-            errors[0],
-            errors[1],
-            errors[2]
+            shown.join(" | ")
         );
-        kind.estimator.push(errors[0] * errors[0]);
-        kind.tracked.push(errors[1] * errors[1]);
-        kind.perfect.push(errors[2] * errors[2]);
+        for (column, error) in kind.iter_mut().zip(errors) {
+            column.push(error * error);
+        }
     }
     let rms = |squares: &[f64]| (squares.iter().sum::<f64>() / squares.len().max(1) as f64).sqrt();
-    println!("\n| presses | n | estimator, RMS mm | tracked corners | perfect tracker |\n|---|---|---|---|---|");
+    println!(
+        "\n| presses | n | {}, RMS mm |\n|---|---|{}",
+        COLUMNS.join(" | "),
+        "---|".repeat(COLUMNS.len())
+    );
     for (name, errors) in [("spheres", &spheres), ("flat punches", &flats)] {
-        println!(
-            "| {name} | {} | {:.3} | {:.3} | {:.3} |",
-            errors.estimator.len(),
-            rms(&errors.estimator),
-            rms(&errors.tracked),
-            rms(&errors.perfect)
-        );
+        let shown: Vec<String> = errors.iter().map(|e| format!("{:.3}", rms(e))).collect();
+        println!("| {name} | {} | {} |", errors[0].len(), shown.join(" | "));
     }
     Ok(())
 }

@@ -321,7 +321,14 @@ pub struct ElasticConfig {
     /// of the squares that alternates row by row moves no midpoint (each pairs a square of one row with one of the
     /// next): with the option the cells' pressure response has a null direction (smallest singular value 1e-16,
     /// against 6e-5 without; the 97th 0.09 against 0.58), which stage 2, whose noise model takes the corners as
-    /// independent, fills at low noise. The sound form observes the squares rather than the corners.
+    /// independent, fills at low noise. Observing the squares themselves (`InverseModel::observing_squares`, a
+    /// diagnostic, not the estimator's) keeps their 192 numbers without the null direction, and with the pad's own
+    /// stack and frame places the validation presses far better from the tracked squares than from the tracked
+    /// corners (docs/benchmarks/validation-quick.md, "Where the localisation error comes from"); but 192 numbers
+    /// for the cells' 576 tractions leave it unsound between cells too: fed its own noise-free field of a 2.5 mm
+    /// square press (`model = "layered"`, `shear_modulus_kpa = 11`), stage 2 places it exactly at a cell's centre
+    /// but 0.46, 1.93, 1.01 and 0.32 mm off at (0.8, 0), (1.6, 0), (0.8, -0.8) and (-1.2, 1.6) mm from it, among
+    /// 15-17 regions, with 2 um of noise assumed (0.11-0.52 mm off among 1-4 regions with 10 um).
     pub tracker_averaging: bool,
     /// The reference's tangential force (and torque about the normal) over the model's, after the modulus: the
     /// force vector's fx, fy and the torques are multiplied by it. One equivalent material cannot match a skin over

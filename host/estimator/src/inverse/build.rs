@@ -49,17 +49,29 @@ fn cached<T, E>(
     Ok(value)
 }
 
+/// What a model observes, 2 numbers per point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Observed {
+    /// The interior corners, in `PadGeometry::corner_slot` order: the estimator's.
+    Corners,
+    /// The yellow squares, each as the mean motion of n x n points over its cell (see [`square_probes`]).
+    Squares { probes_per_side: usize },
+}
+
 struct ViewFreeParts {
     kernel: PointKernel,
     /// The kernel whose normal displacement the parallax sees, when it is not `kernel`'s (see
     /// [`crate::elastic::normal_stack`]).
     normal: Option<PointKernel>,
-    corners: Vec<Point2>,
-    /// Where the responses are taken: the corners, or with `elastic.tracker_averaging` the two yellow squares' centres
-    /// of each corner in turn (see [`corner_square_centres`]).
+    /// The observed points' nominal positions: the corners, or the yellow squares' centres (see [`Observed`]).
+    points: Vec<Point2>,
+    /// Where the responses are taken: the points, or with `elastic.tracker_averaging` the two yellow squares' centres
+    /// of each corner in turn (see [`corner_square_centres`]), or points spread over each square (see
+    /// [`square_probes`]).
     observations: Vec<Point2>,
-    /// `elastic.tracker_averaging`: the responses' rows come in pairs, one per square, to be averaged.
-    averaging: bool,
+    /// How many consecutive observation points make one observed point, averaged (1: none; 2 with
+    /// `elastic.tracker_averaging`, one per square).
+    probes: usize,
     cells: Vec<Cell>,
     /// The in-plane response without the parallax.
     response: PadResponse,
@@ -75,21 +87,24 @@ struct ViewFreeParts {
 }
 
 impl ViewFreeParts {
-    fn shared(config: &SensorConfig) -> Result<Arc<Self>, ElasticError> {
+    fn shared(config: &SensorConfig, observed: Observed) -> Result<Arc<Self>, ElasticError> {
         let key = format!(
-            "{:?}|{:?}|{}",
+            "{:?}|{:?}|{}|{observed:?}",
             config.pad, config.elastic, config.inverse.edge_from_line
         );
-        cached(&VIEW_FREE_PARTS, key, || Self::new(config))
+        cached(&VIEW_FREE_PARTS, key, || Self::new(config, observed))
     }
 
-    fn new(config: &SensorConfig) -> Result<Self, ElasticError> {
+    fn new(config: &SensorConfig, observed: Observed) -> Result<Self, ElasticError> {
         let pad = config.pad;
         let kernel = PointKernel::new(&config.elastic)?;
         let normal = normal_stack(&config.elastic)
             .map(|stack| PointKernel::new(&stack))
             .transpose()?;
-        let corners: Vec<Point2> = pad.corners().map(|c| pad.corner_mm(c)).collect();
+        let points: Vec<Point2> = match observed {
+            Observed::Corners => pad.corners().map(|c| pad.corner_mm(c)).collect(),
+            Observed::Squares { .. } => pad.yellow_squares().map(|c| pad.square_centre_mm(c)).collect(),
+        };
         let size = [pad.pitch_x_mm(), pad.pitch_y_mm()];
         let cells: Vec<Cell> = (0..pad.rows)
             .flat_map(|row| (0..pad.cols).map(move |col| SquareIndex { row, col }))
@@ -111,15 +126,17 @@ impl ViewFreeParts {
             (ElasticModel::BondedLayer | ElasticModel::Layered, false, true) => Border::Sliding(frame),
             _ => Border::None,
         };
-        let averaging = config.elastic.tracker_averaging;
-        let observations = if averaging {
-            corner_square_centres(&pad)
-        } else {
-            corners.clone()
+        let (observations, probes) = match observed {
+            Observed::Squares { probes_per_side } => {
+                let n = probes_per_side.max(1);
+                (square_probes(&pad, n), n * n)
+            }
+            Observed::Corners if config.elastic.tracker_averaging => (corner_square_centres(&pad), 2),
+            Observed::Corners => (points.clone(), 1),
         };
         let response = PadResponse::new(&kernel, &observations, &cells, border)?;
         let images = image_matrix(&kernel, &observations, &cells, frame);
-        let images_t = Dense::from_nalgebra(&observed_at_corners(images, averaging).transpose());
+        let images_t = Dense::from_nalgebra(&observed_at_points(images, probes).transpose());
         let quarters = if config.elastic.model == ElasticModel::Layered {
             let quarters: Vec<Cell> = cells
                 .iter()
@@ -149,9 +166,9 @@ impl ViewFreeParts {
         Ok(Self {
             kernel,
             normal,
-            corners,
+            points,
             observations,
-            averaging,
+            probes,
             cells,
             response,
             images_t,
@@ -172,7 +189,7 @@ impl ViewFreeParts {
             kernel,
             normal,
             observations,
-            averaging,
+            probes,
             cells,
             ..
         } = self;
@@ -192,9 +209,9 @@ impl ViewFreeParts {
             }
         }
         for (_, response) in quarters.iter_mut().chain(fine.iter_mut()) {
-            response.matrix = observed_at_corners(std::mem::take(&mut response.matrix), *averaging);
+            response.matrix = observed_at_points(std::mem::take(&mut response.matrix), *probes);
         }
-        response.matrix = observed_at_corners(response.matrix, *averaging);
+        response.matrix = observed_at_points(response.matrix, *probes);
         let fine = fine.map(|(fine_cells, response)| {
             let (cols, rows) = fine_extent(cells, cells[0].size_mm);
             FineGrid {
@@ -227,16 +244,33 @@ fn corner_square_centres(pad: &PadGeometry) -> Vec<Point2> {
         .collect()
 }
 
-/// A response taken at the model's observation points as the corners see it: with `averaging` (taken at
-/// [`corner_square_centres`]), each pair of rows' pairs (one per square, x and y) averaged into one corner's.
-fn observed_at_corners(matrix: DMatrix<f64>, averaging: bool) -> DMatrix<f64> {
-    if !averaging {
+/// Each yellow square's `n` x `n` points spread evenly over its cell (row-major within a square, squares in
+/// `PadGeometry::yellow_squares` order), where [`Observed::Squares`] takes a model's responses.
+fn square_probes(pad: &PadGeometry, n: usize) -> Vec<Point2> {
+    let size = [pad.pitch_x_mm(), pad.pitch_y_mm()];
+    let offset = move |k: usize| (k as f64 + 0.5) / n as f64 - 0.5;
+    pad.yellow_squares()
+        .flat_map(|square| {
+            let c = pad.square_centre_mm(square);
+            (0..n * n).map(move |k| [c[0] + offset(k % n) * size[0], c[1] + offset(k / n) * size[1]])
+        })
+        .collect()
+}
+
+/// A response taken at the model's observation points as its observed points see them: each `probes` consecutive
+/// points' rows (x and y) averaged into one point's (with `elastic.tracker_averaging`, a corner's two squares; with
+/// [`Observed::Squares`], a square's probes).
+fn observed_at_points(matrix: DMatrix<f64>, probes: usize) -> DMatrix<f64> {
+    if probes == 1 {
         return matrix;
     }
-    let corners = matrix.nrows() / 4;
-    DMatrix::from_fn(2 * corners, matrix.ncols(), |r, c| {
-        let (corner, axis) = (r / 2, r % 2);
-        0.5 * (matrix[(4 * corner + axis, c)] + matrix[(4 * corner + 2 + axis, c)])
+    let points = matrix.nrows() / (2 * probes);
+    DMatrix::from_fn(2 * points, matrix.ncols(), |r, c| {
+        let (point, axis) = (r / 2, r % 2);
+        (0..probes)
+            .map(|k| matrix[(2 * (probes * point + k) + axis, c)])
+            .sum::<f64>()
+            / probes as f64
     })
 }
 
@@ -324,14 +358,31 @@ impl InverseModel {
     }
 
     pub fn new(config: &SensorConfig, view: Option<CameraView>) -> Result<Self, ElasticError> {
+        Self::observing(config, view, Observed::Corners)
+    }
+
+    /// A diagnostic, not the estimator's model: the model observing the yellow squares' centroids (each the mean
+    /// motion of `probes_per_side` x `probes_per_side` points over its cell; 1: its centre) in place of the corners,
+    /// 2 per square in `PadGeometry::yellow_squares` order. The fast tracker measures the squares, and its corners
+    /// are their midpoints, which carry less (see `elastic.tracker_averaging`). What it gives and why the estimator
+    /// does not use it: host/bench/examples/localisation_budget.rs and docs/benchmarks/validation-quick.md.
+    pub fn observing_squares(
+        config: &SensorConfig,
+        view: Option<CameraView>,
+        probes_per_side: usize,
+    ) -> Result<Self, ElasticError> {
+        Self::observing(config, view, Observed::Squares { probes_per_side })
+    }
+
+    fn observing(config: &SensorConfig, view: Option<CameraView>, observed: Observed) -> Result<Self, ElasticError> {
         let pad = config.pad;
-        let parts = ViewFreeParts::shared(config)?;
-        let ViewFreeParts { corners, cells, .. } = &*parts;
+        let parts = ViewFreeParts::shared(config, observed)?;
+        let ViewFreeParts { points, cells, .. } = &*parts;
         let (response, quarters, fine) = parts.seen_from(view, config.elastic.gel_refractive_index);
         let a = response.matrix;
         let observations = a.nrows();
         let motion_length_mm = (pad.width_mm.max(pad.height_mm)) / 2.0;
-        let b = motion_basis(corners, motion_length_mm);
+        let b = motion_basis(points, motion_length_mm);
         let lambda = (config.inverse.noise_mm / config.inverse.traction_prior_n).powi(2);
         let s = kriging_columns(&a, &b, lambda)?;
         let test = TestOperators::new(&a, &b, &s, lambda, cells.len())?;
@@ -351,6 +402,7 @@ impl InverseModel {
             a_t_pressure: Dense::from_nalgebra(&DMatrix::from_fn(cells.len(), observations, |j, r| a[(r, 3 * j + 2)])),
             cells: cells.clone(),
             observations,
+            points_mm: points.clone(),
             lambda,
             residual_share: test.residual_share,
             pressure_noise: test.pressure_noise,
@@ -370,7 +422,7 @@ impl InverseModel {
             fine,
         };
         let table_reach = NEAR_TABLE_REACH_CELLS * pad.pitch_x_mm().max(pad.pitch_y_mm());
-        model.corners_near_cell = corners_near_cells(&model.cells, corners, table_reach);
+        model.corners_near_cell = corners_near_cells(&model.cells, &model.points_mm, table_reach);
         let d = model.central_press_mm();
         let stage = model.stage1(&d, &vec![true; observations / 2]);
         model.reference_explained = stage.rss_rigid - stage.rss_full;

@@ -104,8 +104,11 @@ const SUPPORT_SIGMAS: f64 = 3.0;
 pub struct InverseModel {
     pad: PadGeometry,
     cells: Vec<Cell>,
-    /// Observations: 2 per corner (x, y) at the corners' nominal positions, `corner_slot` order.
+    /// Observations: 2 per observed point (x, y) at `points_mm`.
     observations: usize,
+    /// The observed points' nominal positions, pad mm: the corners in `corner_slot` order (with
+    /// [`InverseModel::observing_squares`], the yellow squares' centres in `PadGeometry::yellow_squares` order).
+    points_mm: Vec<Point2>,
     /// A (obs x 3 cells) and its transpose, row-major.
     a: Dense,
     a_t: Dense,

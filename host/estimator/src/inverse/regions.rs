@@ -484,6 +484,53 @@ mod tests {
         }
     }
 
+    /// With probes over each square's area, the squares' model sees each square as the mean motion of its area (what a
+    /// centroid measures): its field of a load is the mean of the pad's field at n x n points spread over the square.
+    #[test]
+    fn the_squares_model_averages_over_each_square() {
+        let mut config = SensorConfig::default();
+        config.elastic.model = ElasticModel::Layered;
+        config.elastic.shear_modulus_kpa = 11.0;
+        let at_centres = InverseModel::observing_squares(&config, None, 1).unwrap();
+        let n = 3;
+        let averaged = InverseModel::observing_squares(&config, None, n).unwrap();
+        let pad = config.pad;
+        let centres: Vec<Point2> = pad.yellow_squares().map(|s| pad.square_centre_mm(s)).collect();
+        assert_eq!(averaged.points_mm, centres);
+        assert_eq!(averaged.observations, 2 * centres.len());
+        let size = [pad.pitch_x_mm(), pad.pitch_y_mm()];
+        let step = |k: usize| (k as f64 + 0.5) / n as f64 - 0.5;
+        let probes: Vec<Point2> = pad
+            .yellow_squares()
+            .flat_map(|s| {
+                let c = pad.square_centre_mm(s);
+                (0..n * n).map(move |k| [c[0] + step(k % n) * size[0], c[1] + step(k / n) * size[1]])
+            })
+            .collect();
+        let kernel = PointKernel::new(&config.elastic).unwrap();
+        for p in [[3.0, 2.0], [-20.0, 14.0], [0.0, 0.0]] {
+            let cell = cell_at(&averaged, p);
+            let response = PadResponse::new(&kernel, &probes, &[averaged.cells[cell]], Border::None).unwrap();
+            let field = crate::elastic::apply(&response, &[0.3, -0.2, 1.0]);
+            let seen: Vec<f64> = (0..field.len() / (n * n))
+                .map(|r| {
+                    (0..n * n)
+                        .map(|k| field[2 * (n * n * (r / 2) + k) + r % 2])
+                        .sum::<f64>()
+                        / (n * n) as f64
+                })
+                .collect();
+            let load = [(cell, [0.3, -0.2, 1.0])];
+            let no_motion = [0.0; MOTION_PARAMETERS];
+            let modelled = field_of(&averaged, &load, no_motion);
+            let at_the_centres = field_of(&at_centres, &load, no_motion);
+            let largest = |v: &[f64]| v.iter().map(|x| x.abs()).fold(0.0, f64::max);
+            let apart = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+            assert!(apart(&modelled, &seen) <= 1e-12 * largest(&seen), "{p:?}");
+            assert!(apart(&at_the_centres, &seen) > 0.05 * largest(&seen), "{p:?}");
+        }
+    }
+
     /// With `elastic.tracker_averaging` the model sees each corner where the fast tracker does: at the midpoint of its
     /// two yellow squares' centres (`detection::corners_from_squares`). Its field of a load is, corner by corner, the
     /// mean of the pad's field at those two centres (taken from the kernel here), which differs from the field at the

@@ -44,8 +44,7 @@ pub(super) fn field(model: &InverseModel, forces: &[(usize, [f64; 3])], motion: 
     }
     let mut d = vec![0.0; model.observations];
     model.a.mul_vec(&t, &mut d);
-    let corners: Vec<Point2> = model.pad.corners().map(|c| model.pad.corner_mm(c)).collect();
-    for (i, p) in corners.iter().enumerate() {
+    for (i, p) in model.points_mm.iter().enumerate() {
         let m = model.motion_field(&motion, *p);
         d[2 * i] += m[0];
         d[2 * i + 1] += m[1];
