@@ -328,7 +328,8 @@ pub struct ElasticConfig {
     /// for the cells' 576 tractions leave it unsound between cells too: fed its own noise-free field of a 2.5 mm
     /// square press (`model = "layered"`, `shear_modulus_kpa = 11`), stage 2 places it exactly at a cell's centre
     /// but 0.46, 1.93, 1.01 and 0.32 mm off at (0.8, 0), (1.6, 0), (0.8, -0.8) and (-1.2, 1.6) mm from it, among
-    /// 15-17 regions, with 2 um of noise assumed (0.11-0.52 mm off among 1-4 regions with 10 um).
+    /// 15-17 regions, with 2 um of noise assumed (0.11-0.52 mm off among 1-4 regions with 10 um); observed as the
+    /// mean of 3 x 3 points over each square, 0.25-0.34 mm off among 14-22 regions (0.12-0.35 mm, 2-5 regions).
     pub tracker_averaging: bool,
     /// The reference's tangential force (and torque about the normal) over the model's, after the modulus: the
     /// force vector's fx, fy and the torques are multiplied by it. One equivalent material cannot match a skin over
