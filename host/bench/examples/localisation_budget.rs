@@ -12,10 +12,12 @@
 //! material corner); where the perfect one is off, the model does. The last two columns feed the same stages, of
 //! models of the same config that observe the yellow squares instead (`InverseModel::observing_squares`), the
 //! squares' motion as the tracker measured it (every square found in both frames): modelled at the squares'
-//! centres, and as the mean motion of 3 x 3 points over each square's cell.
+//! centres, and as the mean motion of 3 x 3 points over each square's cell. For the set's edges, each column's edge
+//! direction: the estimator's, and the second moments' major axis of the strongest region of the others
+//! (`InverseModel::moments`, at `thresholds.edge_min_confidence`; "none" where it is round or missing).
 
 use nusense_bench::validation::base_config_from_env;
-use nusense_estimator::inverse::InverseModel;
+use nusense_estimator::inverse::{InverseModel, Region};
 use nusense_estimator::{Estimator, Mode};
 use nusense_geometry::Point2;
 use nusense_sim::validation::{CaseKind, Profile, ValidationRenderer, ValidationSet};
@@ -62,7 +64,9 @@ fn main() -> Result<(), Error> {
     // Squared errors per column, of spheres and of flat punches.
     let (mut spheres, mut flats) = (vec![Vec::new(); COLUMNS.len()], vec![Vec::new(); COLUMNS.len()]);
     println!("press, tip, force N, at mm: error mm of the {}", COLUMNS.join(" | "));
-    for case in set.of_kind(CaseKind::Press) {
+    // Per column, edges: the direction's error, deg (infinite where it has none).
+    let mut edges = vec![Vec::new(); COLUMNS.len()];
+    for case in set.of_kind(CaseKind::Press).chain(set.of_kind(CaseKind::Edge)) {
         let (frame, truth) = renderer.render(case)?;
         let Some(contact) = truth.frame.contacts.first() else {
             continue;
@@ -108,23 +112,44 @@ fn main() -> Result<(), Error> {
                 (c[0] - contact.centre_mm[0]).hypot(c[1] - contact.centre_mm[1])
             })
         };
-        let errors = [
-            off(reading.touch.as_ref().map(|t| t.strongest.centre_mm)),
-            off(strongest_centre(model, &tracked, &valid, floor_mm)),
-            off(strongest_centre(model, &perfect, &all, floor_mm)),
-            off(strongest_centre(
+        let regions = [
+            (model, strongest_region(model, &tracked, &valid, floor_mm)),
+            (model, strongest_region(model, &perfect, &all, floor_mm)),
+            (
                 &square_models[0],
-                &squares_moved,
-                &squares_valid,
-                floor_mm,
-            )),
-            off(strongest_centre(
+                strongest_region(&square_models[0], &squares_moved, &squares_valid, floor_mm),
+            ),
+            (
                 &square_models[1],
-                &squares_moved,
-                &squares_valid,
-                floor_mm,
-            )),
+                strongest_region(&square_models[1], &squares_moved, &squares_valid, floor_mm),
+            ),
         ];
+        if let Some(truth_deg) = contact.indenter.edge_angle_deg() {
+            let min_confidence = config.thresholds.edge_min_confidence;
+            let angles = std::iter::once(reading.edge_angle_deg()).chain(
+                regions
+                    .iter()
+                    .map(|(m, r)| r.as_ref().and_then(|r| m.moments(r, min_confidence).angle_deg)),
+            );
+            let mut shown = Vec::new();
+            for (column, angle) in edges.iter_mut().zip(angles) {
+                let error = angle.map_or(f64::INFINITY, |a| {
+                    let d = (a - truth_deg).rem_euclid(180.0);
+                    d.min(180.0 - d)
+                });
+                shown.push(format!("{error:.2}"));
+                column.push(error);
+            }
+            println!(
+                "{}, edge at {truth_deg:.0} deg: error deg {}",
+                case.name,
+                shown.join(" | ")
+            );
+            continue;
+        }
+        let errors: Vec<f64> = std::iter::once(off(reading.touch.as_ref().map(|t| t.strongest.centre_mm)))
+            .chain(regions.iter().map(|(_, r)| off(r.as_ref().map(|r| r.centre_mm))))
+            .collect();
         let (name, kind) = match contact.indenter {
             Indenter::Sphere { radius_mm } => (format!("{radius_mm} mm sphere"), &mut spheres),
             Indenter::FlatPunch { radius_mm } => (format!("{radius_mm} mm flat punch"), &mut flats),
@@ -153,14 +178,24 @@ fn main() -> Result<(), Error> {
         let shown: Vec<String> = errors.iter().map(|e| format!("{:.3}", rms(e))).collect();
         println!("| {name} | {} | {} |", errors[0].len(), shown.join(" | "));
     }
+    let shown: Vec<String> = edges
+        .iter()
+        .map(|e| {
+            let found: Vec<f64> = e.iter().copied().filter(|x| x.is_finite()).collect();
+            let mean = found.iter().sum::<f64>() / found.len().max(1) as f64;
+            let max = found.iter().copied().fold(0.0, f64::max);
+            format!("{mean:.2} / {max:.2} ({} none)", e.len() - found.len())
+        })
+        .collect();
+    println!("| edges, mean / max deg | {} | {} |", edges[0].len(), shown.join(" | "));
     Ok(())
 }
 
-/// The strongest contact's centre from stage 1 and stage 2 on these displacements (2 per corner, pad mm).
-fn strongest_centre(model: &InverseModel, displacements: &[f64], valid: &[bool], floor_mm: f64) -> Option<Point2> {
+/// The strongest contact from stage 1 and stage 2 on these displacements (2 per observed point, pad mm).
+fn strongest_region(model: &InverseModel, displacements: &[f64], valid: &[bool], floor_mm: f64) -> Option<Region> {
     let stage = model.stage1(displacements, valid);
     let noise_mm = model.frame_noise_mm(&stage, floor_mm).max(floor_mm);
     let floor_n = model.test(&stage, noise_mm).detection_floor_n;
     let described = model.stage2(displacements, valid, &stage, noise_mm, floor_n);
-    described.regions.first().map(|r| r.centre_mm)
+    described.regions.into_iter().next()
 }
