@@ -51,7 +51,7 @@ fn cached<T, E>(
 
 /// What a model observes, 2 numbers per point.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Observed {
+enum ObservedPoints {
     /// The interior corners, in `PadGeometry::corner_slot` order: the estimator's.
     Corners,
     /// The yellow squares, each as the mean motion of n x n points over its cell (see [`square_probes`]).
@@ -63,7 +63,7 @@ struct ViewFreeParts {
     /// The kernel whose normal displacement the parallax sees, when it is not `kernel`'s (see
     /// [`crate::elastic::normal_stack`]).
     normal: Option<PointKernel>,
-    /// The observed points' nominal positions: the corners, or the yellow squares' centres (see [`Observed`]).
+    /// The observed points' nominal positions: the corners, or the yellow squares' centres (see [`ObservedPoints`]).
     points: Vec<Point2>,
     /// Where the responses are taken: the points, or with `elastic.tracker_averaging` the two yellow squares' centres
     /// of each corner in turn (see [`corner_square_centres`]), or points spread over each square (see
@@ -87,7 +87,7 @@ struct ViewFreeParts {
 }
 
 impl ViewFreeParts {
-    fn shared(config: &SensorConfig, observed: Observed) -> Result<Arc<Self>, ElasticError> {
+    fn shared(config: &SensorConfig, observed: ObservedPoints) -> Result<Arc<Self>, ElasticError> {
         let key = format!(
             "{:?}|{:?}|{}|{observed:?}",
             config.pad, config.elastic, config.inverse.edge_from_line
@@ -95,15 +95,15 @@ impl ViewFreeParts {
         cached(&VIEW_FREE_PARTS, key, || Self::new(config, observed))
     }
 
-    fn new(config: &SensorConfig, observed: Observed) -> Result<Self, ElasticError> {
+    fn new(config: &SensorConfig, observed: ObservedPoints) -> Result<Self, ElasticError> {
         let pad = config.pad;
         let kernel = PointKernel::new(&config.elastic)?;
         let normal = normal_stack(&config.elastic)
             .map(|stack| PointKernel::new(&stack))
             .transpose()?;
         let points: Vec<Point2> = match observed {
-            Observed::Corners => pad.corners().map(|c| pad.corner_mm(c)).collect(),
-            Observed::Squares { .. } => pad.yellow_squares().map(|c| pad.square_centre_mm(c)).collect(),
+            ObservedPoints::Corners => pad.corners().map(|c| pad.corner_mm(c)).collect(),
+            ObservedPoints::Squares { .. } => pad.yellow_squares().map(|c| pad.square_centre_mm(c)).collect(),
         };
         let size = [pad.pitch_x_mm(), pad.pitch_y_mm()];
         let cells: Vec<Cell> = (0..pad.rows)
@@ -127,12 +127,12 @@ impl ViewFreeParts {
             _ => Border::None,
         };
         let (observations, probes) = match observed {
-            Observed::Squares { probes_per_side } => {
+            ObservedPoints::Squares { probes_per_side } => {
                 let n = probes_per_side.max(1);
                 (square_probes(&pad, n), n * n)
             }
-            Observed::Corners if config.elastic.tracker_averaging => (corner_square_centres(&pad), 2),
-            Observed::Corners => (points.clone(), 1),
+            ObservedPoints::Corners if config.elastic.tracker_averaging => (corner_square_centres(&pad), 2),
+            ObservedPoints::Corners => (points.clone(), 1),
         };
         let response = PadResponse::new(&kernel, &observations, &cells, border)?;
         let images = image_matrix(&kernel, &observations, &cells, frame);
@@ -245,7 +245,7 @@ fn corner_square_centres(pad: &PadGeometry) -> Vec<Point2> {
 }
 
 /// Each yellow square's `n` x `n` points spread evenly over its cell (row-major within a square, squares in
-/// `PadGeometry::yellow_squares` order), where [`Observed::Squares`] takes a model's responses.
+/// `PadGeometry::yellow_squares` order), where [`ObservedPoints::Squares`] takes a model's responses.
 fn square_probes(pad: &PadGeometry, n: usize) -> Vec<Point2> {
     let size = [pad.pitch_x_mm(), pad.pitch_y_mm()];
     let offset = move |k: usize| (k as f64 + 0.5) / n as f64 - 0.5;
@@ -259,7 +259,7 @@ fn square_probes(pad: &PadGeometry, n: usize) -> Vec<Point2> {
 
 /// A response taken at the model's observation points as its observed points see them: each `probes` consecutive
 /// points' rows (x and y) averaged into one point's (with `elastic.tracker_averaging`, a corner's two squares; with
-/// [`Observed::Squares`], a square's probes).
+/// [`ObservedPoints::Squares`], a square's probes).
 fn observed_at_points(matrix: DMatrix<f64>, probes: usize) -> DMatrix<f64> {
     if probes == 1 {
         return matrix;
@@ -358,7 +358,7 @@ impl InverseModel {
     }
 
     pub fn new(config: &SensorConfig, view: Option<CameraView>) -> Result<Self, ElasticError> {
-        Self::observing(config, view, Observed::Corners)
+        Self::observing(config, view, ObservedPoints::Corners)
     }
 
     /// A diagnostic, not the estimator's model: the model observing the yellow squares' centroids (each the mean
@@ -371,10 +371,14 @@ impl InverseModel {
         view: Option<CameraView>,
         probes_per_side: usize,
     ) -> Result<Self, ElasticError> {
-        Self::observing(config, view, Observed::Squares { probes_per_side })
+        Self::observing(config, view, ObservedPoints::Squares { probes_per_side })
     }
 
-    fn observing(config: &SensorConfig, view: Option<CameraView>, observed: Observed) -> Result<Self, ElasticError> {
+    fn observing(
+        config: &SensorConfig,
+        view: Option<CameraView>,
+        observed: ObservedPoints,
+    ) -> Result<Self, ElasticError> {
         let pad = config.pad;
         let parts = ViewFreeParts::shared(config, observed)?;
         let ViewFreeParts { points, cells, .. } = &*parts;
