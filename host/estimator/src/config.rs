@@ -434,6 +434,32 @@ pub struct InverseConfig {
     /// release, 1024x768) and 1.41 times the inverse's time on a frame with an edge (1.61 -> 2.26 ms CPU at 1024x768,
     /// `cargo bench -p nusense-estimator -- table`).
     pub edge_from_line: bool,
+    /// What the model observes of the pattern: its interior corners (the default), or its yellow squares, each the
+    /// mean motion over its cell (what a centroid measures; the fast tracker measures the squares, and its corners
+    /// are their midpoints). See [`ObservedPoints`]. Measured on the validation sets (`NUSENSE_VALIDATION_CONFIG`, at
+    /// the commit that made it, inverse only) with the defaults' stack held in a frame (`elastic.model = "layered"`,
+    /// `shear_modulus_kpa = 11`, `sliding_walls`, `border_margin_mm = 4`), corners -> squares: localisation quick 0.25
+    /// -> 0.24 mm, full 0.49 -> 0.23; force over the pad 0.30 -> 0.20 and 0.51 -> 0.22 N; edge direction mean / worst
+    /// 1.8 / 3.6 -> 1.7 / 3.7 and 2.2 / 10.7 -> 1.8 / 5.5 deg; two contacts 6 / 6 and 15 / 16 both; detection floor
+    /// 0.20 -> 0.30 N (quick; edges 0.30 -> 0.50) and 0.20 (full; edges 0.20 -> 0.30); the pushes' tangential force
+    /// 0.11 -> 0.55 N RMS (quick) and 0.14 -> 0.30 (full) after its calibration: stage 2 puts part of a heavy push's
+    /// shear on cells beside the pressure that no contact region holds. With the default model (the equivalent layer,
+    /// fitted to the real pair's corners as tracked) the squares read worse: quick 0.34 -> 0.48 mm. Not the default:
+    /// the frame's 4 mm is the validation pad's, and the simulated real sensor's pad is a half-space.
+    pub observe: ObservedPoints,
+}
+
+/// The points of the pattern whose displacements the inverse's model observes (`inverse.observe`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ObservedPoints {
+    /// The 165 interior corners, each at its nominal position (or, with `elastic.tracker_averaging`, at its two
+    /// squares' centres).
+    #[default]
+    Corners,
+    /// The 96 yellow squares, each as the mean motion of 3 x 3 points over its cell. `inverse.noise_mm` is then a
+    /// square's noise (a corner's is the mean of two squares': the default's noise is a corner's).
+    Squares,
 }
 
 impl Default for InverseConfig {
@@ -445,6 +471,7 @@ impl Default for InverseConfig {
             noise_floor_px: 0.08,
             false_alarm_probability: 1e-6,
             edge_from_line: false,
+            observe: ObservedPoints::Corners,
         }
     }
 }

@@ -14,7 +14,7 @@ use nusense_geometry::Point2;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::config::SensorConfig;
+use crate::config::{ObservedPoints, SensorConfig};
 use crate::contact::{divergence_centre, fit_affine_motion, norm, AffineMotion, FieldPoint};
 use crate::detection::{corners_from_squares, median, FastTracker, MAD_TO_SIGMA};
 use crate::edge::{edge_direction, EdgeEstimate};
@@ -79,9 +79,10 @@ struct FrameLattice {
     /// Squares the detector found (paper mode: quadrilaterals accepted, indexed or not).
     squares_found: usize,
     recovered: bool,
-    /// Per corner: built from a square seen under another light than in the rest frame (the camera moved, or the
-    /// LEDs changed unevenly: see [`crate::detection::Detection::relit`]); the contact test leaves these corners out.
-    relit_corners: Vec<bool>,
+    /// Per observed point (the model's: `inverse.observe`): a square seen under another light than in the rest frame
+    /// (the camera moved, or the LEDs changed unevenly: see [`crate::detection::Detection::relit`]), or a corner built
+    /// from one; the contact test leaves these points out.
+    relit: Vec<bool>,
 }
 
 enum Detector {
@@ -95,6 +96,10 @@ struct Rest {
     mapping: PadMapping,
     /// Each corner in pad mm (nominal grid position where the rest frame missed it).
     corners_mm: Vec<Point2>,
+    /// The model's observed points (`inverse.observe`: the corners, or the yellow squares) in pad mm, where the rest
+    /// frame found them; `points_mm` has the nominal position where it did not.
+    points_found_mm: Vec<Option<Point2>>,
+    points_mm: Vec<Point2>,
     /// Each of `corners_mm` in raw px (`None` outside the camera's view): where motion removal starts from.
     corners_raw: Vec<Option<Point2>>,
     /// The pad's centre in raw px: the camera motion is reported about it.
@@ -111,8 +116,8 @@ struct Rest {
     /// press the contact test's detection floor is stated for, so the floor press's gamma is the floor times this (see
     /// [`Estimator::line_touch`]).
     gamma_per_n: f64,
-    /// Per corner: moved by a change of light alone (see [`Estimator::light_sensitive_corners`]); the contact test
-    /// leaves these corners out.
+    /// Per observed point: moved by a change of light alone (see [`Estimator::light_sensitive_points`]); the contact
+    /// test leaves these points out.
     light_sensitive: Vec<bool>,
 }
 
@@ -172,7 +177,7 @@ impl Estimator {
             moved_frames: 0,
             retare_count: 0,
         };
-        estimator.rest.light_sensitive = estimator.light_sensitive_corners(reference);
+        estimator.rest.light_sensitive = estimator.light_sensitive_points(reference);
         Ok(estimator)
     }
 
@@ -215,28 +220,37 @@ impl Estimator {
 
     fn detect_frame(&mut self, frame: &RgbImage) -> Result<FrameLattice, EstimateError> {
         let pad = self.config.pad;
-        let (squares, corners, squares_found, recovered, relit_corners) = match &mut self.detector {
+        let observe = self.config.inverse.observe;
+        let (squares, corners, squares_found, recovered, relit) = match &mut self.detector {
             Detector::Fast(tracker) => {
                 let d = tracker.track(frame)?;
                 let found = d.squares.iter().filter(|s| s.is_some()).count();
-                // A corner is the midpoint of two squares: without the relit ones, those it loses are relit.
-                let trusted: Vec<Option<Point2>> = d
-                    .squares
-                    .iter()
-                    .zip(&d.relit)
-                    .map(|(s, &relit)| s.filter(|_| !relit))
-                    .collect();
-                let relit_corners = corners_from_squares(&pad, &trusted)
-                    .iter()
-                    .zip(&d.corners)
-                    .map(|(trusted, found)| trusted.is_none() && found.is_some())
-                    .collect();
-                (d.squares, d.corners, found, d.recovered, relit_corners)
+                let relit = match observe {
+                    ObservedPoints::Squares => d.relit.clone(),
+                    ObservedPoints::Corners => {
+                        // A corner is the midpoint of two squares: without the relit ones, those it loses are relit.
+                        let trusted: Vec<Option<Point2>> = d
+                            .squares
+                            .iter()
+                            .zip(&d.relit)
+                            .map(|(s, &relit)| s.filter(|_| !relit))
+                            .collect();
+                        corners_from_squares(&pad, &trusted)
+                            .iter()
+                            .zip(&d.corners)
+                            .map(|(trusted, found)| trusted.is_none() && found.is_some())
+                            .collect()
+                    }
+                };
+                (d.squares, d.corners, found, d.recovered, relit)
             }
             Detector::Paper(detector) => {
                 let (squares, corners, quads) = paper_points(detector, frame, &self.config)?;
-                let relit_corners = vec![false; corners.len()];
-                (squares, corners, quads, false, relit_corners)
+                let points = match observe {
+                    ObservedPoints::Squares => squares.len(),
+                    ObservedPoints::Corners => corners.len(),
+                };
+                (squares, corners, quads, false, vec![false; points])
             }
         };
         let lattice = build_lattice(&self.config, &self.rest.mapping, squares, &corners);
@@ -244,7 +258,7 @@ impl Estimator {
             lattice,
             squares_found,
             recovered,
-            relit_corners,
+            relit,
         })
     }
 
@@ -265,7 +279,7 @@ impl Estimator {
             lattice,
             squares_found,
             recovered,
-            relit_corners,
+            relit,
         } = self.detect_frame(frame)?;
         // The tracker carries each square's identity from frame to frame, so a corner it finds 2.5 cells away has
         // moved that far (a heavy press). The published detector indexes every frame's lattice afresh: when the
@@ -288,7 +302,8 @@ impl Estimator {
                 needed,
             });
         }
-        let (mut reading, moved_mm) = self.measure(&lattice, &registration, &relit_corners)?;
+        let points = self.observed_points(&lattice, &registration, max_displacement_cells, relit);
+        let (mut reading, moved_mm) = self.measure(&lattice, &registration, &points)?;
         reading.recovered = recovered;
         reading.counts.squares_detected = squares_found;
         reading.retared = self.follow_motion(&reading, moved_mm, &lattice, frame)?;
@@ -303,10 +318,10 @@ impl Estimator {
         &self,
         lattice: &Lattice,
         registration: &Registration,
-        relit_corners: &[bool],
+        points: &FramePoints,
     ) -> Result<(Reading, f64), EstimateError> {
         let valid: Vec<bool> = registration.corners.iter().map(|c| c.valid).collect();
-        let (motion, outcome, near_loads) = self.motion_and_test(lattice, &valid, relit_corners)?;
+        let (motion, outcome, near_loads) = self.motion_and_test(lattice, &valid, points)?;
         let gammas = self.paper_gammas(lattice, &motion, &valid)?;
         let line = force(&self.config.calibration, gammas.compensated);
 
@@ -318,10 +333,10 @@ impl Estimator {
         let contact_score_mm = local.get(CONTACT_SUPPORT - 1).copied().unwrap_or(0.0);
 
         let (touch, pressure_map) = if self.mode == Mode::Inverse {
-            let steady: Vec<bool> = (0..valid.len())
-                .map(|i| valid[i] && !self.rest.light_sensitive.get(i).copied().unwrap_or(false))
+            let steady: Vec<bool> = (0..points.valid.len())
+                .map(|i| points.valid[i] && !self.rest.light_sensitive.get(i).copied().unwrap_or(false))
                 .collect();
-            self.inverse_touch(&motion, &valid, &steady, &near_loads, &outcome)
+            self.inverse_touch(&motion, &points.valid, &steady, &near_loads, &outcome)
         } else {
             let field = PaperField {
                 compensated_paper_px: &gammas.compensated_paper_px,
@@ -374,22 +389,22 @@ impl Estimator {
         Ok((reading, motion.largest_mm))
     }
 
-    /// The camera's motion removed, and the contact test on what is left (its verdict, and the corners within reach
-    /// of the loads it found).
+    /// The camera's motion removed, and the contact test on what is left (its verdict, and the observed points within
+    /// reach of the loads it found). `valid`: the corners registered.
     fn motion_and_test(
         &self,
         lattice: &Lattice,
         valid: &[bool],
-        relit_corners: &[bool],
+        points: &FramePoints,
     ) -> Result<(Compensated, TestOutcome, Vec<usize>), EstimateError> {
         // The contact test leaves out the corners a change of light biases (after a camera move, or under the LEDs'
         // drift where the frame clips): their bias is no traction, while a contact moves many corners besides them.
         // Its noise is what this frame's corners show about the motion-only fit; the floor and everything measured
         // once it says contact use every corner.
-        let tested_valid: Vec<bool> = (0..valid.len())
-            .map(|i| valid[i] && !relit_corners[i] && !self.rest.light_sensitive.get(i).copied().unwrap_or(false))
+        let tested_valid: Vec<bool> = (0..points.valid.len())
+            .map(|i| points.valid[i] && !points.relit[i] && !self.rest.light_sensitive.get(i).copied().unwrap_or(false))
             .collect();
-        let (motion, tested_stage) = self.remove_motion(lattice, valid, &tested_valid)?;
+        let (motion, tested_stage) = self.remove_motion(lattice, valid, points, &tested_valid)?;
         // The published detector keeps the noise the fast tracker was first judged by (its residuals after stage 1,
         // never below the configured floors): its corners' scatter on rest frames is not measured.
         let (outcome, near_loads) = match self.mode {
@@ -456,14 +471,16 @@ impl Estimator {
         })
     }
 
-    /// Camera motion removed (see [`crate::motion`]): the frame's corners are mapped to pad mm through the rest
-    /// frame's pad map, and a homography of the pad plane fitted jointly with the tractions takes the motion (the
-    /// deformation is then measured in the rest frame's pad axes, not turned with the camera). Also returns stage 1
-    /// on the same data over the corners `tested` (the contact test's), solved with the motion's.
+    /// Camera motion removed (see [`crate::motion`]): the frame's observed points (the model's) are mapped to pad mm
+    /// through the rest frame's pad map, and a homography of the pad plane fitted jointly with the tractions takes the
+    /// motion (the deformation is then measured in the rest frame's pad axes, not turned with the camera), then
+    /// removed from the corners (`valid`: those registered). Also returns stage 1 on the same data over the points
+    /// `tested` (the contact test's), solved with the motion's.
     fn remove_motion(
         &self,
         lattice: &Lattice,
         valid: &[bool],
+        points: &FramePoints,
         tested: &[bool],
     ) -> Result<(Compensated, Stage1), EstimateError> {
         let rest = &self.rest.corners_mm;
@@ -472,25 +489,21 @@ impl Estimator {
             reason: "the pad's motion is degenerate".into(),
         };
         let rest_raw = &self.rest.corners_raw;
-        // Each corner through the rest frame's pad map as it is, the camera's motion left whole to stage 1's homography
+        // Each point through the rest frame's pad map as it is, the camera's motion left whole to stage 1's homography
         // of the pad plane (see crate::motion).
-        let compensated: Vec<f64> = lattice
-            .corners
-            .iter()
-            .zip(rest)
-            .zip(valid)
-            .flat_map(|((c, r), &ok)| {
-                let at = if ok {
-                    c.raw_px.and_then(|p| mapping.raw_to_mm(p))
-                } else {
-                    None
-                };
-                at.map_or([0.0, 0.0], |c| [c[0] - r[0], c[1] - r[1]])
-            })
-            .collect();
-        let (stage, tested_stage) = self.model.stage1_pair(&compensated, valid, tested);
+        let corners_moved = moved_mm(mapping, lattice.corners.iter().map(|c| c.raw_px), rest, valid);
+        let data = match self.config.inverse.observe {
+            ObservedPoints::Corners => corners_moved.clone(),
+            ObservedPoints::Squares => moved_mm(
+                mapping,
+                lattice.squares.iter().map(|s| s.raw_px),
+                &self.rest.points_mm,
+                &points.valid,
+            ),
+        };
+        let (stage, tested_stage) = self.model.stage1_pair(&data, &points.valid, tested);
         let fine = Homography::from_matrix(self.model.motion_homography(&stage.motion)).ok_or_else(degenerate)?;
-        let mut displacement = compensated.clone();
+        let mut displacement = corners_moved;
         for (i, r) in rest.iter().enumerate() {
             let m = self.model.motion_field(&stage.motion, *r);
             displacement[2 * i] -= m[0];
@@ -514,7 +527,8 @@ impl Estimator {
             None => CameraMotion::NONE,
         };
         let compensated = Compensated {
-            data: compensated,
+            data,
+            data_valid: points.valid.clone(),
             displacement,
             stage,
             reported,
@@ -777,7 +791,7 @@ impl Estimator {
             torque_nmm: None,
             area_mm2: None,
         };
-        let edge = self.shear_edge(field.samples, &affine, registration, motion, valid);
+        let edge = self.shear_edge(field.samples, &affine, registration, motion);
         Some(Touch {
             strongest,
             others: Vec::new(),
@@ -800,7 +814,6 @@ impl Estimator {
         affine: &AffineMotion,
         registration: &Registration,
         motion: &Compensated,
-        valid: &[bool],
     ) -> EdgeEstimate {
         let sheared: Vec<(Point2, f64)> = self
             .rest
@@ -829,7 +842,7 @@ impl Estimator {
             && self.model.stage1_loads_are_two_presses(
                 &motion.stage,
                 &motion.data,
-                valid,
+                &motion.data_valid,
                 self.support_noise_mm(&motion.stage),
             );
         EdgeEstimate {
@@ -865,15 +878,15 @@ impl Estimator {
         }
     }
 
-    /// The corners a change of light moves: the rest frame is tracked again with every pixel 10 % darker and 10 %
-    /// brighter. Chromaticity does not change with the light except where the frame clips (glare, highlights), so a
-    /// square there changes shape and its corners move, while the rest of the lattice stays put; the LEDs' drift does
-    /// the same to those squares in later frames, a bias that is no traction and that a light press cannot be told
-    /// from. Each corner's largest shift (pad mm) against the lattice's robust spread: beyond [`LIGHT_SIGMAS`] it is
-    /// left out of the contact test (a press moves many corners besides these).
-    fn light_sensitive_corners(&self, reference: &RgbImage) -> Vec<bool> {
+    /// The observed points (the model's) a change of light moves: the rest frame is tracked again with every pixel
+    /// 10 % darker and 10 % brighter. Chromaticity does not change with the light except where the frame clips
+    /// (glare, highlights), so a square there changes shape and it and its corners move, while the rest of the lattice
+    /// stays put; the LEDs' drift does the same to those squares in later frames, a bias that is no traction and that
+    /// a light press cannot be told from. Each point's largest shift (pad mm) against the lattice's robust spread:
+    /// beyond [`LIGHT_SIGMAS`] it is left out of the contact test (a press moves many points besides these).
+    fn light_sensitive_points(&self, reference: &RgbImage) -> Vec<bool> {
         let (config, rest) = (&self.config, &self.rest);
-        let count = rest.corners_mm.len();
+        let count = rest.points_mm.len();
         let mut shift = vec![0.0f64; count];
         for factor in LIGHT_PROBE {
             // Each of the 256 levels scaled once, then looked up (per byte, the rounding is a library call).
@@ -885,20 +898,19 @@ impl Estimator {
             }
             // A copy of the tracker as it stands on this rest frame (just built, or just re-tared onto it): the
             // probe is measured as the next frame would be, with no second full-frame search.
-            let corners = match &self.detector {
-                Detector::Fast(tracker) => tracker.clone().track(&probe).map(|d| d.corners),
-                Detector::Paper(detector) => paper_points(detector, &probe, config).map(|p| p.1),
+            let found = match &self.detector {
+                Detector::Fast(tracker) => tracker.clone().track(&probe).map(|d| (d.squares, d.corners)),
+                Detector::Paper(detector) => paper_points(detector, &probe, config).map(|p| (p.0, p.1)),
             };
-            let Ok(corners) = corners else {
+            let Ok((squares, corners)) = found else {
                 continue;
             };
-            for (i, (c, r)) in corners.iter().zip(&rest.lattice.corners).enumerate() {
-                let moved = c.zip(r.mm).and_then(|(c, r)| {
-                    rest.mapping
-                        .undistort(c)
-                        .and_then(|u| rest.mapping.undistorted_to_mm(u))
-                        .map(|m| (m, r))
-                });
+            let points = match config.inverse.observe {
+                ObservedPoints::Corners => corners,
+                ObservedPoints::Squares => squares,
+            };
+            for (i, (c, r)) in points.iter().zip(&rest.points_found_mm).enumerate() {
+                let moved = c.zip(*r).and_then(|(c, r)| rest.mapping.raw_to_mm(c).map(|m| (m, r)));
                 if let Some((m, r)) = moved {
                     shift[i] = shift[i].max((m[0] - r[0]).hypot(m[1] - r[1]));
                 }
@@ -912,6 +924,54 @@ impl Estimator {
         let mut deviations: Vec<f64> = moved.iter().map(|v| (v - centre).abs()).collect();
         let limit = centre + LIGHT_SIGMAS * MAD_TO_SIGMA * median(&mut deviations);
         shift.iter().map(|&v| v > limit).collect()
+    }
+
+    /// The frame's observed points (the model's, `inverse.observe`), each with whether it is measured: a corner when
+    /// registered; a square when both frames found it, it moved no more than `max_displacement_cells`, and no corner
+    /// built from it was found implausible (registration's neighbour test: a square the tracker lost to its
+    /// neighbour's place moves both its corners against their neighbours). `relit`: per point, from detection.
+    fn observed_points(
+        &self,
+        lattice: &Lattice,
+        registration: &Registration,
+        max_displacement_cells: f64,
+        relit: Vec<bool>,
+    ) -> FramePoints {
+        let valid = match self.config.inverse.observe {
+            ObservedPoints::Corners => registration.corners.iter().map(|c| c.valid).collect(),
+            ObservedPoints::Squares => {
+                let pad = &self.config.pad;
+                let slots: Vec<_> = pad.yellow_squares().collect();
+                let mut doubted = vec![false; slots.len()];
+                for corner in registration
+                    .corners
+                    .iter()
+                    .filter(|c| c.displacement_mm.is_some() && !c.valid)
+                {
+                    for square in pad.corner_squares(corner.index) {
+                        if let Ok(slot) = slots.binary_search(&square) {
+                            doubted[slot] = true;
+                        }
+                    }
+                }
+                let reach_mm = max_displacement_cells * pad.pitch_x_mm().min(pad.pitch_y_mm());
+                let mapping = &self.rest.mapping;
+                lattice
+                    .squares
+                    .iter()
+                    .zip(&self.rest.points_found_mm)
+                    .zip(doubted)
+                    .map(|((seen, rest), doubted)| {
+                        let now = seen.raw_px.and_then(|p| mapping.raw_to_mm(p));
+                        !doubted
+                            && now
+                                .zip(*rest)
+                                .is_some_and(|(n, r)| (n[0] - r[0]).hypot(n[1] - r[1]) <= reach_mm)
+                    })
+                    .collect()
+            }
+        };
+        FramePoints { valid, relit }
     }
 
     /// Counts frames of persistent motion without contact and re-tares after `retare.frames` of them: the frame
@@ -951,7 +1011,7 @@ impl Estimator {
             }
         }
         (self.rest, self.model) = Rest::new(&self.config, *self.rest.mapping.camera(), squares, &corners)?;
-        self.rest.light_sensitive = self.light_sensitive_corners(frame);
+        self.rest.light_sensitive = self.light_sensitive_points(frame);
         self.moved_frames = 0;
         self.retare_count += 1;
         tracing::info!(
@@ -964,10 +1024,36 @@ impl Estimator {
     }
 }
 
+/// Which of a frame's observed points (the model's: `inverse.observe`) are measured, and which were relit (see
+/// [`FrameLattice::relit`]).
+struct FramePoints {
+    valid: Vec<bool>,
+    relit: Vec<bool>,
+}
+
+/// Each point's motion from `rest` (pad mm) to where the pad map puts its `raw` position, 2 per point (zero where
+/// not `valid`).
+fn moved_mm(
+    mapping: &PadMapping,
+    raw: impl Iterator<Item = Option<Point2>>,
+    rest: &[Point2],
+    valid: &[bool],
+) -> Vec<f64> {
+    raw.zip(rest)
+        .zip(valid)
+        .flat_map(|((p, r), &ok)| {
+            let at = if ok { p.and_then(|p| mapping.raw_to_mm(p)) } else { None };
+            at.map_or([0.0, 0.0], |c| [c[0] - r[0], c[1] - r[1]])
+        })
+        .collect()
+}
+
 /// The displacements with the camera motion removed, and the motion.
 struct Compensated {
-    /// Displacements after the first pass's motion is removed (stage 1's input), 2 per corner, mm.
+    /// Displacements after the first pass's motion is removed (stage 1's input), 2 per observed point, mm.
     data: Vec<f64>,
+    /// Which of `data`'s points were measured.
+    data_valid: Vec<bool>,
     /// The pad's own displacement (second pass's motion removed as well), 2 per corner, mm.
     displacement: Vec<f64>,
     stage: Stage1,
@@ -1027,6 +1113,25 @@ impl Rest {
         let shared = InverseModel::shared(config, mapping.camera_view())?;
         let model = &*shared;
         let lattice = build_lattice(config, &mapping, squares, corners);
+        let (points_found_mm, nominal_mm): (Vec<Option<Point2>>, Vec<Point2>) = match config.inverse.observe {
+            ObservedPoints::Corners => lattice.corners.iter().map(|c| (c.mm, pad.corner_mm(c.index))).unzip(),
+            ObservedPoints::Squares => lattice
+                .squares
+                .iter()
+                .map(|s| {
+                    (
+                        s.raw_px.and_then(|p| mapping.raw_to_mm(p)),
+                        pad.square_centre_mm(s.index),
+                    )
+                })
+                .unzip(),
+        };
+        let points_mm: Vec<Point2> = points_found_mm
+            .iter()
+            .zip(nominal_mm)
+            .map(|(f, n)| f.unwrap_or(n))
+            .collect();
+        let points_valid: Vec<bool> = points_found_mm.iter().map(Option::is_some).collect();
         let needed = min_valid(config);
         if lattice.corners_found() < needed {
             return Err(EstimateError::TooFewPoints {
@@ -1054,18 +1159,20 @@ impl Rest {
             &paper_px,
             &valid,
         )?;
-        let gamma_per_n = central_press_gamma(config, model, &mapping, &corners_mm, &sampler, &valid)?;
+        let gamma_per_n = central_press_gamma(config, model, &mapping, &corners_mm, &sampler, &valid, &points_valid)?;
         let floor_px_mm = mapping
             .mm_per_px_at_centre()
             .map_or(0.0, |scale| config.inverse.noise_floor_px * scale);
         let noise_floor_mm = config.inverse.noise_floor_mm;
         let support_floor_mm = noise_floor_mm.max(floor_px_mm);
-        let light_sensitive = vec![false; corners_mm.len()];
+        let light_sensitive = vec![false; points_mm.len()];
         Ok((
             Self {
                 lattice,
                 mapping,
                 corners_mm,
+                points_found_mm,
+                points_mm,
                 corners_raw,
                 centre_raw,
                 paper_px,
@@ -1087,7 +1194,8 @@ const LIGHT_PROBE: [f32; 2] = [0.9, 1.1];
 const LIGHT_SIGMAS: f64 = 5.0;
 
 /// The gamma of the pad model's 1 N central press ([`InverseModel::central_press_mm`]) on this rest frame, with the
-/// motion stage 1 fits to it removed as [`Estimator::measure`] removes it from a frame.
+/// motion stage 1 fits to it removed as [`Estimator::measure`] removes it from a frame. `valid`: the corners the rest
+/// frame found; `points_valid`: the model's observed points it found.
 fn central_press_gamma(
     config: &SensorConfig,
     model: &InverseModel,
@@ -1095,15 +1203,30 @@ fn central_press_gamma(
     corners_mm: &[Point2],
     sampler: &ShearSampler,
     valid: &[bool],
+    points_valid: &[bool],
 ) -> Result<f64, EstimateError> {
     let press = model.central_press_mm();
-    let stage = model.stage1(&press, valid);
+    let stage = model.stage1(&press, points_valid);
+    let corners_press: Vec<f64> = match config.inverse.observe {
+        ObservedPoints::Corners => press,
+        // The tracker's corner is the midpoint of its two squares, so its motion is their mean motion.
+        ObservedPoints::Squares => {
+            let squares: Vec<Option<Point2>> = press.chunks_exact(2).map(|d| Some([d[0], d[1]])).collect();
+            corners_from_squares(&config.pad, &squares)
+                .into_iter()
+                .flat_map(|d| d.unwrap_or([0.0, 0.0]))
+                .collect()
+        }
+    };
     let pressed: Vec<Point2> = corners_mm
         .iter()
         .enumerate()
         .map(|(i, &r)| {
             let m = model.motion_field(&stage.motion, r);
-            let at = [r[0] + press[2 * i] - m[0], r[1] + press[2 * i + 1] - m[1]];
+            let at = [
+                r[0] + corners_press[2 * i] - m[0],
+                r[1] + corners_press[2 * i + 1] - m[1],
+            ];
             let p = if valid[i] { mapping.mm_to_undistorted(at) } else { None };
             p.map(|p| mapping.to_paper(p)).unwrap_or([0.0, 0.0])
         })

@@ -32,8 +32,8 @@ pub mod stats;
 pub mod surface;
 
 pub use config::{
-    ConfigError, ElasticConfig, ElasticModel, ForceCalibration, InverseConfig, PaperParams, RetareConfig, Roi,
-    SensorConfig, SurfaceConfig, Thresholds,
+    ConfigError, ElasticConfig, ElasticModel, ForceCalibration, InverseConfig, ObservedPoints, PaperParams,
+    RetareConfig, Roi, SensorConfig, SurfaceConfig, Thresholds,
 };
 pub use error::EstimateError;
 pub use estimator::{Estimator, Mode, PATTERN_REGION_MARGIN_CELLS};

@@ -8,7 +8,7 @@ use nusense_geometry::{PadGeometry, Point2, SquareIndex};
 
 use super::stage1::{motion_basis, MEASURED_NOISE_REACH_CELLS};
 use super::{normal_quantile, FineGrid, InverseModel, Quarters, FINE_PER_CELL, MOTION_PARAMETERS, SUPPORT_SIGMAS};
-use crate::config::{ElasticModel, SensorConfig};
+use crate::config::{ElasticModel, ObservedPoints, SensorConfig};
 use crate::elastic::{
     image_matrix, normal_stack, parallax_shifts, Border, CameraView, Cell, ElasticError, PadResponse, PointKernel,
 };
@@ -18,6 +18,11 @@ use crate::linalg::{gram, Dense, PackedSymmetric};
 /// diagonals, and the sides (cells) of the square shapes a line must explain better than.
 const LINE_LENGTHS_CELLS: [usize; 2] = [3, 5];
 const BLOCK_SIDES_CELLS: [usize; 3] = [1, 2, 3];
+
+/// With `inverse.observe = "squares"`, each square is the mean motion of this many points per side over its cell:
+/// on the validation sets' presses (host/bench/examples/localisation_budget.rs) 3 x 3 located better than the
+/// centres alone on the full set with the pad as built, and the mean over the cell is what a centroid measures.
+const SQUARE_PROBES_PER_SIDE: usize = 3;
 
 /// [`InverseModel::near_loads`] looks its distances up in a table built for reaches up to this many cells, the
 /// largest it is asked for.
@@ -51,7 +56,7 @@ fn cached<T, E>(
 
 /// What a model observes, 2 numbers per point.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum ObservedPoints {
+enum Observation {
     /// The interior corners, in `PadGeometry::corner_slot` order: the estimator's.
     Corners,
     /// The yellow squares, each as the mean motion of n x n points over its cell (see [`square_probes`]).
@@ -63,7 +68,7 @@ struct ViewFreeParts {
     /// The kernel whose normal displacement the parallax sees, when it is not `kernel`'s (see
     /// [`crate::elastic::normal_stack`]).
     normal: Option<PointKernel>,
-    /// The observed points' nominal positions: the corners, or the yellow squares' centres (see [`ObservedPoints`]).
+    /// The observed points' nominal positions: the corners, or the yellow squares' centres (see [`Observation`]).
     points: Vec<Point2>,
     /// Where the responses are taken: the points, or with `elastic.tracker_averaging` the two yellow squares' centres
     /// of each corner in turn (see [`corner_square_centres`]), or points spread over each square (see
@@ -87,7 +92,7 @@ struct ViewFreeParts {
 }
 
 impl ViewFreeParts {
-    fn shared(config: &SensorConfig, observed: ObservedPoints) -> Result<Arc<Self>, ElasticError> {
+    fn shared(config: &SensorConfig, observed: Observation) -> Result<Arc<Self>, ElasticError> {
         let key = format!(
             "{:?}|{:?}|{}|{observed:?}",
             config.pad, config.elastic, config.inverse.edge_from_line
@@ -95,15 +100,15 @@ impl ViewFreeParts {
         cached(&VIEW_FREE_PARTS, key, || Self::new(config, observed))
     }
 
-    fn new(config: &SensorConfig, observed: ObservedPoints) -> Result<Self, ElasticError> {
+    fn new(config: &SensorConfig, observed: Observation) -> Result<Self, ElasticError> {
         let pad = config.pad;
         let kernel = PointKernel::new(&config.elastic)?;
         let normal = normal_stack(&config.elastic)
             .map(|stack| PointKernel::new(&stack))
             .transpose()?;
         let points: Vec<Point2> = match observed {
-            ObservedPoints::Corners => pad.corners().map(|c| pad.corner_mm(c)).collect(),
-            ObservedPoints::Squares { .. } => pad.yellow_squares().map(|c| pad.square_centre_mm(c)).collect(),
+            Observation::Corners => pad.corners().map(|c| pad.corner_mm(c)).collect(),
+            Observation::Squares { .. } => pad.yellow_squares().map(|c| pad.square_centre_mm(c)).collect(),
         };
         let size = [pad.pitch_x_mm(), pad.pitch_y_mm()];
         let cells: Vec<Cell> = (0..pad.rows)
@@ -127,12 +132,12 @@ impl ViewFreeParts {
             _ => Border::None,
         };
         let (observations, probes) = match observed {
-            ObservedPoints::Squares { probes_per_side } => {
+            Observation::Squares { probes_per_side } => {
                 let n = probes_per_side.max(1);
                 (square_probes(&pad, n), n * n)
             }
-            ObservedPoints::Corners if config.elastic.tracker_averaging => (corner_square_centres(&pad), 2),
-            ObservedPoints::Corners => (points.clone(), 1),
+            Observation::Corners if config.elastic.tracker_averaging => (corner_square_centres(&pad), 2),
+            Observation::Corners => (points.clone(), 1),
         };
         let response = PadResponse::new(&kernel, &observations, &cells, border)?;
         let images = image_matrix(&kernel, &observations, &cells, frame);
@@ -245,7 +250,7 @@ fn corner_square_centres(pad: &PadGeometry) -> Vec<Point2> {
 }
 
 /// Each yellow square's `n` x `n` points spread evenly over its cell (row-major within a square, squares in
-/// `PadGeometry::yellow_squares` order), where [`ObservedPoints::Squares`] takes a model's responses.
+/// `PadGeometry::yellow_squares` order), where [`Observation::Squares`] takes a model's responses.
 fn square_probes(pad: &PadGeometry, n: usize) -> Vec<Point2> {
     let size = [pad.pitch_x_mm(), pad.pitch_y_mm()];
     let offset = move |k: usize| (k as f64 + 0.5) / n as f64 - 0.5;
@@ -259,7 +264,7 @@ fn square_probes(pad: &PadGeometry, n: usize) -> Vec<Point2> {
 
 /// A response taken at the model's observation points as its observed points see them: each `probes` consecutive
 /// points' rows (x and y) averaged into one point's (with `elastic.tracker_averaging`, a corner's two squares; with
-/// [`ObservedPoints::Squares`], a square's probes).
+/// [`Observation::Squares`], a square's probes).
 fn observed_at_points(matrix: DMatrix<f64>, probes: usize) -> DMatrix<f64> {
     if probes == 1 {
         return matrix;
@@ -357,28 +362,32 @@ impl InverseModel {
         cached(&MODELS, key, || Self::new(config, view))
     }
 
+    /// The model of `config`, observing the points `inverse.observe` names.
     pub fn new(config: &SensorConfig, view: Option<CameraView>) -> Result<Self, ElasticError> {
-        Self::observing(config, view, ObservedPoints::Corners)
+        let observed = match config.inverse.observe {
+            ObservedPoints::Corners => Observation::Corners,
+            ObservedPoints::Squares => Observation::Squares {
+                probes_per_side: SQUARE_PROBES_PER_SIDE,
+            },
+        };
+        Self::observing(config, view, observed)
     }
 
-    /// A diagnostic, not the estimator's model: the model observing the yellow squares' centroids (each the mean
-    /// motion of `probes_per_side` x `probes_per_side` points over its cell; 1: its centre) in place of the corners,
-    /// 2 per square in `PadGeometry::yellow_squares` order. The fast tracker measures the squares, and its corners
-    /// are their midpoints, which carry less (see `elastic.tracker_averaging`). What it gives and why the estimator
-    /// does not use it: host/bench/examples/localisation_budget.rs and docs/benchmarks/validation-quick.md.
+    /// A diagnostic: the model observing the yellow squares' centroids (each the mean motion of `probes_per_side` x
+    /// `probes_per_side` points over its cell; 1: its centre) in place of the corners, 2 per square in
+    /// `PadGeometry::yellow_squares` order, whatever `inverse.observe` says (the estimator's, with `inverse.observe =
+    /// "squares"`, is this with [`SQUARE_PROBES_PER_SIDE`]). The fast tracker measures the squares, and its corners
+    /// are their midpoints, which carry less (see `elastic.tracker_averaging`). What it gives:
+    /// host/bench/examples/localisation_budget.rs and docs/benchmarks/validation-quick.md.
     pub fn observing_squares(
         config: &SensorConfig,
         view: Option<CameraView>,
         probes_per_side: usize,
     ) -> Result<Self, ElasticError> {
-        Self::observing(config, view, ObservedPoints::Squares { probes_per_side })
+        Self::observing(config, view, Observation::Squares { probes_per_side })
     }
 
-    fn observing(
-        config: &SensorConfig,
-        view: Option<CameraView>,
-        observed: ObservedPoints,
-    ) -> Result<Self, ElasticError> {
+    fn observing(config: &SensorConfig, view: Option<CameraView>, observed: Observation) -> Result<Self, ElasticError> {
         let pad = config.pad;
         let parts = ViewFreeParts::shared(config, observed)?;
         let ViewFreeParts { points, cells, .. } = &*parts;

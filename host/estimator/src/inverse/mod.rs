@@ -242,6 +242,12 @@ impl InverseModel {
         &self.pad
     }
 
+    /// The points whose displacements the model observes, nominal pad mm: the corners, or the yellow squares (see
+    /// `inverse.observe`).
+    pub fn observed_points_mm(&self) -> &[Point2] {
+        &self.points_mm
+    }
+
     /// Pressure in kPa on the cell grid (row-major), from tractions.
     pub fn pressure_kpa(&self, tractions: &[f64]) -> Vec<f64> {
         let area = self.pad.pitch_x_mm() * self.pad.pitch_y_mm();
