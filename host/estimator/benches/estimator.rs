@@ -3,7 +3,9 @@
 //! prints a table of ms per frame of every mode measured in the same run (thread CPU time, and wall time), with the
 //! ratios between them. `-- table` (a filter no criterion benchmark matches) prints the table alone. A second table
 //! times the inverse on a 20 mm edge press of the validation sensor with the edge direction from the moments (the
-//! default) and from the line load (`inverse.edge_from_line`), in the same run.
+//! default) and from the line load (`inverse.edge_from_line`), in the same run; a third the inverse on the real pair
+//! with the defaults' stack held in a frame, observing the corners and the squares (`inverse.observe`), against the
+//! default.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -13,7 +15,7 @@ use image::{imageops, RgbImage};
 use nusense_estimator::contact::{divergence_centre, fit_affine_motion, FieldPoint};
 use nusense_estimator::registration::register;
 use nusense_estimator::shear::{gamma, ShearSampler};
-use nusense_estimator::{Estimator, Mode, SensorConfig};
+use nusense_estimator::{ElasticModel, Estimator, Mode, ObservedPoints, SensorConfig};
 use nusense_sim::validation::{Case, CaseKind, ValidationRenderer};
 use nusense_sim::{Contact, Scene};
 
@@ -222,7 +224,55 @@ fn main() {
             ratio(paper, fast, 0)
         );
     }
+    observed_points_table(&frames);
     edge_direction_table();
+}
+
+/// The inverse's ms per frame on the real pair with the defaults' stack held in a frame (`elastic.model = "layered"`,
+/// sliding walls 4 mm beyond the pattern), observing the corners and the squares (`inverse.observe`), against the
+/// default (the equivalent layer, the corners).
+fn observed_points_table(frames: &[(&'static str, RgbImage, RgbImage)]) {
+    let in_a_frame = |observe: ObservedPoints| {
+        let mut config = SensorConfig::default();
+        config.elastic.model = ElasticModel::Layered;
+        config.elastic.shear_modulus_kpa = 11.0;
+        config.elastic.sliding_walls = true;
+        config.elastic.border_margin_mm = 4.0;
+        config.inverse.observe = observe;
+        config
+    };
+    println!(
+        "\ninverse ms per frame, the defaults' stack held in a frame, observing corners or squares (thread CPU, wall):"
+    );
+    println!(
+        "{:>10} {:>18} {:>18} {:>18} {:>16} {:>16}",
+        "size", "default", "frame, corners", "frame, squares", "corners/default", "squares/default"
+    );
+    for (label, reference, touch) in frames {
+        let default = ms_per_frame(Mode::Inverse, reference, touch, 200);
+        let corners = ms_per_frame_with(
+            in_a_frame(ObservedPoints::Corners),
+            Mode::Inverse,
+            reference,
+            touch,
+            200,
+        );
+        let squares = ms_per_frame_with(
+            in_a_frame(ObservedPoints::Squares),
+            Mode::Inverse,
+            reference,
+            touch,
+            200,
+        );
+        println!(
+            "{label:>10} {:>18} {:>18} {:>18} {:>16} {:>16}",
+            show(default),
+            show(corners),
+            show(squares),
+            ratio(corners, default, 2),
+            ratio(squares, default, 2)
+        );
+    }
 }
 
 /// The inverse's ms per frame on an edge press of the validation sensor, the edge direction from the moments and

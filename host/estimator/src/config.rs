@@ -444,7 +444,9 @@ pub struct InverseConfig {
     /// 0.20 -> 0.30 N (quick; edges 0.30 -> 0.50) and 0.20 (full; edges 0.20 -> 0.30); the pushes' tangential force
     /// 0.11 -> 0.55 N RMS (quick) and 0.14 -> 0.30 (full) after its calibration: stage 2 puts part of a heavy push's
     /// shear on cells beside the pressure that no contact region holds. With the default model (the equivalent layer,
-    /// fitted to the real pair's corners as tracked) the squares read worse: quick 0.34 -> 0.48 mm. Not the default:
+    /// fitted to the real pair's corners as tracked) the squares read worse: quick 0.34 -> 0.48 mm. Time per frame on
+    /// the real pair, against the default's: 0.93-1.19x (512x384 to 2048x1536), the same model observing the corners
+    /// 2.6-4.2x (`cargo bench -p nusense-estimator -- table`). Not the default:
     /// the frame's 4 mm is the validation pad's, and the simulated real sensor's pad is a half-space.
     pub observe: ObservedPoints,
 }
