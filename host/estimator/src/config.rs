@@ -321,8 +321,8 @@ pub struct ElasticConfig {
     /// of the squares that alternates row by row moves no midpoint (each pairs a square of one row with one of the
     /// next): with the option the cells' pressure response has a null direction (smallest singular value 1e-16,
     /// against 6e-5 without; the 97th 0.09 against 0.58), which stage 2, whose noise model takes the corners as
-    /// independent, fills at low noise. Observing the squares themselves (`InverseModel::observing_squares`, a
-    /// diagnostic, not the estimator's) keeps their 192 numbers without the null direction, and with the pad's own
+    /// independent, fills at low noise. Observing the squares themselves (`inverse.observe = "squares"`, or any
+    /// number of probes per square with the diagnostic `InverseModel::observing_squares`) keeps their 192 numbers without the null direction, and with the pad's own
     /// stack and frame places the validation presses far better from the tracked squares than from the tracked
     /// corners (docs/benchmarks/validation-quick.md, "Where the localisation error comes from"); but 192 numbers
     /// for the cells' 576 tractions leave it unsound between cells too: fed its own noise-free field of a 2.5 mm

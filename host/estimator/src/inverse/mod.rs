@@ -106,8 +106,9 @@ pub struct InverseModel {
     cells: Vec<Cell>,
     /// Observations: 2 per observed point (x, y) at `points_mm`.
     observations: usize,
-    /// The observed points' nominal positions, pad mm: the corners in `corner_slot` order (with
-    /// [`InverseModel::observing_squares`], the yellow squares' centres in `PadGeometry::yellow_squares` order).
+    /// The observed points' nominal positions, pad mm: the corners in `corner_slot` order (with `inverse.observe =
+    /// "squares"` or [`InverseModel::observing_squares`], the yellow squares' centres in `PadGeometry::yellow_squares`
+    /// order).
     points_mm: Vec<Point2>,
     /// A (obs x 3 cells) and its transpose, row-major.
     a: Dense,
