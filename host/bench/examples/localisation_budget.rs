@@ -7,7 +7,8 @@
 //! floor) fed the corners' motion twice, both through the rest frame's pad map: as the tracker measured it, and as
 //! the simulator's truth puts the corners in the image (a perfect tracker: the material corner, parallax included).
 //! The estimator proper also leaves out the corners under the glare and makes further passes, so its column and the
-//! tracked one differ a little. Where the tracked column and the perfect one differ, the tracker's measurement makes
+//! tracked one differ a little (with `inverse.observe = "squares"` the estimator observes the squares, and the
+//! corners' columns are a model of the same config observing the corners). Where the tracked column and the perfect one differ, the tracker's measurement makes
 //! the error (its corner is the midpoint of two yellow squares' centroids, which a strain gradient moves off the
 //! material corner); where the perfect one is off, the model does. The last two columns feed the same stages, of
 //! models of the same config that observe the yellow squares instead (`InverseModel::observing_squares`), the
@@ -18,7 +19,7 @@
 
 use nusense_bench::validation::base_config_from_env;
 use nusense_estimator::inverse::{InverseModel, Region};
-use nusense_estimator::{Estimator, Mode};
+use nusense_estimator::{Estimator, InverseConfig, Mode, ObservedPoints, SensorConfig};
 use nusense_geometry::Point2;
 use nusense_sim::validation::{CaseKind, Profile, ValidationRenderer, ValidationSet};
 use nusense_sim::Indenter;
@@ -51,6 +52,17 @@ fn main() -> Result<(), Error> {
         .map_or(0.0, |mm| config.inverse.noise_floor_px * mm)
         .max(config.inverse.noise_floor_mm);
     let view = estimator.mapping().camera_view();
+    // The corners' columns need a model of the corners, whatever `inverse.observe` gives the estimator.
+    let corners_model = InverseModel::shared(
+        &SensorConfig {
+            inverse: InverseConfig {
+                observe: ObservedPoints::Corners,
+                ..config.inverse
+            },
+            ..config.clone()
+        },
+        view,
+    )?;
     let square_models = [
         InverseModel::observing_squares(&config, view, 1)?,
         InverseModel::observing_squares(&config, view, 3)?,
@@ -105,7 +117,7 @@ fn main() -> Result<(), Error> {
             squares_valid.push(moved.is_some());
             squares_moved.extend(moved.unwrap_or([0.0, 0.0]));
         }
-        let model = estimator.inverse_model();
+        let model = &*corners_model;
         let all = vec![true; valid.len()];
         let off = |found: Option<Point2>| {
             found.map_or(f64::INFINITY, |c| {
