@@ -15,7 +15,7 @@ use image::{imageops, RgbImage};
 use nusense_estimator::contact::{divergence_centre, fit_affine_motion, FieldPoint};
 use nusense_estimator::registration::register;
 use nusense_estimator::shear::{gamma, ShearSampler};
-use nusense_estimator::{ElasticModel, Estimator, Mode, ObservedPoints, SensorConfig};
+use nusense_estimator::{ElasticConfig, Estimator, Mode, ObservedPoints, SensorConfig};
 use nusense_sim::validation::{Case, CaseKind, ValidationRenderer};
 use nusense_sim::{Contact, Scene};
 
@@ -233,11 +233,10 @@ fn main() {
 /// default (the equivalent layer, the corners).
 fn observed_points_table(frames: &[(&'static str, RgbImage, RgbImage)]) {
     let in_a_frame = |observe: ObservedPoints| {
-        let mut config = SensorConfig::default();
-        config.elastic.model = ElasticModel::Layered;
-        config.elastic.shear_modulus_kpa = 11.0;
-        config.elastic.sliding_walls = true;
-        config.elastic.border_margin_mm = 4.0;
+        let mut config = SensorConfig {
+            elastic: ElasticConfig::layered_in_a_frame(),
+            ..SensorConfig::default()
+        };
         config.inverse.observe = observe;
         config
     };

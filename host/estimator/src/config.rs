@@ -382,6 +382,22 @@ impl Default for ElasticConfig {
     }
 }
 
+impl ElasticConfig {
+    /// The defaults' stack (`model = "layered"`, the gel at [`LAYERED_GEL_KPA`]) held in a frame whose sliding walls
+    /// stand 4 mm beyond the pattern: the pad as built, as far as the defaults know it, with which
+    /// `inverse.observe = "squares"` is measured (the frame's 4 mm is the validation pad's; the real pad's is not
+    /// known).
+    pub fn layered_in_a_frame() -> Self {
+        Self {
+            model: ElasticModel::Layered,
+            shear_modulus_kpa: LAYERED_GEL_KPA,
+            sliding_walls: true,
+            border_margin_mm: 4.0,
+            ..Self::default()
+        }
+    }
+}
+
 /// The skin's shear modulus, kPa: Sorta-Clear 18 (Shore 18A), E about 0.6 MPa on its data sheet, nearly
 /// incompressible, G = E / 3.
 const SKIN_KPA: f64 = 200.0;

@@ -7,7 +7,7 @@
 //! "Where the localisation error comes from") halved the full set's error. These presses are drawn here (tips,
 //! forces and places of their own, not the validation set's).
 
-use nusense_estimator::{ElasticModel, Estimator, Mode, ObservedPoints, SensorConfig};
+use nusense_estimator::{ElasticConfig, Estimator, Mode, ObservedPoints, SensorConfig};
 use nusense_sim::validation::{Case, CaseKind, ValidationRenderer};
 use nusense_sim::{Contact, Scene};
 use rand::{Rng, SeedableRng};
@@ -18,11 +18,10 @@ const PRESSES: usize = 24;
 
 /// The defaults' layered stack on its plate, held in a frame with sliding walls 4 mm beyond the pattern.
 fn pad_as_built(observe: ObservedPoints) -> SensorConfig {
-    let mut config = SensorConfig::default();
-    config.elastic.model = ElasticModel::Layered;
-    config.elastic.shear_modulus_kpa = 11.0;
-    config.elastic.sliding_walls = true;
-    config.elastic.border_margin_mm = 4.0;
+    let mut config = SensorConfig {
+        elastic: ElasticConfig::layered_in_a_frame(),
+        ..SensorConfig::default()
+    };
     config.inverse.observe = observe;
     config
 }
