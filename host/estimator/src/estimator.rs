@@ -30,7 +30,7 @@ use crate::reading::{
     CameraMotion, ContactRegion, ContactTest, EdgeReading, GammaReading, LatticeCounts, PressureMap, Reading,
     ShearVector, Touch,
 };
-use crate::registration::{register, Registration};
+use crate::registration::{register, register_squares, Registration};
 use crate::shear::{gamma, ShearSampler, ShearSamples};
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
@@ -489,21 +489,12 @@ impl Estimator {
             reason: "the pad's motion is degenerate".into(),
         };
         let rest_raw = &self.rest.corners_raw;
-        // Each point through the rest frame's pad map as it is, the camera's motion left whole to stage 1's homography
-        // of the pad plane (see crate::motion).
-        let corners_moved = moved_mm(mapping, lattice.corners.iter().map(|c| c.raw_px), rest, valid);
-        let data = match self.config.inverse.observe {
-            ObservedPoints::Corners => corners_moved.clone(),
-            ObservedPoints::Squares => moved_mm(
-                mapping,
-                lattice.squares.iter().map(|s| s.raw_px),
-                &self.rest.points_mm,
-                &points.valid,
-            ),
-        };
+        // Each point through the rest frame's pad map as it is (the lattice's and `points`' positions in pad mm), the
+        // camera's motion left whole to stage 1's homography of the pad plane (see crate::motion).
+        let data = moved_mm(points.mm.iter().copied(), &self.rest.points_mm, &points.valid);
         let (stage, tested_stage) = self.model.stage1_pair(&data, &points.valid, tested);
         let fine = Homography::from_matrix(self.model.motion_homography(&stage.motion)).ok_or_else(degenerate)?;
-        let mut displacement = corners_moved;
+        let mut displacement = moved_mm(lattice.corners.iter().map(|c| c.mm), rest, valid);
         for (i, r) in rest.iter().enumerate() {
             let m = self.model.motion_field(&stage.motion, *r);
             displacement[2 * i] -= m[0];
@@ -926,10 +917,8 @@ impl Estimator {
         shift.iter().map(|&v| v > limit).collect()
     }
 
-    /// The frame's observed points (the model's, `inverse.observe`), each with whether it is measured: a corner when
-    /// registered; a square when both frames found it, it moved no more than `max_displacement_cells`, and no corner
-    /// built from it was found implausible (registration's neighbour test: a square the tracker lost to its
-    /// neighbour's place moves both its corners against their neighbours). `relit`: per point, from detection.
+    /// The frame's observed points (the model's, `inverse.observe`): where each is in pad mm, and whether it is
+    /// measured (a corner when registered, a square by [`register_squares`]). `relit`: per point, from detection.
     fn observed_points(
         &self,
         lattice: &Lattice,
@@ -937,41 +926,29 @@ impl Estimator {
         max_displacement_cells: f64,
         relit: Vec<bool>,
     ) -> FramePoints {
-        let valid = match self.config.inverse.observe {
-            ObservedPoints::Corners => registration.corners.iter().map(|c| c.valid).collect(),
+        let (mm, valid) = match self.config.inverse.observe {
+            ObservedPoints::Corners => (
+                lattice.corners.iter().map(|c| c.mm).collect(),
+                registration.corners.iter().map(|c| c.valid).collect(),
+            ),
             ObservedPoints::Squares => {
-                let pad = &self.config.pad;
-                let slots: Vec<_> = pad.yellow_squares().collect();
-                let mut doubted = vec![false; slots.len()];
-                for corner in registration
-                    .corners
-                    .iter()
-                    .filter(|c| c.displacement_mm.is_some() && !c.valid)
-                {
-                    for square in pad.corner_squares(corner.index) {
-                        if let Ok(slot) = slots.binary_search(&square) {
-                            doubted[slot] = true;
-                        }
-                    }
-                }
-                let reach_mm = max_displacement_cells * pad.pitch_x_mm().min(pad.pitch_y_mm());
                 let mapping = &self.rest.mapping;
-                lattice
+                let mm: Vec<Option<Point2>> = lattice
                     .squares
                     .iter()
-                    .zip(&self.rest.points_found_mm)
-                    .zip(doubted)
-                    .map(|((seen, rest), doubted)| {
-                        let now = seen.raw_px.and_then(|p| mapping.raw_to_mm(p));
-                        !doubted
-                            && now
-                                .zip(*rest)
-                                .is_some_and(|(n, r)| (n[0] - r[0]).hypot(n[1] - r[1]) <= reach_mm)
-                    })
-                    .collect()
+                    .map(|s| s.raw_px.and_then(|p| mapping.raw_to_mm(p)))
+                    .collect();
+                let valid = register_squares(
+                    &self.config.pad,
+                    &self.rest.points_found_mm,
+                    &mm,
+                    registration,
+                    max_displacement_cells,
+                );
+                (mm, valid)
             }
         };
-        FramePoints { valid, relit }
+        FramePoints { mm, valid, relit }
     }
 
     /// Counts frames of persistent motion without contact and re-tares after `retare.frames` of them: the frame
@@ -1027,24 +1004,17 @@ impl Estimator {
 /// Which of a frame's observed points (the model's: `inverse.observe`) are measured, and which were relit (see
 /// [`FrameLattice::relit`]).
 struct FramePoints {
+    /// Where the frame's pad map puts each point, pad mm.
+    mm: Vec<Option<Point2>>,
     valid: Vec<bool>,
     relit: Vec<bool>,
 }
 
-/// Each point's motion from `rest` (pad mm) to where the pad map puts its `raw` position, 2 per point (zero where
-/// not `valid`).
-fn moved_mm(
-    mapping: &PadMapping,
-    raw: impl Iterator<Item = Option<Point2>>,
-    rest: &[Point2],
-    valid: &[bool],
-) -> Vec<f64> {
-    raw.zip(rest)
+/// Each point's motion from `rest` to `now` (pad mm), 2 per point (zero where not `valid`).
+fn moved_mm(now: impl Iterator<Item = Option<Point2>>, rest: &[Point2], valid: &[bool]) -> Vec<f64> {
+    now.zip(rest)
         .zip(valid)
-        .flat_map(|((p, r), &ok)| {
-            let at = if ok { p.and_then(|p| mapping.raw_to_mm(p)) } else { None };
-            at.map_or([0.0, 0.0], |c| [c[0] - r[0], c[1] - r[1]])
-        })
+        .flat_map(|((at, r), &ok)| at.filter(|_| ok).map_or([0.0, 0.0], |c| [c[0] - r[0], c[1] - r[1]]))
         .collect()
 }
 
