@@ -178,7 +178,13 @@ impl InverseModel {
             loaded.dedup();
             Some(self.edge_line(observed, &loaded, start)?.angle_deg)
         });
-        let Solved { motion, regions, .. } = solved;
+        let Solved {
+            motion,
+            regions,
+            tractions,
+            groups,
+            ..
+        } = solved;
         // Tractions outside the contacts are not reported (they are below the floor).
         let mut kept = vec![0.0; 3 * cells];
         for (j, f) in regions.iter().flat_map(|r| &r.cells) {
@@ -186,12 +192,53 @@ impl InverseModel {
         }
         let mut regions = regions;
         self.quarter_centres(d, valid, &kept, &mut regions);
+        self.give_shear_beside(&tractions, &groups, &mut regions, &mut kept);
         Stage2 {
             tractions: kept,
             motion,
             regions,
             edge_region,
             edge_line_deg,
+        }
+    }
+
+    /// Gives each contact the shear its group's cells without pressure carry. Stage 2's shear unknowns are a
+    /// group's: its total push and twist, spread over its cells in proportion to stage 1's pressure (and along the
+    /// push; see `push_shear_unknowns`). A contact's region holds only cells with pressure, so where stage 2 leaves
+    /// a cell of the group none, the share of the push and twist on it was lost from every contact's force vector and
+    /// torque: most on pushes, whose shear stage 1 spreads ahead of the pressure. Each such cell's shear goes to the
+    /// group's contact cell nearest it; a group without a contact (below the floor) keeps none. Centres, areas and
+    /// normal forces stay as they were.
+    fn give_shear_beside(&self, tractions: &[f64], groups: &[Vec<usize>], regions: &mut [Region], kept: &mut [f64]) {
+        let mut owner: Vec<Option<usize>> = vec![None; self.cells.len()];
+        for (k, region) in regions.iter().enumerate() {
+            for &(j, _) in &region.cells {
+                owner[j] = Some(k);
+            }
+        }
+        for group in groups {
+            let held: Vec<(usize, usize)> = group.iter().filter_map(|&j| Some((owner[j]?, j))).collect();
+            for &j in group {
+                let shear = [tractions[3 * j], tractions[3 * j + 1]];
+                if owner[j].is_some() || tractions[3 * j + 2] > 0.0 || shear == [0.0, 0.0] {
+                    continue;
+                }
+                let p = self.cells[j].centre_mm;
+                let distance = |c: usize| {
+                    let q = self.cells[c].centre_mm;
+                    (p[0] - q[0]).hypot(p[1] - q[1])
+                };
+                let Some(&(k, _)) = held.iter().min_by(|a, b| distance(a.1).total_cmp(&distance(b.1))) else {
+                    continue;
+                };
+                let region = &mut regions[k];
+                region.force_vector_n[0] += shear[0];
+                region.force_vector_n[1] += shear[1];
+                region.torque_nmm += (p[0] - region.centre_mm[0]) * shear[1] - (p[1] - region.centre_mm[1]) * shear[0];
+                region.cells.push((j, [shear[0], shear[1], 0.0]));
+                kept[3 * j] = shear[0];
+                kept[3 * j + 1] = shear[1];
+            }
         }
     }
 
@@ -360,6 +407,7 @@ impl InverseModel {
 
 #[cfg(test)]
 mod tests {
+    use super::PressureBasis;
     use crate::inverse::test_support::{cell_at, field, model};
     use crate::inverse::MOTION_PARAMETERS;
 
@@ -405,6 +453,75 @@ mod tests {
             (stage2.regions[0].force_vector_n[2] - total[2]).abs() < 0.05 * total[2],
             "{:?}",
             stage2.regions
+        );
+    }
+
+    /// A press whose push reaches the cells around it, as the pad spreads a contact's shear beyond its pressure:
+    /// stage 2 leaves some of the cells it solves shear on without pressure, and the contact's force vector and
+    /// torque hold the shear of all of them, the whole of what the solve found (before `give_shear_beside` the
+    /// contact lost the shear of its group's cells without pressure, here a tenth of the push).
+    #[test]
+    fn a_contact_holds_all_the_shear_its_group_carries() {
+        let model = model();
+        let centre = cell_at(&model, [-4.0, 2.0]);
+        let cols = usize::from(model.pad.cols);
+        let ring = [
+            centre - cols - 1,
+            centre - cols,
+            centre - cols + 1,
+            centre - 1,
+            centre + 1,
+            centre + cols - 1,
+            centre + cols,
+            centre + cols + 1,
+        ];
+        let mut press = vec![(centre, [0.2, -0.1, 4.0])];
+        press.extend(ring.map(|j| (j, [0.15, -0.1, 0.0])));
+        let d = field(&model, &press, [0.0; MOTION_PARAMETERS]);
+        let valid = vec![true; model.observations / 2];
+        let stage = model.stage1(&d, &valid);
+        let stage2 = model.stage2(&d, &valid, &stage, 0.002, 0.1);
+        assert_eq!(stage2.regions.len(), 1, "{:?}", stage2.regions);
+        let region = &stage2.regions[0];
+        // The solve stage 2 made: one pass on stage 1's loaded groups (no line carries this press further).
+        let groups = model.loaded_groups(&stage, 0.002);
+        let (solved, _, _) = model
+            .constrained_solve(&d, &valid, &stage, &groups, PressureBasis::Cells)
+            .expect("the press's cells can be solved");
+        let group = groups.iter().find(|g| g.contains(&centre)).expect("the press's group");
+        let without_pressure = group
+            .iter()
+            .filter(|&&j| solved[3 * j + 2] <= 0.0 && (solved[3 * j] != 0.0 || solved[3 * j + 1] != 0.0))
+            .count();
+        assert!(
+            without_pressure > 0,
+            "every cell of the group kept pressure: nothing to test"
+        );
+        let shear: [f64; 2] = std::array::from_fn(|k| group.iter().map(|&j| solved[3 * j + k]).sum());
+        let torque: f64 = group
+            .iter()
+            .map(|&j| {
+                let p = model.cells[j].centre_mm;
+                (p[0] - region.centre_mm[0]) * solved[3 * j + 1] - (p[1] - region.centre_mm[1]) * solved[3 * j]
+            })
+            .sum();
+        for k in 0..2 {
+            assert!(
+                (region.force_vector_n[k] - shear[k]).abs() < 1e-9,
+                "{:?} against the group's {shear:?}",
+                region.force_vector_n
+            );
+        }
+        assert!(
+            (region.torque_nmm - torque).abs() < 1e-9,
+            "{} against {torque}",
+            region.torque_nmm
+        );
+        let reported: [f64; 2] =
+            std::array::from_fn(|k| (0..model.cells.len()).map(|j| stage2.tractions[3 * j + k]).sum());
+        assert!(
+            (reported[0] - shear[0]).abs() < 1e-9 && (reported[1] - shear[1]).abs() < 1e-9,
+            "{reported:?}"
         );
     }
 
