@@ -50,9 +50,10 @@ fn read(renderer: &ValidationRenderer, estimator: &mut Estimator, at: [f64; 2]) 
     touch.force_vector_n.expect("the inverse reports a force vector")
 }
 
-/// Measured with the parallax model, 5 N against the centre's reading (3.66 N in the pad model's newtons): at (20,
-/// -12) 1.11, (-20, 12) 1.10, (21, 0) 1.01, (-8, -16) 1.09, (5, 5) 0.96, (-12, -6) 0.96, (14, 10) 0.94, with a
-/// tangential force of at most 0.054 of the normal one. Without it (`gel_refractive_index = 0`): 1.21, 1.24, 1.04,
+/// Measured with the parallax model at 9f7d4f8, 5 N against the centre's reading (3.64 N in the pad model's newtons;
+/// 3.66 when first measured): at (20, -12) 1.13, (-20, 12) 1.11, (21, 0) 1.00, (-8, -16) 1.10, (5, 5) 0.97, (-12, -6)
+/// 0.98, (14, 10) 0.95, with a tangential force of at most 0.053 of the normal one (first measured: 1.11, 1.10, 1.01,
+/// 1.09, 0.96, 0.96, 0.94 and 0.054). Without it, when first measured (`gel_refractive_index = 0`): 1.21, 1.24, 1.04,
 /// 1.13, 0.96, 0.99, 0.97, tangential up to 0.077, outwards. What is left at the pad's corners (10 %) is not the
 /// parallax (see docs/benchmarks/validation-quick.md).
 #[test]
