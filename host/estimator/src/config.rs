@@ -459,8 +459,9 @@ pub struct InverseConfig {
     /// 1.8 / 3.6 -> 1.7 / 3.7 and 2.2 / 10.7 -> 1.8 / 5.5 deg; two contacts 6 / 6 and 15 / 16 both; detection floor
     /// 0.20 -> 0.30 N (quick; edges 0.30 -> 0.50) and 0.20 (full; edges 0.20 -> 0.30); the pushes' tangential force
     /// 0.11 -> 0.55 N RMS (quick) and 0.14 -> 0.30 (full) after its calibration, while stage 2 left part of a heavy
-    /// push's shear on cells beside the pressure that no contact held (since 9f7d4f8 the contacts hold it: the squares
-    /// read the pushes 0.12 and 0.07 N RMS, their twists' torque 1.31 and 3.01 N mm against 2.89 and 1.21). A scratch
+    /// push's shear on cells beside the pressure that no contact held (since 9f7d4f8 the contacts' force vectors hold
+    /// it: the squares read the pushes 0.12 and 0.07 N RMS, their twists' torque 1.61 and 1.06 N mm against 2.89 and
+    /// 1.21 before). A scratch
     /// test at b16e128 read the edge direction of 40 other edges of the validation sensor (tests/edge_line.rs's) 1.24 /
     /// 4.88 deg mean / worst against the default's 1.92 / 7.80, and of 22 edges of the simulated real sensor (a
     /// half-space) 0.52 / 1.40 against 0.73 / 2.15. With the default model (the equivalent layer,

@@ -48,8 +48,8 @@
 //! `InverseModel::border_bump`), each above the detection floor where it is (the floor at the centre scaled by how much
 //! less a press of its shape there moves the corners, see [`InverseModel::floor_scale`]); force vectors, torque,
 //! centres and areas come from it (the layered model's centres from the contact's cells split in four, see
-//! `InverseModel::quarter_centres`), and each contact also holds the shear of its group's cells that stage 2 left
-//! without pressure (`InverseModel::give_shear_beside`). A long light contact loads no single cell above its noise: when those cells hold
+//! `InverseModel::quarter_centres`), and each contact's force vector also holds the shear of its group's cells that
+//! stage 2 left without pressure (`InverseModel::give_shear_beside`; its torque is its own cells'). A long light contact loads no single cell above its noise: when those cells hold
 //! no contact, stage 2 is solved again with the cells of the line shapes a matched filter finds significant and better
 //! explained as a line than as a square patch; there the fragments a line's pressure breaks into are one contact unless
 //! the dip between them is significant, and a group of cells is judged against the floor as a whole, by its unbiased
