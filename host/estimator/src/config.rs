@@ -461,14 +461,13 @@ pub struct InverseConfig {
     /// 0.11 -> 0.55 N RMS (quick) and 0.14 -> 0.30 (full) after its calibration, while stage 2 left part of a heavy
     /// push's shear on cells beside the pressure that no contact held (since 9f7d4f8 the contacts' force vectors hold
     /// it: the squares read the pushes 0.12 and 0.07 N RMS, their twists' torque 1.61 and 1.06 N mm against 2.89 and
-    /// 1.21 before). A scratch
-    /// test at b16e128 read the edge direction of 40 other edges of the validation sensor (tests/edge_line.rs's) 1.24 /
-    /// 4.88 deg mean / worst against the default's 1.92 / 7.80, and of 22 edges of the simulated real sensor (a
-    /// half-space) 0.52 / 1.40 against 0.73 / 2.15. With the default model (the equivalent layer,
-    /// fitted to the real pair's corners as tracked) the squares read worse: quick 0.34 -> 0.48 mm. Time per frame on
-    /// the real pair, against the default's: 0.93-1.19x (512x384 to 2048x1536), the same model observing the corners
-    /// 2.6-4.2x (`cargo bench -p nusense-estimator -- table`). Not the default:
-    /// the frame's 4 mm is the validation pad's, and the simulated real sensor's pad is a half-space.
+    /// 1.21 before). A scratch test at b16e128 read the edge direction of 40 other edges of the validation sensor
+    /// (tests/edge_line.rs's) 1.24 / 4.88 deg mean / worst against the default's 1.92 / 7.80, and of 22 edges of the
+    /// simulated real sensor (a half-space) 0.52 / 1.40 against 0.73 / 2.15. With the default model (the equivalent
+    /// layer, fitted to the real pair's corners as tracked) the squares read worse: quick 0.34 -> 0.48 mm. Time per
+    /// frame on the real pair, against the default's: 0.93-1.19x (512x384 to 2048x1536), the same model observing the
+    /// corners 2.6-4.2x (`cargo bench -p nusense-estimator -- table`). Not the default: the frame's 4 mm is the
+    /// validation pad's, and the simulated real sensor's pad is a half-space.
     pub observe: ObservedPoints,
 }
 

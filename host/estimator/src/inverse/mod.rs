@@ -49,21 +49,22 @@
 //! less a press of its shape there moves the corners, see [`InverseModel::floor_scale`]); force vectors, torque,
 //! centres and areas come from it (the layered model's centres from the contact's cells split in four, see
 //! `InverseModel::quarter_centres`), and each contact's force vector also holds the shear of its group's cells that
-//! stage 2 left without pressure (`InverseModel::give_shear_beside`; its torque is its own cells'). A long light contact loads no single cell above its noise: when those cells hold
-//! no contact, stage 2 is solved again with the cells of the line shapes a matched filter finds significant and better
-//! explained as a line than as a square patch; there the fragments a line's pressure breaks into are one contact unless
-//! the dip between them is significant, and a group of cells is judged against the floor as a whole, by its unbiased
-//! least-squares force (see `InverseModel::contacts`). When they do hold contacts, a light long one may have only its
-//! stronger part among them: stage 2 is solved again with the cells of the line shapes through the strongest contact
-//! that explain the displacements better than its own pressure does (`InverseModel::lines_extending`). Two regions side
-//! by side are one long contact when a straight line load explains them better than two round loads by the test's
-//! margin and the pressure between them is more than two round presses leave there (`InverseModel::join_cut_lines`: the
-//! cell map cuts some 20 mm edges of the validation pad into lumps about 10 mm apart); after the last pass, all the
-//! contacts of one loaded group are one when a line explains their union so (`InverseModel::join_long_groups`:
-//! pairwise, the lumps of a 30 mm edge can each fail the other tests). The edge direction (second moments of the
-//! pressure) comes from a second solve with the pressure's unknowns on the grid's nodes instead of its cells, which has
-//! no checkerboard noise (see `PressureBasis`); with `inverse.edge_from_line`, when those moments give a direction, it
-//! is the direction of the straight line load that best explains the displacements (see `InverseModel::edge_line`).
+//! stage 2 left without pressure (`InverseModel::give_shear_beside`; its torque is its own cells'). A long light
+//! contact loads no single cell above its noise: when those cells hold no contact, stage 2 is solved again with the
+//! cells of the line shapes a matched filter finds significant and better explained as a line than as a square patch;
+//! there the fragments a line's pressure breaks into are one contact unless the dip between them is significant, and a
+//! group of cells is judged against the floor as a whole, by its unbiased least-squares force (see
+//! `InverseModel::contacts`). When they do hold contacts, a light long one may have only its stronger part among them:
+//! stage 2 is solved again with the cells of the line shapes through the strongest contact that explain the
+//! displacements better than its own pressure does (`InverseModel::lines_extending`). Two regions side by side are one
+//! long contact when a straight line load explains them better than two round loads by the test's margin and the
+//! pressure between them is more than two round presses leave there (`InverseModel::join_cut_lines`: the cell map cuts
+//! some 20 mm edges of the validation pad into lumps about 10 mm apart); after the last pass, all the contacts of one
+//! loaded group are one when a line explains their union so (`InverseModel::join_long_groups`: pairwise, the lumps of a
+//! 30 mm edge can each fail the other tests). The edge direction (second moments of the pressure) comes from a second
+//! solve with the pressure's unknowns on the grid's nodes instead of its cells, which has no checkerboard noise (see
+//! `PressureBasis`); with `inverse.edge_from_line`, when those moments give a direction, it is the direction of the
+//! straight line load that best explains the displacements (see `InverseModel::edge_line`).
 //!
 //! The parts, one file each: `build` (the model, once per sensor config and camera view), `stage1` (the motion,
 //! stage 1 and the contact test), `noise` (the noise estimate, the F and normal quantiles), `constrained` (stage 2's

@@ -180,17 +180,17 @@ impl InverseModel {
         });
         let Solved {
             motion,
-            regions,
+            mut regions,
             tractions,
             groups,
             ..
         } = solved;
-        // Tractions outside the contacts are not reported (they are below the floor).
+        // Tractions outside the contacts are not reported (they are below the floor), but for the shear a contact's
+        // force vector takes from the cells beside it (see `give_shear_beside`).
         let mut kept = vec![0.0; 3 * cells];
         for (j, f) in regions.iter().flat_map(|r| &r.cells) {
             kept[3 * j..3 * j + 3].copy_from_slice(f);
         }
-        let mut regions = regions;
         self.quarter_centres(d, valid, &kept, &mut regions);
         self.give_shear_beside(&tractions, &groups, &mut regions, &mut kept);
         Stage2 {
