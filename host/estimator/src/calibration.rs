@@ -54,6 +54,11 @@ pub enum CalibrationError {
     BadScale(f64),
     #[error("the sensor config: {0}")]
     Config(String),
+    #[error(
+        "the force/torque log's torque column `{column}` does not say its unit: name it {column}_nm (N m) or \
+         {column}_nmm (N mm)"
+    )]
+    TorqueUnit { column: String },
 }
 
 /// Options of [`fit_force_line`].
@@ -636,6 +641,45 @@ pub fn parse_position_log_csv(text: &str) -> Result<Option<Vec<PositionSample>>,
         .map(Some)
 }
 
+/// The torque about the normal (N mm, its size) from a force/torque log's optional `mz` or `tz` column, whose name
+/// must say its unit: `mz_nmm` / `tz_nmm` (N mm) or `mz_nm` / `tz_nm` (N m). `Ok(None)` when the header has none
+/// of them; a bare `mz` or `tz` (F/T sensors log N m or N mm) is a [`CalibrationError::TorqueUnit`], and a row
+/// whose torque is not a finite number a [`CalibrationError::Parse`]. The time column as [`parse_force_log_csv`]
+/// reads it.
+pub fn parse_torque_log_csv(text: &str) -> Result<Option<Vec<ForceSample>>, CalibrationError> {
+    let mut lines = data_lines(text);
+    let (_, header_line) = lines.next().ok_or(CalibrationError::MissingColumn {
+        wanted: "a header".into(),
+        found: String::new(),
+    })?;
+    let header = split_csv(header_line);
+    let with_unit = [("mz_nmm", 1.0), ("tz_nmm", 1.0), ("mz_nm", 1e3), ("tz_nm", 1e3)];
+    let Some((column, unit, name)) = with_unit
+        .iter()
+        .find_map(|&(name, unit)| find_column(&header, &[name]).map(|c| (c, unit, name)))
+    else {
+        return match ["mz", "tz"]
+            .into_iter()
+            .find(|name| find_column(&header, &[name]).is_some())
+        {
+            Some(bare) => Err(CalibrationError::TorqueUnit { column: bare.into() }),
+            None => Ok(None),
+        };
+    };
+    let (time_col, time_unit) = time_column(&header)?;
+    lines
+        .map(|(line, text)| {
+            let fields = split_csv(text);
+            let get = |col: usize, what: &str| number_at(&fields, col, line, what);
+            Ok(ForceSample {
+                time_s: get(time_col, "timestamp")? * time_unit,
+                force_n: (get(column, name)? * unit).abs(),
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map(Some)
+}
+
 /// The log's position at each of `times` (seconds, the log's clock), interpolated by [`align_by_time`]'s rule as
 /// the forces are; `None` where no sample lies within `max_skew_s`.
 pub fn positions_at_times(times: &[f64], positions: &[PositionSample], max_skew_s: f64) -> Vec<Option<Point2>> {
@@ -770,6 +814,19 @@ pub fn set_config_tangential_force_scale(text: &str, scale: f64) -> Result<Strin
     }
     edit_config(text, |document| {
         table_mut(document, "elastic")?.insert("tangential_force_scale", toml_edit::value(scale));
+        Ok(())
+    })
+}
+
+/// Sets `elastic.torque_scale` (what [`modulus::fit_torque_scale`] calibrates), keeping everything else.
+pub fn set_config_torque_scale(text: &str, scale: f64) -> Result<String, CalibrationError> {
+    if !(scale.is_finite() && scale > 0.0) {
+        return Err(CalibrationError::Config(format!(
+            "refusing to write a torque scale of {scale}"
+        )));
+    }
+    edit_config(text, |document| {
+        table_mut(document, "elastic")?.insert("torque_scale", toml_edit::value(scale));
         Ok(())
     })
 }
@@ -1127,6 +1184,43 @@ mod tests {
         ));
         assert!(matches!(
             parse_position_log_csv("fz,x_mm,y_mm\n1,2,3\n"),
+            Err(CalibrationError::MissingColumn { .. })
+        ));
+    }
+
+    /// The torque column's name says its unit; N m are read as N mm, the sign dropped (an F/T sensor's z axis may
+    /// point either way); a bare `tz` or `mz` is refused by name, a log without any is no torque and no error.
+    #[test]
+    fn the_torque_log_reads_its_unit_from_the_column_name() {
+        let read = |text: &str| -> Vec<f64> {
+            parse_torque_log_csv(text)
+                .unwrap()
+                .unwrap()
+                .iter()
+                .map(|s| s.force_n)
+                .collect()
+        };
+        assert_eq!(read("t_ms,fz,tz_nmm\n0,1,-12.5\n10,1,3\n"), vec![12.5, 3.0]);
+        assert_eq!(read("timestamp,Mz_Nm,fz\n0,-0.0125,1\n"), vec![12.5]);
+        let times: Vec<f64> = parse_torque_log_csv("t_ms,fz,tz_nmm\n0,1,-12.5\n10,1,3\n")
+            .unwrap()
+            .unwrap()
+            .iter()
+            .map(|s| s.time_s)
+            .collect();
+        assert_eq!(times, vec![0.0, 0.01]);
+        assert_eq!(parse_torque_log_csv("timestamp,fx,fy,fz\n0,0,0,1\n").unwrap(), None);
+        for (text, bare) in [("timestamp,fz,tz\n0,1,2\n", "tz"), ("timestamp,MZ,fz\n0,1,2\n", "mz")] {
+            let error = parse_torque_log_csv(text).unwrap_err();
+            assert_eq!(error, CalibrationError::TorqueUnit { column: bare.into() });
+            assert!(error.to_string().contains(&format!("{bare}_nmm")), "{error}");
+        }
+        assert!(matches!(
+            parse_torque_log_csv("timestamp,fz,tz_nmm\n0,1,2\n0.01,1,inf\n"),
+            Err(CalibrationError::Parse { line: 3, .. })
+        ));
+        assert!(matches!(
+            parse_torque_log_csv("fz,tz_nmm\n1,2\n"),
             Err(CalibrationError::MissingColumn { .. })
         ));
     }

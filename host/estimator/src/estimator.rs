@@ -671,7 +671,7 @@ impl Estimator {
                 .sum::<f64>()
                 / total_pressure_n
         });
-        let torque = shear
+        let torque = self.config.elastic.torque_factor()
             * kept
                 .iter()
                 .flat_map(|r| &r.cells)
@@ -715,7 +715,7 @@ impl Estimator {
                 region.force_vector_n,
                 self.config.elastic.tangential_force_scale,
             )),
-            torque_nmm: Some(region.torque_nmm * self.config.elastic.tangential_force_scale),
+            torque_nmm: Some(region.torque_nmm * self.config.elastic.torque_factor()),
             area_mm2: Some(region.area_mm2),
         })
     }

@@ -558,9 +558,10 @@ fn a_firm_press_pushed_sideways_is_found_in_every_direction() {
 }
 
 /// `elastic.tangential_force_scale` (what `nusense calibrate` fits from pushes) multiplies the push's fx, fy and the
-/// torque, total and per contact, and leaves the contact, its place and its normal force as they were.
+/// torque, total and per contact, and leaves the contact, its place and its normal force as they were;
+/// `elastic.torque_scale`, when set, multiplies the torque instead.
 #[test]
-fn the_tangential_force_scale_scales_shear_and_torque_only() {
+fn the_tangential_and_torque_scales_scale_shear_and_torque_only() {
     let mut contact = Contact::sphere(5.0, [-3.0, 2.0], 5.0);
     contact.tangential_force_n = [1.2, -0.8];
     contact.torsion_nmm = 10.0;
@@ -603,6 +604,28 @@ fn the_tangential_force_scale_scales_shear_and_torque_only() {
         );
         let (t, u) = (a.torque_nmm.expect("a torque"), b.torque_nmm.expect("a torque"));
         assert!(close(u, 0.4 * t), "contact torque {t} -> {u}");
+    }
+
+    // A torque scale of its own (`elastic.torque_scale`, what `nusense calibrate` fits from twists) takes the torque
+    // from the tangential scale, total and per contact, and nothing else.
+    let mut config = SensorConfig::default();
+    config.elastic.tangential_force_scale = 0.4;
+    config.elastic.torque_scale = Some(0.7);
+    let twisted = Estimator::new(config, Mode::Inverse, reference())
+        .expect("the simulated rest frame is measurable")
+        .estimate(&frame)
+        .expect("a push is measurable")
+        .touch
+        .expect("the same contact");
+    assert_eq!(twisted.force_vector_n, scaled.force_vector_n);
+    assert!(
+        close(twisted.torque_nmm.expect("a torque"), 0.7 * t),
+        "torque {t} -> {twisted:?}"
+    );
+    for (a, b) in plain.contacts().zip(twisted.contacts()) {
+        assert_eq!(a.force_n, b.force_n);
+        let (t, u) = (a.torque_nmm.expect("a torque"), b.torque_nmm.expect("a torque"));
+        assert!(close(u, 0.7 * t), "contact torque {t} -> {u}");
     }
 }
 

@@ -151,6 +151,38 @@ pub fn fit_tangential_scale(
     fit_modulus_scale(&pushes, bisquare_c, confidence)
 }
 
+/// Twists lighter than this (reference torque about the normal, N mm) are not used for the torque scale: presses and
+/// pushes read up to about 1.1 N mm of torque in the model (the quick validation set's, before any scale), which
+/// against a reference near 0 says nothing about the pad's torsional stiffness.
+pub const MIN_REFERENCE_TORQUE_NMM: f64 = 2.0;
+
+/// One twist: the size of the model's torque about the normal and of the reference's at the same time, N mm.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ModelTorqueSample {
+    pub model_nmm: f64,
+    pub reference_nmm: f64,
+}
+
+/// Fits |M_reference| = s |M_model| on the torque about the normal (sizes: an F/T sensor's z axis may point either
+/// way), on the readings whose reference torque is at least [`MIN_REFERENCE_TORQUE_NMM`]; the same robust fit through
+/// the origin as [`fit_modulus_scale`]'s, its residual scale in N mm. The model's twist and push are not off by one
+/// factor, so the torque has a scale of its own (`elastic.torque_scale`).
+pub fn fit_torque_scale(
+    samples: &[ModelTorqueSample],
+    bisquare_c: f64,
+    confidence: f64,
+) -> Result<ModulusFit, CalibrationError> {
+    let twists: Vec<ModelForceSample> = samples
+        .iter()
+        .filter(|s| !(s.reference_nmm.abs() < MIN_REFERENCE_TORQUE_NMM))
+        .map(|s| ModelForceSample {
+            model_n: s.model_nmm.abs(),
+            reference_n: s.reference_nmm.abs(),
+        })
+        .collect();
+    fit_modulus_scale(&twists, bisquare_c, confidence)
+}
+
 /// Standard error of a one-parameter M-estimator through the origin: K^2 [sum psi^2 / (n - 1)] / mean(psi')^2
 /// sigma^2 / sum x^2, Huber's correction K as in the force line's.
 fn sandwich_std_error(x: &[f64], residuals: &[f64], sigma: f64, c: f64) -> f64 {
@@ -224,6 +256,33 @@ mod tests {
         assert!((fit.scale - 0.58).abs() < 1e-9, "{fit:?}");
         assert_eq!(
             fit_tangential_scale(&session[..30], 4.685, 0.95).unwrap_err(),
+            CalibrationError::TooFewPoints { found: 0, needed: 2 }
+        );
+    }
+
+    /// Twists whose F/T sensor reads the torque with the opposite sign, among presses and pushes whose model torque is
+    /// small: the scale is fitted on the twists' sizes alone.
+    #[test]
+    fn the_torque_scale_is_fitted_on_the_twists_alone_whatever_their_sign() {
+        let twists = (0..6).map(|i| {
+            let model_nmm = if i % 2 == 0 { 1.0 } else { -1.0 } * (8.0 + 5.0 * f64::from(i));
+            ModelTorqueSample {
+                model_nmm,
+                reference_nmm: -0.57 * model_nmm,
+            }
+        });
+        let mut session: Vec<ModelTorqueSample> = (0..30)
+            .map(|i| ModelTorqueSample {
+                model_nmm: 0.05 * f64::from(i),
+                reference_nmm: 0.1,
+            })
+            .collect();
+        session.extend(twists);
+        let fit = fit_torque_scale(&session, 4.685, 0.95).unwrap();
+        assert_eq!(fit.points, 6, "{fit:?}");
+        assert!((fit.scale - 0.57).abs() < 1e-9, "{fit:?}");
+        assert_eq!(
+            fit_torque_scale(&session[..30], 4.685, 0.95).unwrap_err(),
             CalibrationError::TooFewPoints { found: 0, needed: 2 }
         );
     }
