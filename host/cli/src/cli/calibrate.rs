@@ -6,6 +6,13 @@
 //!   session's pushes: the reference's tangential force against the model's, one scale through the origin, on the
 //!   readings whose reference push is at least 0.5 N (see `nusense_estimator::calibration::modulus`); the log needs
 //!   `fx` and `fy` for it, and a session without pushes leaves the scale as it was;
+//! - the pad model's torque about the normal against its normal stiffness (`elastic.torque_scale`), from the same
+//!   session's twists: the reference's torque against the model's (their sizes), one scale through the origin, on
+//!   the readings whose reference torque is at least 2 N mm (see `nusense_estimator::calibration::modulus`); the log
+//!   needs a torque column that says its unit for it (`mz_nmm` or `tz_nmm` in N mm, `mz_nm` or `tz_nm` in N m: the
+//!   torque about the normal through the probe's contact point, as an F/T sensor on the probe whose z axis runs
+//!   through its tip logs it), and a session without twists leaves the scale as it was (unset, the torque takes the
+//!   tangential scale), and the output says why;
 //! - how far a push's contact centre reads behind (or ahead of) the push (`elastic.push_centre_shift_mm`), from the
 //!   same session when the log also says where the probe touched (`x_mm`, `y_mm`, see below): the offset from each
 //!   reading's strongest contact to the probe, against the model's push over load, one factor through the origin on
@@ -65,7 +72,9 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context};
 use nusense_capture::read_image_rgb;
-use nusense_estimator::calibration::modulus::{fit_modulus_scale, fit_tangential_scale, ModelForceSample, ModulusFit};
+use nusense_estimator::calibration::modulus::{
+    fit_modulus_scale, fit_tangential_scale, fit_torque_scale, ModelForceSample, ModelTorqueSample, ModulusFit,
+};
 use nusense_estimator::calibration::push_centre::{
     fit_push_centre_shift, most_shift_mm, unshifted_centre, PushCentreSample,
 };
@@ -74,9 +83,10 @@ use nusense_estimator::calibration::push_normal::{
 };
 use nusense_estimator::calibration::{
     align_by_time, fit_force_line, forces_at_times, parse_force_log_csv, parse_pairs_csv, parse_position_log_csv,
-    positions_at_times, set_config_pad_map, set_config_push_centre_shift, set_config_push_normal_share,
-    set_config_shear_modulus, set_config_tangential_force_scale, update_config_toml, CalibrationError,
-    CalibrationSample, FitOptions, ForceComponent, ForceFit, ForceSample, TimedGamma,
+    parse_torque_log_csv, positions_at_times, set_config_pad_map, set_config_push_centre_shift,
+    set_config_push_normal_share, set_config_shear_modulus, set_config_tangential_force_scale, set_config_torque_scale,
+    update_config_toml, CalibrationError, CalibrationSample, FitOptions, ForceComponent, ForceFit, ForceSample,
+    TimedGamma,
 };
 use nusense_estimator::{Estimator, MapResidual, Mode, SensorConfig, StoredPadMap};
 use serde::Serialize;
@@ -160,6 +170,11 @@ struct Report {
     modulus: Option<ModulusReport>,
     /// The pad model's shear against its normal stiffness; null without at least two pushes in the session.
     tangential: Option<TangentialReport>,
+    /// The pad model's torque against its normal stiffness; null unless the log has a torque column with its unit and
+    /// the session at least two twists (`torque_left_alone` says which).
+    torque: Option<TorqueReport>,
+    /// Why `elastic.torque_scale` was not fitted (and so left as it was) in a session; null otherwise.
+    torque_left_alone: Option<String>,
     /// How far a push's centre reads behind it; null unless the log has `x_mm`, `y_mm` and the session at least two
     /// pushes of a tenth of their load (`push_centre_left_alone` says which).
     push_centre: Option<PushCentreReport>,
@@ -201,6 +216,20 @@ struct TangentialReport {
 }
 
 #[derive(Serialize)]
+struct TorqueReport {
+    /// Reference torque / the model's, as the session's readings reported it.
+    scale: f64,
+    scale_interval: [f64; 2],
+    /// The config's torque scale before (its `tangential_force_scale` when `torque_scale` was unset) and after (after
+    /// the new modulus's share is taken out).
+    torque_scale_before: f64,
+    torque_scale: f64,
+    residual_scale_nmm: f64,
+    points: usize,
+    outliers: usize,
+}
+
+#[derive(Serialize)]
 struct PushCentreReport {
     /// The config's `elastic.push_centre_shift_mm` before and after: mm along the push per unit of the model's push
     /// over load.
@@ -234,6 +263,8 @@ struct Fits {
     modulus: Option<(ModulusFit, f64)>,
     /// The fit and the config's new `elastic.tangential_force_scale`.
     tangential: Option<(ModulusFit, f64)>,
+    /// The fit and the config's new `elastic.torque_scale`, or why it is left as it was (sessions only).
+    torque: Option<Result<(ModulusFit, f64), String>>,
     /// The config's new `elastic.push_centre_shift_mm`, or why it is left as it was (sessions only).
     push_centre: Option<Result<PushCentreFit, String>>,
     /// The config's new `elastic.push_normal_share`, or why it is left as it was (sessions only).
@@ -295,6 +326,9 @@ pub fn run(args: Args) -> anyhow::Result<ExitCode> {
             if let Some((_, scale)) = fits.tangential {
                 text = set_config_tangential_force_scale(&text, scale).with_context(context)?;
             }
+            if let Some(Ok((_, scale))) = fits.torque {
+                text = set_config_torque_scale(&text, scale).with_context(context)?;
+            }
             if let Some(Ok(fit)) = fits.push_centre {
                 text = set_config_push_centre_shift(&text, fit.shift_mm).with_context(context)?;
             }
@@ -335,6 +369,7 @@ fn fit_all(args: &Args, config: &SensorConfig) -> anyhow::Result<Fits> {
         line: None,
         modulus: None,
         tangential: None,
+        torque: None,
         push_centre: None,
         push_normal: None,
         pad_map: None,
@@ -366,6 +401,17 @@ fn fit_all(args: &Args, config: &SensorConfig) -> anyhow::Result<Fits> {
             Err(CalibrationError::TooFewPoints { .. }) => {}
             Err(e) => return Err(e).context("cannot fit the pad model's tangential force scale"),
         }
+        // As the tangential scale: relative to the torque the readings were made with, less the new modulus's share.
+        fits.torque = Some(match &session.torques {
+            Err(why) => Err(why.clone()),
+            Ok(samples) => match fit_torque_scale(samples, options.bisquare_c, args.confidence) {
+                Ok(fit) => Ok((fit, config.elastic.torque_factor() * fit.scale / modulus_scale)),
+                Err(CalibrationError::TooFewPoints { found, needed }) => {
+                    Err(format!("{found} readings twisted by 2 N mm or more, {needed} needed"))
+                }
+                Err(e) => return Err(e).context("cannot fit the pad model's torque scale"),
+            },
+        });
         // The shift is in the model's push over load, which neither the modulus nor the tangential scale changes.
         fits.push_centre = Some(match &session.push_centres {
             None => Err("the force/torque log has no x_mm, y_mm columns".to_string()),
@@ -432,6 +478,8 @@ struct Session {
     model: Vec<ModelForceSample>,
     /// The same readings' tangential force (its size) against the reference's; empty when the log has no fx, fy.
     tangential: Vec<ModelForceSample>,
+    /// The same readings' torque about the normal against the reference's, or why the log gives none.
+    torques: Result<Vec<ModelTorqueSample>, String>,
     /// The same readings' strongest contact, un-shifted, against the log's probe position; `None` when the log has
     /// no x_mm, y_mm.
     push_centres: Option<Vec<PushCentreSample>>,
@@ -476,6 +524,29 @@ fn load_session(
         Err(CalibrationError::MissingColumn { .. }) => Vec::new(),
         Err(e) => return Err(e).with_context(|| format!("in {}", log_path.display())),
     };
+    let torques = match parse_torque_log_csv(&log) {
+        Ok(Some(mut log_torques)) => {
+            for t in &mut log_torques {
+                t.time_s += args.time_offset_s;
+            }
+            let twisted: Vec<(f64, f64)> = parsed
+                .model
+                .iter()
+                .filter_map(|m| Some((m.time_s, m.torque_nmm?)))
+                .collect();
+            Ok(with_reference(twisted.into_iter(), &log_torques, max_skew_s)
+                .into_iter()
+                .map(|s| ModelTorqueSample {
+                    model_nmm: s.model_n,
+                    reference_nmm: s.reference_n,
+                })
+                .collect())
+        }
+        Ok(None) => Err("the force/torque log has no torque column (mz_nmm, tz_nmm, mz_nm or tz_nm)".to_string()),
+        // A torque whose unit is unknown is left out; the forces still calibrate.
+        Err(e @ CalibrationError::TorqueUnit { .. }) => Err(e.to_string()),
+        Err(e) => return Err(e).with_context(|| format!("in {}", log_path.display())),
+    };
     let push_centres = match parse_position_log_csv(&log).with_context(|| format!("in {}", log_path.display()))? {
         None => None,
         Some(mut positions) => {
@@ -489,6 +560,7 @@ fn load_session(
         samples: alignment.samples,
         model,
         tangential,
+        torques,
         push_centres,
         push_normals,
         dropped: parsed.skipped + alignment.dropped,
@@ -591,6 +663,8 @@ struct TimedModelForce {
     time_s: f64,
     force_n: f64,
     tangential_n: Option<f64>,
+    /// The torque about the normal, N mm.
+    torque_nmm: Option<f64>,
     strongest: Option<([f64; 2], [f64; 3])>,
 }
 
@@ -666,10 +740,15 @@ fn parse_readings(text: &str) -> anyhow::Result<ParsedReadings> {
                     .and_then(|c| c.first())
                     .map_or(estimate.get("force_vector_n"), |c| c.get("force_vector_n"));
                 let strongest = numbers::<2>(estimate.get("contact_mm")).zip(numbers::<3>(strongest_vector));
+                let torque_nmm = estimate
+                    .get("torque_nmm")
+                    .and_then(serde_json::Value::as_f64)
+                    .filter(|t| t.is_finite());
                 parsed.model.push(TimedModelForce {
                     time_s,
                     force_n,
                     tangential_n,
+                    torque_nmm,
                     strongest,
                 });
             }
@@ -727,6 +806,20 @@ fn report(fits: &Fits, config: &SensorConfig, confidence: f64, config_written: O
             points: fit.points,
             outliers: fit.outliers,
         }),
+        torque: fits
+            .torque
+            .as_ref()
+            .and_then(|r| r.as_ref().ok())
+            .map(|(fit, scale)| TorqueReport {
+                scale: fit.scale,
+                scale_interval: fit.scale_interval,
+                torque_scale_before: config.elastic.torque_factor(),
+                torque_scale: *scale,
+                residual_scale_nmm: fit.residual_scale_n,
+                points: fit.points,
+                outliers: fit.outliers,
+            }),
+        torque_left_alone: fits.torque.as_ref().and_then(|r| r.as_ref().err().cloned()),
         push_centre: fits
             .push_centre
             .as_ref()
@@ -802,6 +895,22 @@ fn print_human(fits: &Fits, config: &SensorConfig, config_written: Option<&str>,
             "  tangential force scale {:.4} -> {scale:.4}",
             config.elastic.tangential_force_scale
         );
+    }
+    match &fits.torque {
+        Some(Ok((fit, scale))) => {
+            let level = fit.confidence * 100.0;
+            println!(
+                "pad model's torque: reference torque = {:.4} x model's from {} twists ({} outliers), {level:.0} % \
+                 interval [{:.4}, {:.4}], residual scale {:.4} N mm",
+                fit.scale, fit.points, fit.outliers, fit.scale_interval[0], fit.scale_interval[1], fit.residual_scale_n
+            );
+            println!("  torque scale {:.4} -> {scale:.4}", config.elastic.torque_factor());
+        }
+        Some(Err(why)) => match config.elastic.torque_scale {
+            Some(scale) => println!("pad model's torque: {why}; elastic.torque_scale left at {scale:.4}"),
+            None => println!("pad model's torque: {why}; elastic.torque_scale left unset (the tangential scale)"),
+        },
+        None => {}
     }
     match &fits.push_centre {
         Some(Ok(fit)) => println!(
@@ -937,6 +1046,7 @@ mod tests {
             time_s,
             force_n,
             tangential_n,
+            torque_nmm: None,
             strongest: None,
         };
         let readings = [
