@@ -329,9 +329,9 @@ fn validation_header(v: &crate::validation::ValidationReport) -> String {
         "\n## Every mode on the validation set (issue 12)\n\n{} frames ({:?} profile, seed {}) from the validation \
          sensor (`nusense_sim::validation`, docs/validation.md: equisolid decentred lens, tilted pose, layered pad \
          seen through plate and gel, glare, vignetting, shot noise, JPEG 85, LED drift); sizes {}. One force \
-         calibration per mode, fitted on the calibration presses and pushes only (N modes: one scale on the normal \
-         force; one on the tangential force and torque, the pushes' centre shift and what a push adds to the normal \
-         force, all three fitted on the pushes; gamma modes: F = a·gamma + b, which \
+         calibration per mode, fitted on the calibration presses, pushes and twists only (N modes: one scale on the \
+         normal force; one on the tangential force, the pushes' centre shift and what a push adds to the normal \
+         force, all three fitted on the pushes; one on the torque, fitted on the twists; gamma modes: F = a·gamma + b, which \
          their estimators are built with, as `nusense calibrate` leaves a sensor's config), applied everywhere; a \
          missed press reads 0 N. Speed: median/p99 of `estimate` on the {main} frames, one thread, speed-up against `{}` in this run. Floor: smallest force from which every level \
          is detected in >= 90 % of presses. \"–\": the mode does not report what the figure needs; ✗: the issue's \
@@ -520,9 +520,11 @@ fn other_rows(v: &crate::validation::ValidationReport) -> Vec<Row> {
             )
         },
     );
-    row("torque RMS, N mm (the tangential scale)".into(), "", &|m| {
-        (opt(m.torque_rms_nmm, 2), None)
-    });
+    row(
+        "torque RMS, N mm: twists, the torque scale fitted on the calibration twists".into(),
+        "",
+        &|m| (opt(m.torque_rms_nmm, 2), None),
+    );
     row("presses on damaged pads detected".into(), "", &|m| {
         (format!("{}/{}", m.damaged_detected, m.damaged_frames), None)
     });

@@ -8,7 +8,9 @@
 use std::time::Instant;
 
 use image::RgbImage;
-use nusense_estimator::calibration::modulus::{fit_tangential_scale, ModelForceSample};
+use nusense_estimator::calibration::modulus::{
+    fit_tangential_scale, fit_torque_scale, ModelForceSample, ModelTorqueSample,
+};
 use nusense_estimator::calibration::push_centre::{
     fit_push_centre_shift, most_shift_mm, shifted_centre, PushCentreSample,
 };
@@ -430,13 +432,15 @@ fn strongest_centre(truth: &CaseTruth) -> Option<[f64; 2]> {
 /// The one force calibration, fitted on the calibration cases only.
 enum ForceCalibration {
     /// The mode reports newtons: one scale factor on fz (least squares through the origin, on the calibration
-    /// presses), one on fx, fy and the torque (`nusense calibrate`'s tangential scale, on the calibration pushes;
-    /// the normal one when the set has none), how far a push's centre reads behind it
+    /// presses), one on fx, fy (`nusense calibrate`'s tangential scale, on the calibration pushes; the normal one when
+    /// the set has none), one on the torque (`nusense calibrate`'s torque scale, on the calibration twists; the
+    /// tangential one when the set has none), how far a push's centre reads behind it
     /// (`elastic.push_centre_shift_mm`, on the calibration pushes, whose places the set knows) and what a push adds to
     /// its normal force (`elastic.push_normal_share`, on the calibration pushes against the normal scale).
     Scale {
         normal: f64,
         tangential: Option<f64>,
+        torque: Option<f64>,
         push_shift_mm: Option<f64>,
         push_normal_share: Option<f64>,
     },
@@ -474,6 +478,19 @@ impl ForceCalibration {
             let tangential = fit_tangential_scale(&pushes, FitOptions::default().bisquare_c, 0.95)
                 .ok()
                 .map(|fit| fit.scale);
+            let twists: Vec<ModelTorqueSample> = scored
+                .iter()
+                .filter(|s| s.kind == CaseKind::CalibrationTwist)
+                .filter_map(|s| {
+                    Some(ModelTorqueSample {
+                        model_nmm: s.observed.as_ref().filter(|o| o.contact)?.torque_nmm?,
+                        reference_nmm: s.truth.frame.torque_nmm,
+                    })
+                })
+                .collect();
+            let torque = fit_torque_scale(&twists, FitOptions::default().bisquare_c, 0.95)
+                .ok()
+                .map(|fit| fit.scale);
             let centres: Vec<PushCentreSample> = scored
                 .iter()
                 .filter(|s| s.kind == CaseKind::CalibrationPush)
@@ -505,6 +522,7 @@ impl ForceCalibration {
             return Some(Self::Scale {
                 normal,
                 tangential,
+                torque,
                 push_shift_mm,
                 push_normal_share,
             });
@@ -527,12 +545,16 @@ impl ForceCalibration {
             Self::Scale {
                 normal,
                 tangential,
+                torque,
                 push_shift_mm,
                 push_normal_share,
             } => {
                 let mut name = format!("scale {normal:.3}");
                 if let Some(t) = tangential {
                     name += &format!(", tangential {t:.3}");
+                }
+                if let Some(t) = torque {
+                    name += &format!(", torque {t:.3}");
                 }
                 if let Some(k) = push_shift_mm {
                     name += &format!(", push shift {k:.2} mm");
@@ -603,11 +625,19 @@ impl ForceCalibration {
         }
     }
 
-    /// The factor on the tangential force and the torque.
+    /// The factor on the tangential force.
     fn tangential_scale(&self) -> f64 {
         match self {
             Self::Scale { normal, tangential, .. } => tangential.unwrap_or(*normal),
             Self::GammaLine { .. } => 1.0,
+        }
+    }
+
+    /// The factor on the torque.
+    fn torque_scale(&self) -> f64 {
+        match self {
+            Self::Scale { torque: Some(t), .. } => *t,
+            _ => self.tangential_scale(),
         }
     }
 
@@ -915,12 +945,9 @@ impl<'a> Cases<'a> {
         rms(&errors)
     }
 
-    /// The twists' torque errors (N mm), with the tangential scale.
+    /// The twists' torque errors (N mm), with the torque scale (fitted on the calibration twists, near the centre).
     fn torque_errors(&self) -> Vec<f64> {
-        let scale = self
-            .calibration
-            .as_ref()
-            .map_or(1.0, ForceCalibration::tangential_scale);
+        let scale = self.calibration.as_ref().map_or(1.0, ForceCalibration::torque_scale);
         self.of(CaseKind::Twist)
             .filter_map(|s| Some(s.observed.as_ref()?.torque_nmm? * scale - s.truth.frame.torque_nmm))
             .collect()
@@ -1133,11 +1160,28 @@ mod tests {
             push,
             Some(json!({"contact": true, "contact_mm": behind, "force_vector_n": turned})),
         ));
+        // Twists read three times their torque, whatever the tangential scale; one twist 1.5 N mm more.
+        let twist = |torque_nmm: f64| {
+            let mut t = press([0.0, 0.0], 5.0);
+            t.frame.torque_nmm = torque_nmm;
+            t
+        };
+        let twisted =
+            |torque_nmm: f64| json!({"contact": true, "force_vector_n": [0.0, 0.0, 10.0], "torque_nmm": torque_nmm});
+        for m in [10.0, -6.0, 15.0] {
+            scored.push(case(CaseKind::CalibrationTwist, twist(m), Some(twisted(3.0 * m))));
+        }
+        scored.push(case(CaseKind::Twist, twist(-9.0), Some(twisted(-27.0 + 1.5))));
 
         let f = score(Mode::Fast, &scored);
         assert_eq!(
             f.calibration.as_deref(),
-            Some("scale 0.500, tangential 0.250, push shift 1.50 mm, push normal share 0.100")
+            Some("scale 0.500, tangential 0.250, torque 0.333, push shift 1.50 mm, push normal share 0.100")
+        );
+        assert!(
+            (f.torque_rms_nmm.unwrap() - 0.5).abs() < 1e-12,
+            "{:?}",
+            f.torque_rms_nmm
         );
         assert!((f.localisation_rmse_mm.unwrap() - 0.3).abs() < 1e-12);
         assert_eq!((f.localisation_misses, f.localisation_frames), (1, 2));

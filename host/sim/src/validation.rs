@@ -60,10 +60,13 @@ pub enum CaseKind {
     /// Pushes near the centre with a known tangential force, as a force/torque log records them: what a calibration
     /// of the model's shear against its pressure is fitted on (`nusense calibrate`'s tangential scale).
     CalibrationPush,
+    /// Twists near the centre with a known torque, as a force/torque log records them: what a calibration of the
+    /// model's torque is fitted on (`nusense calibrate`'s torque scale).
+    CalibrationTwist,
 }
 
 impl CaseKind {
-    pub const ALL: [CaseKind; 13] = [
+    pub const ALL: [CaseKind; 14] = [
         CaseKind::Calibration,
         CaseKind::Press,
         CaseKind::Floor,
@@ -77,6 +80,7 @@ impl CaseKind {
         CaseKind::Damaged,
         CaseKind::Resolution,
         CaseKind::CalibrationPush,
+        CaseKind::CalibrationTwist,
     ];
 }
 
@@ -202,7 +206,7 @@ impl ValidationSet {
             DRIFT,
             draw.many(8, 24),
         );
-        draw.twists();
+        draw.twists(CaseKind::Twist, -10.0..=10.0, -6.0..=6.0, DRIFT, draw.many(4, 12));
         draw.rests();
         draw.camera_motions();
         draw.damaged();
@@ -215,6 +219,8 @@ impl ValidationSet {
         // After the edges' floor, for the same reason. Where and how hard as the calibration presses, the push a
         // fifth to a half of the load, as the tangential cases.
         draw.pushes(CaseKind::CalibrationPush, -8.0..=8.0, -6.0..=6.0, 0.0, draw.many(4, 8));
+        // After the calibration pushes, for the same reason. Where and how hard as the twists, nearer the centre.
+        draw.twists(CaseKind::CalibrationTwist, -8.0..=8.0, -6.0..=6.0, 0.0, draw.many(4, 8));
         Self {
             profile,
             seed,
@@ -389,14 +395,22 @@ impl Draw {
         }
     }
 
-    fn twists(&mut self) {
-        for k in 0..self.many(4, 12) {
+    /// `count` 8 mm spheres of 4-6 N within `x`, `y` (mm), twisted by 5-20 N mm, alternately each way.
+    fn twists(
+        &mut self,
+        kind: CaseKind,
+        x: std::ops::RangeInclusive<f64>,
+        y: std::ops::RangeInclusive<f64>,
+        drift: f32,
+        count: usize,
+    ) {
+        for k in 0..count {
             let rng = &mut self.rng;
-            let at = [rng.gen_range(-10.0..=10.0), rng.gen_range(-6.0..=6.0)];
+            let at = [rng.gen_range(x.clone()), rng.gen_range(y.clone())];
             let mut contact = Contact::sphere(8.0, at, rng.gen_range(4.0..=6.0));
             let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
             contact.torsion_nmm = sign * rng.gen_range(5.0..=20.0);
-            self.push(CaseKind::Twist, self.main, Scene::with_contact(contact), None, DRIFT);
+            self.push(kind, self.main, Scene::with_contact(contact), None, drift);
         }
     }
 
@@ -481,6 +495,7 @@ fn kind_name(kind: CaseKind) -> &'static str {
         CaseKind::Damaged => "damaged",
         CaseKind::Resolution => "resolution",
         CaseKind::CalibrationPush => "calibration_push",
+        CaseKind::CalibrationTwist => "calibration_twist",
     }
 }
 
