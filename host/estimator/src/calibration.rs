@@ -455,6 +455,16 @@ fn number_at(fields: &[&str], col: usize, line: usize, what: &str) -> Result<f64
         })
 }
 
+/// A force/torque log's header (its first data line, split) and the data lines after it.
+fn log_header(text: &str) -> Result<(Vec<&str>, impl Iterator<Item = (usize, &str)>), CalibrationError> {
+    let mut lines = data_lines(text);
+    let (_, header_line) = lines.next().ok_or(CalibrationError::MissingColumn {
+        wanted: "a header".into(),
+        found: String::new(),
+    })?;
+    Ok((split_csv(header_line), lines))
+}
+
 fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
     text.lines()
         .enumerate()
@@ -535,12 +545,7 @@ pub struct TimedGamma {
 /// A force/torque log: a header with a time column (`timestamp`, `time`, `t`, with an optional `_s`, `_ms` or
 /// `_us` suffix giving the unit; seconds otherwise) and `fx`, `fy`, `fz`; other columns are ignored.
 pub fn parse_force_log_csv(text: &str, component: ForceComponent) -> Result<Vec<ForceSample>, CalibrationError> {
-    let mut lines = data_lines(text);
-    let (_, header_line) = lines.next().ok_or(CalibrationError::MissingColumn {
-        wanted: "a header".into(),
-        found: String::new(),
-    })?;
-    let header = split_csv(header_line);
+    let (header, lines) = log_header(text)?;
     let found = header.join(", ");
     let (time_col, time_unit) = time_column(&header)?;
     let column = |name: &str| {
@@ -611,12 +616,7 @@ pub struct PositionSample {
 /// [`CalibrationError::MissingColumn`], and a row whose `x_mm` or `y_mm` is not a finite number a
 /// [`CalibrationError::Parse`] (every row must carry both).
 pub fn parse_position_log_csv(text: &str) -> Result<Option<Vec<PositionSample>>, CalibrationError> {
-    let mut lines = data_lines(text);
-    let (_, header_line) = lines.next().ok_or(CalibrationError::MissingColumn {
-        wanted: "a header".into(),
-        found: String::new(),
-    })?;
-    let header = split_csv(header_line);
+    let (header, lines) = log_header(text)?;
     let (x_col, y_col) = match (find_column(&header, &["x_mm"]), find_column(&header, &["y_mm"])) {
         (None, None) => return Ok(None),
         (Some(x), Some(y)) => (x, y),
@@ -647,12 +647,7 @@ pub fn parse_position_log_csv(text: &str) -> Result<Option<Vec<PositionSample>>,
 /// whose torque is not a finite number a [`CalibrationError::Parse`]. The time column as [`parse_force_log_csv`]
 /// reads it.
 pub fn parse_torque_log_csv(text: &str) -> Result<Option<Vec<ForceSample>>, CalibrationError> {
-    let mut lines = data_lines(text);
-    let (_, header_line) = lines.next().ok_or(CalibrationError::MissingColumn {
-        wanted: "a header".into(),
-        found: String::new(),
-    })?;
-    let header = split_csv(header_line);
+    let (header, lines) = log_header(text)?;
     let with_unit = [("mz_nmm", 1.0), ("tz_nmm", 1.0), ("mz_nm", 1e3), ("tz_nm", 1e3)];
     let Some((column, unit, name)) = with_unit
         .iter()
@@ -798,10 +793,7 @@ pub fn set_config_shear_modulus(text: &str, kpa: f64) -> Result<String, Calibrat
             "refusing to write a shear modulus of {kpa} kPa"
         )));
     }
-    edit_config(text, |document| {
-        table_mut(document, "elastic")?.insert("shear_modulus_kpa", toml_edit::value(kpa));
-        Ok(())
-    })
+    set_elastic_value(text, "shear_modulus_kpa", kpa)
 }
 
 /// Sets `elastic.tangential_force_scale` (what [`modulus::fit_tangential_scale`] calibrates), keeping everything
@@ -812,10 +804,7 @@ pub fn set_config_tangential_force_scale(text: &str, scale: f64) -> Result<Strin
             "refusing to write a tangential force scale of {scale}"
         )));
     }
-    edit_config(text, |document| {
-        table_mut(document, "elastic")?.insert("tangential_force_scale", toml_edit::value(scale));
-        Ok(())
-    })
+    set_elastic_value(text, "tangential_force_scale", scale)
 }
 
 /// Sets `elastic.torque_scale` (what [`modulus::fit_torque_scale`] calibrates), keeping everything else.
@@ -825,10 +814,7 @@ pub fn set_config_torque_scale(text: &str, scale: f64) -> Result<String, Calibra
             "refusing to write a torque scale of {scale}"
         )));
     }
-    edit_config(text, |document| {
-        table_mut(document, "elastic")?.insert("torque_scale", toml_edit::value(scale));
-        Ok(())
-    })
+    set_elastic_value(text, "torque_scale", scale)
 }
 
 /// Sets `elastic.push_centre_shift_mm` (what [`push_centre::fit_push_centre_shift`] calibrates), keeping everything
@@ -839,10 +825,7 @@ pub fn set_config_push_centre_shift(text: &str, shift_mm: f64) -> Result<String,
             "refusing to write a push centre shift of {shift_mm} mm"
         )));
     }
-    edit_config(text, |document| {
-        table_mut(document, "elastic")?.insert("push_centre_shift_mm", toml_edit::value(shift_mm));
-        Ok(())
-    })
+    set_elastic_value(text, "push_centre_shift_mm", shift_mm)
 }
 
 /// Sets `elastic.push_normal_share` (what [`push_normal::fit_push_normal_share`] calibrates), keeping everything
@@ -853,8 +836,13 @@ pub fn set_config_push_normal_share(text: &str, share: f64) -> Result<String, Ca
             "refusing to write a push normal share of {share}"
         )));
     }
+    set_elastic_value(text, "push_normal_share", share)
+}
+
+/// Sets `[elastic]`'s `key` to `value`, keeping everything else (each caller checks its own value first).
+fn set_elastic_value(text: &str, key: &str, value: f64) -> Result<String, CalibrationError> {
     edit_config(text, |document| {
-        table_mut(document, "elastic")?.insert("push_normal_share", toml_edit::value(share));
+        table_mut(document, "elastic")?.insert(key, toml_edit::value(value));
         Ok(())
     })
 }
